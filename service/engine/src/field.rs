@@ -1,0 +1,165 @@
+//! Occupancy and colour fields, and the single counted, checked path through which every
+//! localization method and the renderer evaluate them.
+
+use crate::grid::{Grid, GridSpec};
+use glam::Vec3;
+
+/// Why a field evaluation failed.
+#[derive(Debug, Clone, thiserror::Error, PartialEq)]
+pub enum FieldError {
+    /// The field returned NaN or an infinity. Never silently replaced.
+    #[error("field returned non-finite value {value} at grid index {index:?} (NDC {point:?})")]
+    NonFinite {
+        index: Option<[usize; 3]>,
+        point: [f32; 3],
+        value: f32,
+    },
+    /// The field returned a value outside [0, 1].
+    #[error(
+        "field returned occupancy {value} outside [0, 1] at grid index {index:?} (NDC {point:?})"
+    )]
+    OutOfRange {
+        index: Option<[usize; 3]>,
+        point: [f32; 3],
+        value: f32,
+    },
+    /// The field's backend failed (e.g. a network runtime error).
+    #[error("field backend failed: {0}")]
+    Backend(String),
+}
+
+/// A batch-evaluated occupancy field over NDC space: `out[i]` is the occupancy in [0, 1]
+/// of `points[i]`. Implementations may be expensive (a network); callers batch.
+pub trait OccupancyField: Sync {
+    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError>;
+}
+
+/// A batch-evaluated colour field: linear RGB in [0, 1] at surface points.
+pub trait ColorField: Sync {
+    fn color(&self, points: &[Vec3], out: &mut [[f32; 3]]) -> Result<(), FieldError>;
+}
+
+impl<F: OccupancyField + ?Sized> OccupancyField for &F {
+    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        (**self).occupancy(points, out)
+    }
+}
+
+/// Points per field call.
+pub const BATCH: usize = 4096;
+
+/// The counted, checked evaluation path: every evaluation of every method goes through
+/// here, so the counts in benchmarks are exact and a NaN/Inf is always reported with the
+/// point that produced it.
+pub struct Evaluator<'f> {
+    field: &'f dyn OccupancyField,
+    count: u64,
+    pts: Vec<Vec3>,
+    out: Vec<f32>,
+}
+
+impl<'f> Evaluator<'f> {
+    pub fn new(field: &'f dyn OccupancyField) -> Self {
+        Self {
+            field,
+            count: 0,
+            pts: Vec::with_capacity(BATCH),
+            out: vec![0.0; BATCH],
+        }
+    }
+
+    /// Evaluations so far.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    fn check(
+        &self,
+        values: &[f32],
+        spec: Option<GridSpec>,
+        idxs: &[u32],
+    ) -> Result<(), FieldError> {
+        for (i, &v) in values.iter().enumerate() {
+            if !(0.0..=1.0).contains(&v) {
+                let index = spec.map(|s| s.unlinear(idxs[i] as usize));
+                let point = self.pts[i].to_array();
+                return Err(if v.is_finite() {
+                    FieldError::OutOfRange {
+                        index,
+                        point,
+                        value: v,
+                    }
+                } else {
+                    FieldError::NonFinite {
+                        index,
+                        point,
+                        value: v,
+                    }
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Evaluate the grid points `idxs` (linear indices of `grid`'s spec), writing their
+    /// values and marking them evaluated.
+    pub fn eval_grid(&mut self, grid: &mut Grid, idxs: &[u32]) -> Result<(), FieldError> {
+        let spec = grid.spec();
+        for chunk in idxs.chunks(BATCH) {
+            self.pts.clear();
+            self.pts
+                .extend(chunk.iter().map(|&l| spec.world(spec.unlinear(l as usize))));
+            let out = &mut self.out[..chunk.len()];
+            self.field.occupancy(&self.pts, out)?;
+            self.count += chunk.len() as u64;
+            let out = &self.out[..chunk.len()];
+            self.check(out, Some(spec), chunk)?;
+            for (&l, &v) in chunk.iter().zip(out) {
+                grid.values[l as usize] = v;
+                grid.evaluated.set(l as usize);
+            }
+        }
+        Ok(())
+    }
+
+    /// Evaluate arbitrary points (counted and checked the same way).
+    pub fn eval_points(&mut self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        assert_eq!(
+            points.len(),
+            out.len(),
+            "eval_points: points and out differ in length"
+        );
+        for (pc, oc) in points.chunks(BATCH).zip(out.chunks_mut(BATCH)) {
+            self.pts.clear();
+            self.pts.extend_from_slice(pc);
+            self.field.occupancy(pc, oc)?;
+            self.count += pc.len() as u64;
+            self.check(oc, None, &[])?;
+        }
+        Ok(())
+    }
+}
+
+/// A field defined by a closure of one point (tests, small tools).
+pub struct FnField<F>(pub F);
+
+impl<F: Fn(Vec3) -> f32 + Sync> OccupancyField for FnField<F> {
+    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        for (o, p) in out.iter_mut().zip(points) {
+            *o = (self.0)(*p);
+        }
+        Ok(())
+    }
+}
+
+/// A colour field defined by a closure of one point.
+pub struct FnColor<F>(pub F);
+
+impl<F: Fn(Vec3) -> [f32; 3] + Sync> ColorField for FnColor<F> {
+    fn color(&self, points: &[Vec3], out: &mut [[f32; 3]]) -> Result<(), FieldError> {
+        for (o, p) in out.iter_mut().zip(points) {
+            *o = (self.0)(*p);
+        }
+        Ok(())
+    }
+}

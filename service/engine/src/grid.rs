@@ -1,0 +1,387 @@
+//! Grids, integer indices and the one coordinate convention of volcap.
+//!
+//! # Coordinate convention (the only one; everything else converts to it)
+//!
+//! * Space is the **normalized device coordinates (NDC) of the render view**, the cube
+//!   `[-1, 1]^3`:
+//!   - `x` runs left to right across the image (column),
+//!   - `y` runs **top to bottom** down the image (row), as in image memory and in PyTorch's
+//!     `grid_sample` (`y = -1` is the top row),
+//!   - `z` runs along the camera ray, **larger z is nearer the camera** (`z = +1` is the
+//!     front face of the volume, `z = -1` the back).
+//!
+//!   The frame is therefore left-handed; nothing in the engine relies on handedness except
+//!   the renderer, which looks down `-z`.
+//! * A grid of level `L` has `n = 2^L + 1` points per axis. Points are addressed by **integer
+//!   indices** `[i, j, k]` in `0..n` of the *finest* grid, never by float indices. A point's
+//!   NDC position is `-1 + 2 * index / (n - 1)` on every axis ("align corners": index 0 is
+//!   exactly -1, index n-1 exactly +1; there is no half-voxel offset anywhere, geometry and
+//!   colour alike). [`GridSpec::world`] and [`GridSpec::index_of`] are the round trip.
+//! * A coarser level `l < L` uses the points whose indices are multiples of the stride
+//!   `2^(L - l)`; every fine point is the exact mean of 1, 2, 4 or 8 coarse parents.
+//! * Linear storage is `x` fastest: `linear = i + n * (j + n * k)`.
+//! * The iso level is [`ISO`] = 0.5, and a value is **inside** iff `value > ISO`
+//!   ([`is_inside`]): one source of truth for every method, metric and mesher.
+
+use glam::Vec3;
+
+/// The occupancy iso level. Every method, metric and mesher uses this constant.
+pub const ISO: f32 = 0.5;
+
+/// The binarization rule: inside iff strictly above [`ISO`].
+#[inline]
+pub fn is_inside(v: f32) -> bool {
+    v > ISO
+}
+
+/// Largest supported level (1025^3 points; linear indices still fit in `u32`).
+pub const MAX_LEVEL: u32 = 10;
+
+/// Errors in grid specifications.
+#[derive(Debug, Clone, thiserror::Error, PartialEq, Eq)]
+pub enum GridError {
+    #[error(
+        "grid resolution {0} is not of the form 2^L + 1 with 1 <= L <= {MAX_LEVEL} (e.g. 65, 129, 257, 513)"
+    )]
+    BadResolution(usize),
+    #[error("coarsest level {coarse} must be between 1 and the finest level {fine}")]
+    BadCoarseLevel { coarse: u32, fine: u32 },
+}
+
+/// A grid of `2^level + 1` points per axis over NDC `[-1, 1]^3`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GridSpec {
+    level: u32,
+    n: usize,
+}
+
+impl GridSpec {
+    /// A grid of level `level` (`2^level + 1` points per axis).
+    pub fn new(level: u32) -> Result<Self, GridError> {
+        if level == 0 || level > MAX_LEVEL {
+            return Err(GridError::BadResolution((1usize << level.min(31)) + 1));
+        }
+        Ok(Self {
+            level,
+            n: (1usize << level) + 1,
+        })
+    }
+
+    /// The grid with `resolution` points per axis; `resolution` must be `2^L + 1`.
+    pub fn from_resolution(resolution: usize) -> Result<Self, GridError> {
+        let m = resolution.wrapping_sub(1);
+        if resolution < 3 || !m.is_power_of_two() {
+            return Err(GridError::BadResolution(resolution));
+        }
+        let level = m.trailing_zeros();
+        if level > MAX_LEVEL {
+            return Err(GridError::BadResolution(resolution));
+        }
+        Self::new(level)
+    }
+
+    pub fn level(&self) -> u32 {
+        self.level
+    }
+
+    /// Points per axis.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
+    /// Total number of points (`n^3`).
+    pub fn len(&self) -> usize {
+        self.n * self.n * self.n
+    }
+
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Spacing between neighbouring points in NDC units.
+    pub fn spacing(&self) -> f32 {
+        2.0 / (self.n - 1) as f32
+    }
+
+    /// The grid one level coarser (`None` at level 1).
+    pub fn coarser(&self) -> Option<GridSpec> {
+        GridSpec::new(self.level - 1).ok()
+    }
+
+    /// Stride, in this grid's indices, of the points of level `l <= self.level`.
+    #[inline]
+    pub fn stride(&self, l: u32) -> usize {
+        1usize << (self.level - l)
+    }
+
+    #[inline]
+    pub fn linear(&self, [i, j, k]: [usize; 3]) -> usize {
+        i + self.n * (j + self.n * k)
+    }
+
+    #[inline]
+    pub fn unlinear(&self, idx: usize) -> [usize; 3] {
+        let n = self.n;
+        [idx % n, (idx / n) % n, idx / (n * n)]
+    }
+
+    /// NDC coordinate of index `i` along any axis.
+    #[inline]
+    pub fn coord(&self, i: usize) -> f32 {
+        // Computed as (2i - (n-1)) / (n-1): exact for the end points and symmetric.
+        let m = (self.n - 1) as f32;
+        (2.0 * i as f32 - m) / m
+    }
+
+    /// NDC position of a grid point.
+    #[inline]
+    pub fn world(&self, [i, j, k]: [usize; 3]) -> Vec3 {
+        Vec3::new(self.coord(i), self.coord(j), self.coord(k))
+    }
+
+    /// The grid point nearest to an NDC position, or `None` outside `[-1, 1]^3` or for
+    /// non-finite input. Round trip: `index_of(world(idx)) == Some(idx)`.
+    pub fn index_of(&self, p: Vec3) -> Option<[usize; 3]> {
+        let m = (self.n - 1) as f32;
+        let mut out = [0usize; 3];
+        for (o, c) in out.iter_mut().zip(p.to_array()) {
+            if !c.is_finite() || !(-1.0..=1.0).contains(&c) {
+                return None;
+            }
+            let f = ((c + 1.0) * 0.5 * m).round();
+            *o = (f as usize).min(self.n - 1);
+        }
+        Some(out)
+    }
+}
+
+/// A fixed-size bitset over grid points (one bit per point, not a bool volume).
+#[derive(Debug, Clone, Default)]
+pub struct BitSet {
+    words: Vec<u64>,
+    len: usize,
+}
+
+impl BitSet {
+    pub fn new(len: usize) -> Self {
+        Self {
+            words: vec![0; len.div_ceil(64)],
+            len,
+        }
+    }
+
+    /// Resize to `len` bits, all cleared; keeps the allocation when it is large enough.
+    pub fn reset(&mut self, len: usize) {
+        let w = len.div_ceil(64);
+        self.words.clear();
+        self.words.resize(w, 0);
+        self.len = len;
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    #[inline]
+    pub fn get(&self, i: usize) -> bool {
+        (self.words[i >> 6] >> (i & 63)) & 1 == 1
+    }
+
+    #[inline]
+    pub fn set(&mut self, i: usize) {
+        self.words[i >> 6] |= 1u64 << (i & 63);
+    }
+
+    /// Sets bit `i`; returns true if it was clear before.
+    #[inline]
+    pub fn insert(&mut self, i: usize) -> bool {
+        let w = &mut self.words[i >> 6];
+        let m = 1u64 << (i & 63);
+        let was = *w & m != 0;
+        *w |= m;
+        !was
+    }
+
+    #[inline]
+    pub fn clear_bit(&mut self, i: usize) {
+        self.words[i >> 6] &= !(1u64 << (i & 63));
+    }
+
+    pub fn count_ones(&self) -> usize {
+        self.words.iter().map(|w| w.count_ones() as usize).sum()
+    }
+
+    /// The raw 64-bit words (bit `i` of the set is bit `i % 64` of word `i / 64`).
+    pub fn iter_ones_words(&self) -> impl Iterator<Item = u64> + '_ {
+        self.words.iter().copied()
+    }
+
+    /// Indices of the set bits, ascending.
+    pub fn iter_ones(&self) -> impl Iterator<Item = usize> + '_ {
+        self.words.iter().enumerate().flat_map(|(wi, &w)| {
+            let mut w = w;
+            std::iter::from_fn(move || {
+                if w == 0 {
+                    return None;
+                }
+                let b = w.trailing_zeros() as usize;
+                w &= w - 1;
+                Some(wi * 64 + b)
+            })
+        })
+    }
+}
+
+/// The result type of every localization method: a value for every point of the finest
+/// grid plus which points were actually evaluated by the field.
+///
+/// Values at unevaluated points are whatever the method defines (interpolated, filled);
+/// `evaluated` says which values came from the field. Buffers are reused across frames.
+#[derive(Debug, Clone)]
+pub struct Grid {
+    spec: GridSpec,
+    pub values: Vec<f32>,
+    pub evaluated: BitSet,
+}
+
+impl Grid {
+    pub fn new(spec: GridSpec) -> Self {
+        Self {
+            spec,
+            values: vec![0.0; spec.len()],
+            evaluated: BitSet::new(spec.len()),
+        }
+    }
+
+    /// Re-target the grid to `spec`, clearing `evaluated`. Keeps allocations; values are
+    /// left as they are (every method writes every value).
+    pub fn reset(&mut self, spec: GridSpec) {
+        self.spec = spec;
+        self.values.resize(spec.len(), 0.0);
+        self.evaluated.reset(spec.len());
+    }
+
+    pub fn spec(&self) -> GridSpec {
+        self.spec
+    }
+
+    #[inline]
+    pub fn value(&self, idx: [usize; 3]) -> f32 {
+        self.values[self.spec.linear(idx)]
+    }
+
+    #[inline]
+    pub fn inside(&self, linear: usize) -> bool {
+        is_inside(self.values[linear])
+    }
+
+    /// Number of points whose value came from the field.
+    pub fn evaluated_count(&self) -> usize {
+        self.evaluated.count_ones()
+    }
+
+    /// The binarized grid as a bitset (inside = 1).
+    pub fn binarized(&self) -> BitSet {
+        let mut b = BitSet::new(self.spec.len());
+        for (i, &v) in self.values.iter().enumerate() {
+            if is_inside(v) {
+                b.set(i);
+            }
+        }
+        b
+    }
+}
+
+/// Offsets of the 26-neighbourhood (3x3x3 minus the centre).
+pub const RING26: [[i32; 3]; 26] = {
+    let mut out = [[0i32; 3]; 26];
+    let mut c = 0;
+    let mut k = -1;
+    while k <= 1 {
+        let mut j = -1;
+        while j <= 1 {
+            let mut i = -1;
+            while i <= 1 {
+                if !(i == 0 && j == 0 && k == 0) {
+                    out[c] = [i, j, k];
+                    c += 1;
+                }
+                i += 1;
+            }
+            j += 1;
+        }
+        k += 1;
+    }
+    out
+};
+
+/// `idx + off * stride`, or `None` when it leaves `0..n`.
+#[inline]
+pub fn offset(idx: [usize; 3], off: [i32; 3], stride: usize, n: usize) -> Option<[usize; 3]> {
+    let mut out = [0usize; 3];
+    for a in 0..3 {
+        let v = idx[a] as i64 + off[a] as i64 * stride as i64;
+        if v < 0 || v >= n as i64 {
+            return None;
+        }
+        out[a] = v as usize;
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resolution_forms() {
+        assert_eq!(GridSpec::from_resolution(257).unwrap().level(), 8);
+        assert_eq!(GridSpec::from_resolution(3).unwrap().level(), 1);
+        assert!(GridSpec::from_resolution(256).is_err());
+        assert!(GridSpec::from_resolution(0).is_err());
+        assert!(GridSpec::from_resolution(2).is_err());
+        assert!(GridSpec::from_resolution((1 << 11) + 1).is_err());
+    }
+
+    #[test]
+    fn end_points_are_exact() {
+        let g = GridSpec::new(8).unwrap();
+        assert_eq!(g.coord(0), -1.0);
+        assert_eq!(g.coord(256), 1.0);
+        assert_eq!(g.coord(128), 0.0);
+    }
+
+    #[test]
+    fn coarse_points_coincide_with_fine_points() {
+        let fine = GridSpec::new(7).unwrap();
+        let coarse = GridSpec::new(5).unwrap();
+        for i in 0..coarse.n() {
+            assert_eq!(coarse.coord(i), fine.coord(i * fine.stride(5)));
+        }
+    }
+
+    #[test]
+    fn ring_has_26_distinct_offsets() {
+        let mut v: Vec<_> = RING26.to_vec();
+        v.sort();
+        v.dedup();
+        assert_eq!(v.len(), 26);
+        assert!(!v.contains(&[0, 0, 0]));
+    }
+
+    #[test]
+    fn bitset_ops() {
+        let mut b = BitSet::new(130);
+        assert!(b.insert(129));
+        assert!(!b.insert(129));
+        b.set(0);
+        b.set(64);
+        assert_eq!(b.iter_ones().collect::<Vec<_>>(), vec![0, 64, 129]);
+        b.clear_bit(64);
+        assert_eq!(b.count_ones(), 2);
+    }
+}

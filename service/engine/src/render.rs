@@ -1,0 +1,327 @@
+//! Mesh-free rendering with view-based culling (MonoPort Sec. 3.3).
+//!
+//! The grid is the render view's NDC cube (see [`crate::grid`]): pixel `(i, j)` is the
+//! column of grid points `[i, j, 0..n]`, and larger `k` (larger z) is nearer the camera. The
+//! image is `n x n` pixels for a grid of `n` points per axis.
+//!
+//! 1. Localize to level `L - 1` with the paper's hierarchical method.
+//! 2. Upsample and binarize to level `L`; per pixel, the first inside node from the front
+//!    (largest `k`) is the *coarse hit*. Nodes behind it (`k < hit`) are **shadow nodes**
+//!    and are never evaluated.
+//! 3. Evaluate the remaining boundary candidates (1-ring dilated), run the conflict loop
+//!    under the same culling, and take the first hit again. Our additions: the conflict loop
+//!    at this level, and a hit is only trusted once confirmed: where the predicted hit
+//!    evaluates as outside (a grazing ray), the culled candidates in front of the new first
+//!    hit are released and evaluated, until every column's hit stands.
+//! 4. The surface lies between the hit node and the node in front of it, placed by linear
+//!    interpolation of their occupancies (equal values guarded: the midpoint is used).
+//! 5. Colour comes from the colour field at that point; pixels without a hit get the
+//!    background (alpha 0 for a transparent background). Optional Lambert shading uses
+//!    normals from central differences of the occupancy.
+
+use crate::field::{ColorField, Evaluator, FieldError, OccupancyField};
+use crate::grid::{Grid, GridSpec, is_inside};
+use crate::localize::{Hierarchical, HierarchicalMode, LocalizeError, check_coarse};
+use glam::Vec3;
+
+/// How to render.
+#[derive(Debug, Clone, Copy)]
+pub struct RenderOptions {
+    /// Coarsest level of the localization (at most `L - 1`).
+    pub coarse_level: u32,
+    /// Background RGBA in [0, 1]; alpha 0 gives a transparent background for compositing.
+    pub background: [f32; 4],
+    /// Shade with normals from central differences (6 extra evaluations per pixel).
+    pub shade: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            coarse_level: crate::localize::DEFAULT_COARSE_LEVEL,
+            background: [0.0; 4],
+            shade: false,
+        }
+    }
+}
+
+/// What a frame cost.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RenderStats {
+    /// Evaluations of the level `L - 1` localization.
+    pub coarse_evaluations: u64,
+    /// Evaluations of the final level (culled candidates).
+    pub final_evaluations: u64,
+    /// Candidates never evaluated because they lie behind a confirmed hit (shadow nodes).
+    pub culled: u64,
+    /// Occupancy evaluations for shading normals.
+    pub normal_evaluations: u64,
+    /// Colour field evaluations.
+    pub color_evaluations: u64,
+    /// Pixels with a surface.
+    pub hits: u64,
+}
+
+/// A mesh-free renderer; owns its buffers and reuses them frame to frame.
+#[derive(Default)]
+pub struct Renderer {
+    hier: Hierarchical,
+    grid: Option<Grid>,
+    coarse_hit: Vec<i32>,
+    hit: Vec<i32>,
+    depth: Vec<f32>,
+    rgba: Vec<u8>,
+    final_nodes: Vec<u32>,
+    culled: Vec<u32>,
+    pts: Vec<Vec3>,
+    cols: Vec<[f32; 3]>,
+    occ: Vec<f32>,
+    size: usize,
+}
+
+/// Per-column first inside node from the front, or -1. Scans planes front to back so memory
+/// is read in order.
+fn first_hits(grid: &Grid, out: &mut Vec<i32>) {
+    let n = grid.spec().n();
+    let plane = n * n;
+    out.clear();
+    out.resize(plane, -1);
+    let mut open = plane;
+    for k in (0..n).rev() {
+        let base = k * plane;
+        for (c, h) in out.iter_mut().enumerate() {
+            if *h < 0 && is_inside(grid.values[base + c]) {
+                *h = k as i32;
+                open -= 1;
+            }
+        }
+        if open == 0 {
+            break;
+        }
+    }
+}
+
+impl Renderer {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Render `field` coloured by `colors` on a grid of level `spec.level()`.
+    pub fn render(
+        &mut self,
+        field: &dyn OccupancyField,
+        colors: &dyn ColorField,
+        spec: GridSpec,
+        opts: &RenderOptions,
+    ) -> Result<RenderStats, LocalizeError> {
+        let big_l = spec.level();
+        let fine = spec
+            .coarser()
+            .ok_or(crate::grid::GridError::BadResolution(spec.n()))?;
+        let coarse = check_coarse(fine, opts.coarse_level)?;
+        let grid = self.grid.get_or_insert_with(|| Grid::new(spec));
+        grid.reset(spec);
+        let n = spec.n();
+        let plane = n * n;
+        let mut stats = RenderStats::default();
+
+        // 1. Localize to L - 1 inside the level-L grid.
+        let mut ev = Evaluator::new(field);
+        self.hier
+            .run(&mut ev, grid, coarse, big_l - 1, HierarchicalMode::Paper)?;
+        stats.coarse_evaluations = ev.count();
+
+        // 2. Upsample to L, coarse hits per pixel.
+        self.hier.upsample(grid, big_l);
+        first_hits(grid, &mut self.coarse_hit);
+
+        // 3. Evaluate the candidates in front of (or at) the coarse hit.
+        self.hier.dilate(grid, big_l, |_| true);
+        self.final_nodes.clear();
+        self.culled.clear();
+        for &q in &self.hier.batch {
+            let h = self.coarse_hit[q as usize % plane];
+            if h < 0 || (q as usize / plane) as i32 >= h {
+                self.final_nodes.push(q);
+            } else {
+                self.culled.push(q);
+            }
+        }
+        let before = ev.count();
+        let mut start = 0;
+        self.hit.clone_from(&self.coarse_hit);
+        loop {
+            ev.eval_grid(grid, &self.final_nodes[start..])?;
+            // The conflict loop under the same culling repairs interpolated nodes that hide a
+            // surface in front of the hit.
+            let hits = &self.hit;
+            let keep = |q: usize| {
+                let h = hits[q % plane];
+                h < 0 || (q / plane) as i32 >= h
+            };
+            self.hier.conflict_loop(
+                &mut ev,
+                grid,
+                big_l,
+                false,
+                keep,
+                Some(&mut self.final_nodes),
+            )?;
+            // A predicted hit that evaluated as outside is refuted: release the culled
+            // candidates in front of the new first hit of that column and go again.
+            first_hits(grid, &mut self.hit);
+            start = self.final_nodes.len();
+            let hits = &self.hit;
+            let final_nodes = &mut self.final_nodes;
+            self.culled.retain(|&q| {
+                let h = hits[q as usize % plane];
+                let release = h < 0 || (q as usize / plane) as i32 >= h;
+                if release {
+                    final_nodes.push(q);
+                }
+                !release
+            });
+            if self.final_nodes.len() == start {
+                break;
+            }
+        }
+        stats.culled = self.culled.len() as u64;
+        stats.final_evaluations = ev.count() - before;
+
+        // 4. Surface by interpolation at the first hit (computed above).
+        self.depth.clear();
+        self.depth.resize(plane, -1.0);
+        self.pts.clear();
+        let mut hit_pixels: Vec<usize> = Vec::new();
+        for c in 0..plane {
+            let k = self.hit[c];
+            if k < 0 {
+                continue;
+            }
+            let k = k as usize;
+            let z = if k + 1 < n {
+                let v_in = grid.values[c + k * plane];
+                let v_out = grid.values[c + (k + 1) * plane];
+                let d = v_in - v_out;
+                let t = if d > 1e-12 {
+                    ((v_in - 0.5) / d).clamp(0.0, 1.0)
+                } else {
+                    0.5
+                };
+                let (z0, z1) = (spec.coord(k), spec.coord(k + 1));
+                z0 + (z1 - z0) * t
+            } else {
+                1.0
+            };
+            self.depth[c] = z;
+            let (i, j) = (c % n, c / n);
+            self.pts.push(Vec3::new(spec.coord(i), spec.coord(j), z));
+            hit_pixels.push(c);
+        }
+        stats.hits = hit_pixels.len() as u64;
+
+        // 5. Colour (and optional shading).
+        self.cols.clear();
+        self.cols.resize(self.pts.len(), [0.0; 3]);
+        colors.color(&self.pts, &mut self.cols)?;
+        stats.color_evaluations = self.pts.len() as u64;
+        for (p, c) in self.pts.iter().zip(&self.cols) {
+            if c.iter().any(|x| !x.is_finite()) {
+                return Err(FieldError::NonFinite {
+                    index: None,
+                    point: p.to_array(),
+                    value: f32::NAN,
+                }
+                .into());
+            }
+        }
+        if opts.shade && !self.pts.is_empty() {
+            let h = 0.5 * spec.spacing();
+            let mut probe = Vec::with_capacity(self.pts.len() * 6);
+            for p in &self.pts {
+                for a in 0..3 {
+                    let mut d = Vec3::ZERO;
+                    d[a] = h;
+                    probe.push(*p + d);
+                    probe.push(*p - d);
+                }
+            }
+            self.occ.clear();
+            self.occ.resize(probe.len(), 0.0);
+            let before = ev.count();
+            ev.eval_points(&probe, &mut self.occ)?;
+            stats.normal_evaluations = ev.count() - before;
+            // Light from the upper left front (y is down, z toward the camera).
+            let light = Vec3::new(-0.4, -0.6, 0.7).normalize();
+            for (i, c) in self.cols.iter_mut().enumerate() {
+                let o = &self.occ[i * 6..i * 6 + 6];
+                let grad = Vec3::new(o[0] - o[1], o[2] - o[3], o[4] - o[5]);
+                // Occupancy grows inward: the outward normal is -grad.
+                let nrm = (-grad).normalize_or_zero();
+                let lambert = if nrm == Vec3::ZERO {
+                    1.0
+                } else {
+                    nrm.dot(light).max(0.0)
+                };
+                let s = 0.35 + 0.65 * lambert;
+                for x in c.iter_mut() {
+                    *x *= s;
+                }
+            }
+        }
+        self.size = n;
+        self.rgba.clear();
+        let bg = opts.background.map(to_u8);
+        self.rgba.resize(plane * 4, 0);
+        for px in self.rgba.chunks_exact_mut(4) {
+            px.copy_from_slice(&bg);
+        }
+        for (&c, col) in hit_pixels.iter().zip(&self.cols) {
+            let px = &mut self.rgba[c * 4..c * 4 + 4];
+            px[0] = to_u8(col[0]);
+            px[1] = to_u8(col[1]);
+            px[2] = to_u8(col[2]);
+            px[3] = 255;
+        }
+        Ok(stats)
+    }
+
+    /// Image side in pixels (`n`).
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    /// RGBA8, row-major, rows top to bottom (`j`), `size x size`.
+    pub fn rgba(&self) -> &[u8] {
+        &self.rgba
+    }
+
+    /// NDC z of the surface per pixel, or -1 where there is none (see [`Self::hits`]).
+    pub fn depth(&self) -> &[f32] {
+        &self.depth
+    }
+
+    /// Final first-hit node per pixel (-1 for none).
+    pub fn hits(&self) -> &[i32] {
+        &self.hit
+    }
+
+    /// Coarse (upsampled level `L - 1`) first-hit node per pixel (-1 for none).
+    pub fn coarse_hits(&self) -> &[i32] {
+        &self.coarse_hit
+    }
+
+    /// Linear indices of the level-`L` nodes evaluated in the last frame's final pass.
+    pub fn final_nodes(&self) -> &[u32] {
+        &self.final_nodes
+    }
+
+    /// The last frame's grid (levels up to `L - 1` localized, level `L` partially).
+    pub fn grid(&self) -> Option<&Grid> {
+        self.grid.as_ref()
+    }
+}
+
+fn to_u8(x: f32) -> u8 {
+    (x.clamp(0.0, 1.0) * 255.0).round() as u8
+}

@@ -1,0 +1,221 @@
+//! Mesh-free renderer: depth against analytic ray casts, shadow culling, alpha, stability.
+
+use glam::{DVec3, Vec3};
+use volcap_engine::analytic::AnalyticScene;
+use volcap_engine::field::{FieldError, FnColor, FnField, OccupancyField};
+use volcap_engine::grid::{Grid, GridSpec, is_inside};
+use volcap_engine::localize::{Localizer, Method};
+use volcap_engine::render::{RenderOptions, Renderer};
+
+fn dense(field: &dyn OccupancyField, spec: GridSpec) -> Grid {
+    let mut g = Grid::new(spec);
+    Localizer::new()
+        .run(Method::Dense, field, spec, spec.level(), &mut g)
+        .unwrap();
+    g
+}
+
+fn check_scene(name: &str, level: u32) {
+    let scene = AnalyticScene::by_name(name).unwrap();
+    let spec = GridSpec::new(level).unwrap();
+    let mut r = Renderer::new();
+    let stats = r
+        .render(&scene, &scene, spec, &RenderOptions::default())
+        .unwrap();
+    let d = dense(&scene, spec);
+    let n = spec.n();
+    let voxel = spec.spacing() as f64;
+    let rgba = r.rgba();
+    let mut checked = 0;
+    for j in 0..n {
+        for i in 0..n {
+            let c = i + n * j;
+            let column_has_surface = (0..n).any(|k| is_inside(d.value([i, j, k])));
+            let alpha = rgba[c * 4 + 3];
+            assert_eq!(
+                alpha == 255,
+                column_has_surface,
+                "{name}: alpha at pixel ({i}, {j})"
+            );
+            assert!(alpha == 0 || alpha == 255);
+            if !column_has_surface {
+                continue;
+            }
+            let (x, y) = (spec.coord(i) as f64, spec.coord(j) as f64);
+            let z_ref = scene
+                .first_hit_z(x, y, voxel / 16.0)
+                .expect("a grid point inside implies a ray hit");
+            let z = r.depth()[c] as f64;
+            assert!(
+                (z - z_ref).abs() <= voxel,
+                "{name} pixel ({i}, {j}): depth {z} vs analytic {z_ref} (voxel {voxel})"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 100, "{name}: only {checked} surface pixels");
+    assert_eq!(stats.hits as usize, checked);
+    // Culling: no node behind a known hit was evaluated in the final pass. A hit is known
+    // when predicted (coarse) and when confirmed (final); a node behind both was culled.
+    let plane = n * n;
+    for &q in r.final_nodes() {
+        let c = q as usize % plane;
+        let (hc, hf) = (r.coarse_hits()[c], r.hits()[c]);
+        let k = (q as usize / plane) as i32;
+        assert!(
+            hc < 0 || hf < 0 || k >= hc.min(hf),
+            "{name}: shadow node {q} evaluated"
+        );
+    }
+    assert!(stats.culled > 0, "{name}: nothing culled");
+}
+
+#[test]
+fn depth_matches_analytic_surface_within_a_voxel() {
+    for name in ["sphere", "torus", "capsule-human"] {
+        check_scene(name, 7);
+    }
+    check_scene("capsule-human", 8);
+}
+
+#[test]
+fn rear_body_is_culled_and_front_body_is_seen() {
+    // A small sphere in front of a big one: the big one's back surface lies behind known
+    // hits and must never be evaluated; the depth is the small sphere's where they overlap.
+    let front = (DVec3::new(0.0, 0.0, 0.5), 0.25);
+    let back = (DVec3::new(0.0, 0.0, -0.3), 0.55);
+    let sdf =
+        move |p: DVec3| ((p - front.0).length() - front.1).min((p - back.0).length() - back.1);
+    let field = FnField(move |p: Vec3| (1.0 / (1.0 + (sdf(p.as_dvec3()) / 0.01).exp())) as f32);
+    let white = FnColor(|_| [1.0f32, 1.0, 1.0]);
+    let spec = GridSpec::new(7).unwrap();
+    let mut r = Renderer::new();
+    r.render(&field, &white, spec, &RenderOptions::default())
+        .unwrap();
+    let n = spec.n();
+    let centre = n / 2 + n * (n / 2);
+    assert!(
+        (r.depth()[centre] - 0.75).abs() < spec.spacing(),
+        "depth {}",
+        r.depth()[centre]
+    );
+    // Nodes just inside the back sphere's rear surface along the centre column (z ~ -0.85)
+    // are far behind the hit and never evaluated.
+    let plane = n * n;
+    for &q in r.final_nodes() {
+        let (c, k) = (q as usize % plane, q as usize / plane);
+        if c == centre {
+            assert!(
+                spec.coord(k) > 0.4,
+                "evaluated node at z {} behind the front sphere",
+                spec.coord(k)
+            );
+        }
+    }
+}
+
+#[test]
+fn transparent_background_and_colours() {
+    let scene = AnalyticScene::by_name("two-bodies").unwrap();
+    let spec = GridSpec::new(6).unwrap();
+    let mut r = Renderer::new();
+    let opts = RenderOptions {
+        background: [0.1, 0.2, 0.3, 0.0],
+        ..Default::default()
+    };
+    r.render(&scene, &scene, spec, &opts).unwrap();
+    let rgba = r.rgba();
+    assert_eq!(&rgba[0..4], &[26, 51, 77, 0]);
+    let n = spec.n();
+    // Left body is red-ish, right body green-ish.
+    let left = spec.index_of(Vec3::new(-0.45, 0.05, 0.0)).unwrap();
+    let right = spec.index_of(Vec3::new(0.48, -0.1, 0.0)).unwrap();
+    let px = |i: usize, j: usize| &rgba[(i + n * j) * 4..(i + n * j) * 4 + 4];
+    assert!(px(left[0], left[1])[0] > 200 && px(left[0], left[1])[3] == 255);
+    assert!(px(right[0], right[1])[1] > 150 && px(right[0], right[1])[3] == 255);
+}
+
+#[test]
+fn shading_and_adversarial_fields_stay_finite() {
+    for name in ["flat-half", "noise", "thin-plate", "capsule-human"] {
+        let scene = AnalyticScene::by_name(name).unwrap();
+        let spec = GridSpec::new(6).unwrap();
+        let mut r = Renderer::new();
+        let opts = RenderOptions {
+            shade: true,
+            coarse_level: 3,
+            ..Default::default()
+        };
+        let st = r.render(&scene, &scene, spec, &opts).unwrap();
+        assert!(
+            r.depth()
+                .iter()
+                .all(|z| z.is_finite() && (-1.0..=1.0).contains(z)),
+            "{name}"
+        );
+        assert_eq!(st.normal_evaluations, 6 * st.hits, "{name}");
+    }
+}
+
+#[test]
+fn step_field_with_equal_plateaus_gives_no_nan() {
+    // Occupancy jumps straight from 0 to 1: interpolation sees only 0 and 1, never a 0/0.
+    let field = FnField(|p: Vec3| if p.length() < 0.5 { 1.0 } else { 0.0 });
+    let grey = FnColor(|_| [0.5f32; 3]);
+    let spec = GridSpec::new(6).unwrap();
+    let mut r = Renderer::new();
+    r.render(
+        &field,
+        &grey,
+        spec,
+        &RenderOptions {
+            shade: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(r.depth().iter().all(|z| z.is_finite()));
+    let n = spec.n();
+    let c = n / 2 + n * (n / 2);
+    assert!((r.depth()[c] - 0.5).abs() <= spec.spacing());
+}
+
+#[test]
+fn nan_colour_and_nan_occupancy_are_errors() {
+    let scene = AnalyticScene::by_name("sphere").unwrap();
+    let bad_col = FnColor(|_| [f32::NAN, 0.0, 0.0]);
+    let spec = GridSpec::new(5).unwrap();
+    let mut r = Renderer::new();
+    assert!(
+        r.render(&scene, &bad_col, spec, &RenderOptions::default())
+            .is_err()
+    );
+    let bad_occ = FnField(|p: Vec3| if p.z > 0.9 { f32::NAN } else { 0.0 });
+    let e = r
+        .render(&bad_occ, &scene, spec, &RenderOptions::default())
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            volcap_engine::localize::LocalizeError::Field(FieldError::NonFinite { .. })
+        ),
+        "{e:?}"
+    );
+}
+
+#[test]
+fn coarse_level_must_leave_a_level_to_refine() {
+    let scene = AnalyticScene::by_name("sphere").unwrap();
+    let spec = GridSpec::new(4).unwrap();
+    let mut r = Renderer::new();
+    let e = r.render(
+        &scene,
+        &scene,
+        spec,
+        &RenderOptions {
+            coarse_level: 4,
+            ..Default::default()
+        },
+    );
+    assert!(e.is_err());
+}

@@ -1,0 +1,335 @@
+//! `volcap bench localize`: every localization method side by side on the same field and
+//! grid, accuracy against dense next to evaluations and time.
+
+use crate::LocalizeArgs;
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+use volcap_engine::OccupancyField;
+use volcap_engine::analytic::{AnalyticScene, SCENES};
+use volcap_engine::grid::{Grid, GridSpec};
+use volcap_engine::localize::{LocalizeStats, Localizer, Method, default_coarse};
+use volcap_engine::metrics::{band_bound, components, iou_bits, lost_components};
+
+/// One row of the benchmark: one (scene, resolution, method, parameter).
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub scene: String,
+    pub resolution: usize,
+    pub coarse_resolution: usize,
+    pub method: String,
+    pub param: Option<f32>,
+    pub evaluations: u64,
+    pub dense_evaluations: u64,
+    pub band_bound: u64,
+    pub iou_vs_dense: f64,
+    pub lost_components: usize,
+    pub dense_components: usize,
+    /// Median wall time of the runs, ms, measured in the same process as dense.
+    pub ms: f64,
+    pub dense_ms: f64,
+    pub runs: usize,
+    pub conflict_rounds: u32,
+}
+
+impl Row {
+    pub fn label(&self) -> String {
+        match self.param {
+            Some(p) => format!("{}@{p}", self.method),
+            None => self.method.clone(),
+        }
+    }
+    /// Dense evaluations divided by this method's.
+    pub fn eval_speedup(&self) -> f64 {
+        self.dense_evaluations as f64 / self.evaluations.max(1) as f64
+    }
+    pub fn time_speedup(&self) -> f64 {
+        self.dense_ms / self.ms.max(1e-9)
+    }
+    pub fn evals_over_band(&self) -> f64 {
+        self.evaluations as f64 / self.band_bound.max(1) as f64
+    }
+}
+
+/// A field to benchmark, by scene name.
+fn scene_field(name: &str) -> anyhow::Result<Box<dyn OccupancyField>> {
+    if let Some(s) = AnalyticScene::by_name(name) {
+        return Ok(Box::new(s));
+    }
+    bail!(
+        "unknown scene '{name}' (analytic scenes: {})",
+        SCENES.join(", ")
+    )
+}
+
+fn timed(
+    loc: &mut Localizer,
+    m: Method,
+    field: &dyn OccupancyField,
+    spec: GridSpec,
+    coarse: u32,
+    grid: &mut Grid,
+    a: &LocalizeArgs,
+) -> anyhow::Result<(f64, usize, LocalizeStats)> {
+    let (runs, budget_s) = (a.runs, a.time_budget);
+    let mut times = Vec::new();
+    let mut stats = LocalizeStats::default();
+    let start = Instant::now();
+    while times.len() < runs.max(1) {
+        let t = Instant::now();
+        stats = loc
+            .run(m, field, spec, coarse, grid)
+            .with_context(|| format!("{} failed", m.label()))?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        if start.elapsed().as_secs_f64() > budget_s {
+            break;
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    let n = times.len();
+    let median = if n % 2 == 1 {
+        times[n / 2]
+    } else {
+        0.5 * (times[n / 2 - 1] + times[n / 2])
+    };
+    Ok((median, n, stats))
+}
+
+pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
+    let scenes: Vec<String> = if a.scenes.is_empty() {
+        SCENES.iter().map(|s| s.to_string()).collect()
+    } else {
+        a.scenes.clone()
+    };
+    let fields = scenes
+        .iter()
+        .map(|s| scene_field(s))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let specs = a
+        .res
+        .iter()
+        .map(|&r| GridSpec::from_resolution(r).with_context(|| format!("--res {r}")))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut methods = Vec::new();
+    if a.methods.is_empty() {
+        methods = Method::all();
+    } else {
+        for m in &a.methods {
+            methods.extend(
+                Method::parse(m)
+                    .map_err(anyhow::Error::msg)
+                    .context("--methods")?,
+            );
+        }
+    }
+    methods.retain(|m| *m != Method::Dense);
+    methods.insert(0, Method::Dense);
+    if a.runs == 0 {
+        bail!("--runs must be at least 1");
+    }
+
+    let total = (scenes.len() * specs.len() * methods.len()) as u64;
+    let pb = ProgressBar::new(total);
+    pb.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut rows: Vec<Row> = Vec::new();
+    let mut loc = Localizer::new();
+    let stdout = std::io::stdout();
+    for (name, field) in scenes.iter().zip(&fields) {
+        for &spec in &specs {
+            let coarse = a
+                .coarse_level
+                .map(|c| c.min(spec.level()))
+                .unwrap_or_else(|| default_coarse(spec));
+            pb.set_message(format!("{name} {}^3 dense", spec.n()));
+            let mut dense = Grid::new(spec);
+            let (dense_ms, dense_runs, dstats) = timed(
+                &mut loc,
+                Method::Dense,
+                field.as_ref(),
+                spec,
+                coarse,
+                &mut dense,
+                a,
+            )?;
+            let dense_bits = dense.binarized();
+            let comps = components(spec, &dense_bits);
+            let band = band_bound(spec, &dense_bits);
+            let mut grid = Grid::new(spec);
+            for &m in &methods {
+                pb.set_message(format!("{name} {}^3 {}", spec.n(), m.label()));
+                let (ms, runs, stats, iou, lost) = if m == Method::Dense {
+                    (dense_ms, dense_runs, dstats, 1.0, 0)
+                } else {
+                    let (ms, runs, st) =
+                        timed(&mut loc, m, field.as_ref(), spec, coarse, &mut grid, a)?;
+                    let bits = grid.binarized();
+                    (
+                        ms,
+                        runs,
+                        st,
+                        iou_bits(&dense_bits, &bits),
+                        lost_components(&comps, &bits),
+                    )
+                };
+                let row = Row {
+                    scene: name.clone(),
+                    resolution: spec.n(),
+                    coarse_resolution: (1usize << coarse) + 1,
+                    method: m.name().to_string(),
+                    param: m.param(),
+                    evaluations: stats.evaluations,
+                    dense_evaluations: dstats.evaluations,
+                    band_bound: band,
+                    iou_vs_dense: iou,
+                    lost_components: lost,
+                    dense_components: comps.len(),
+                    ms,
+                    dense_ms,
+                    runs,
+                    conflict_rounds: stats.conflict_rounds,
+                };
+                if a.json {
+                    let mut out = stdout.lock();
+                    serde_json::to_writer(&mut out, &row)?;
+                    writeln!(out)?;
+                    out.flush()?;
+                }
+                rows.push(row);
+                pb.inc(1);
+            }
+        }
+    }
+    pb.finish_and_clear();
+
+    let out_dir = match (&a.out, a.json) {
+        (Some(d), _) => Some(d.clone()),
+        (None, false) => Some(PathBuf::from("docs/bench")),
+        (None, true) => None,
+    };
+    if let Some(dir) = out_dir {
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let plot_scene = a
+            .plot_scene
+            .clone()
+            .or_else(|| scenes.iter().find(|s| *s == "capsule-human").cloned())
+            .unwrap_or_else(|| scenes[0].clone());
+        let md = dir.join("accuracy-vs-time.md");
+        let png = dir.join("accuracy-vs-time.png");
+        std::fs::write(&md, markdown(&rows, a, &plot_scene))
+            .with_context(|| format!("writing {}", md.display()))?;
+        crate::plot::accuracy_vs_time(&rows, &plot_scene, &png)
+            .with_context(|| format!("writing {}", png.display()))?;
+        if !a.json {
+            println!("{}", summary_table(&rows));
+            println!("wrote {} and {}", md.display(), png.display());
+        }
+    }
+    Ok(())
+}
+
+fn summary_table(rows: &[Row]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| scene | res | method | evaluations | x fewer | evals/band | IoU vs dense | lost | ms | x faster |"
+    );
+    let _ = writeln!(s, "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|");
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {:.1} | {:.2} | {:.5} | {} | {:.1} | {:.1} |",
+            r.scene,
+            r.resolution,
+            r.label(),
+            r.evaluations,
+            r.eval_speedup(),
+            r.evals_over_band(),
+            r.iou_vs_dense,
+            r.lost_components,
+            r.ms,
+            r.time_speedup()
+        );
+    }
+    s
+}
+
+fn markdown(rows: &[Row], a: &LocalizeArgs, plot_scene: &str) -> String {
+    let mut s = String::new();
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|c| {
+            c.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1);
+    let _ = writeln!(s, "# Accuracy vs time: surface localization\n");
+    let _ = writeln!(
+        s,
+        "Generated by `cargo run --release -p volcap -- bench localize{}{}` on {cpu} ({cores} cores), single-threaded \
+         evaluation. Every method runs on the same analytic field and grid in the same process; `ms` is the median of \
+         up to {} runs (fewer when a row exceeds {} s). Evaluation counts are exact and machine-independent; times \
+         include each method's bookkeeping and filling of the full grid, and the analytic fields are cheap (tens of ns \
+         per point), so time ratios understate what a network field (microseconds per point) gains.\n",
+        if a.res.len() == 4 && a.res == [65, 129, 257, 513] {
+            String::new()
+        } else {
+            format!(
+                " --res {}",
+                a.res
+                    .iter()
+                    .map(|r| r.to_string())
+                    .collect::<Vec<_>>()
+                    .join(",")
+            )
+        },
+        if a.scenes.is_empty() {
+            String::new()
+        } else {
+            a.scenes
+                .iter()
+                .map(|s| format!(" --scene {s}"))
+                .collect::<String>()
+        },
+        a.runs,
+        a.time_budget
+    );
+    let _ = writeln!(
+        s,
+        "Columns: `x fewer` = dense evaluations / evaluations; `evals/band` = evaluations / band bound (points whose \
+         3x3x3 neighbourhood holds both sides of 0.5 in the dense result: the least an exact method must evaluate); \
+         `IoU` against the dense binarized grid; `lost` = connected components of the dense result with no inside \
+         point in the method's; `x faster` = dense ms / ms.\n"
+    );
+    let _ = writeln!(s, "![accuracy vs time](accuracy-vs-time.png)\n");
+    let _ = writeln!(
+        s,
+        "The plot shows `{plot_scene}`: one panel per resolution, IoU against dense vs acceleration (dense evaluations / evaluations).\n"
+    );
+    let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    for sc in scenes {
+        let _ = writeln!(s, "## {sc}\n");
+        let sub: Vec<Row> = rows.iter().filter(|r| r.scene == sc).cloned().collect();
+        if let Some(r) = sub.first() {
+            let _ = writeln!(
+                s,
+                "Coarsest grid {}^3; dense result has {} connected component(s).\n",
+                r.coarse_resolution, r.dense_components
+            );
+        }
+        s.push_str(&summary_table(&sub));
+        s.push('\n');
+    }
+    s
+}

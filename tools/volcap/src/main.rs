@@ -1,0 +1,81 @@
+//! `volcap`: the command line for benchmarks, evaluation and simulation.
+
+mod bench;
+mod plot;
+
+use clap::{Args, Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "volcap",
+    version,
+    about = "volcap tools: benchmarks, evaluation, simulation"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Benchmarks that put accuracy next to time.
+    #[command(subcommand)]
+    Bench(BenchCmd),
+}
+
+#[derive(Subcommand)]
+enum BenchCmd {
+    /// Every surface-localization method on the same fields and grids: evaluations, time,
+    /// IoU against dense, lost components, band bound. Writes a table and a plot.
+    Localize(LocalizeArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct LocalizeArgs {
+    /// Scene to measure (repeatable). Default: every analytic scene.
+    #[arg(long = "scene", value_name = "NAME")]
+    pub scenes: Vec<String>,
+    /// Grid resolutions, each 2^L + 1.
+    #[arg(long, value_delimiter = ',', default_value = "65,129,257,513")]
+    pub res: Vec<usize>,
+    /// Methods (comma-separated): dense, mise, octree-threshold (every threshold) or
+    /// octree-threshold@T, hierarchical, hierarchical-no-conflict, hierarchical-tight.
+    /// Default: all. Dense always runs (it is the reference).
+    #[arg(long, value_delimiter = ',')]
+    pub methods: Vec<String>,
+    /// Coarsest level of the coarse-to-fine methods (default 5, i.e. 33^3).
+    #[arg(long)]
+    pub coarse_level: Option<u32>,
+    /// Timed runs per row (median reported); fewer when a row exceeds --time-budget.
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Seconds of timed runs per row after which no further run is started.
+    #[arg(long, default_value_t = 2.0)]
+    pub time_budget: f64,
+    /// JSON Lines on stdout (one object per row, nothing else on stdout); files are then
+    /// written only if --out is given.
+    #[arg(long)]
+    pub json: bool,
+    /// Folder for accuracy-vs-time.md and accuracy-vs-time.png (default docs/bench).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Scene drawn in the plot (default capsule-human if measured, else the first scene).
+    #[arg(long)]
+    pub plot_scene: Option<String>,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let res = match cli.cmd {
+        Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
+    };
+    match res {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("volcap: error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,122 @@
+//! PNG plots (plotters, bitmap backend, font embedded so no system fonts are needed).
+
+use crate::bench::Row;
+use anyhow::anyhow;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+use std::path::Path;
+use std::sync::Once;
+
+static FONT: &[u8] = include_bytes!("../assets/DejaVuSansMono.ttf");
+static REGISTER: Once = Once::new();
+
+fn register_font() {
+    REGISTER.call_once(|| {
+        // The font is compiled in and known to parse; a failure would only lose labels.
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    });
+}
+
+fn method_color(method: &str) -> RGBColor {
+    match method {
+        "dense" => RGBColor(0, 0, 0),
+        "mise" => RGBColor(230, 120, 0),
+        "octree-threshold" => RGBColor(30, 110, 200),
+        "hierarchical" => RGBColor(200, 30, 40),
+        "hierarchical-no-conflict" => RGBColor(150, 80, 170),
+        "hierarchical-tight" => RGBColor(20, 150, 60),
+        _ => RGBColor(100, 100, 100),
+    }
+}
+
+/// The paper's Fig. 5 redrawn from our rows: IoU vs dense over acceleration factor, one
+/// panel per resolution, one marker per method/threshold, for `scene`.
+pub fn accuracy_vs_time(rows: &[Row], scene: &str, path: &Path) -> anyhow::Result<()> {
+    register_font();
+    let sub: Vec<&Row> = rows.iter().filter(|r| r.scene == scene).collect();
+    let mut res: Vec<usize> = sub.iter().map(|r| r.resolution).collect();
+    res.sort();
+    res.dedup();
+    let cols = if res.len() > 1 { 2 } else { 1 };
+    let nrows = res.len().div_ceil(cols).max(1);
+    let (w, h) = (560 * cols as u32, 440 * nrows as u32 + 40);
+    let root = BitMapBackend::new(path, (w, h)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let (title, body) = root.split_vertically(40);
+    title
+        .titled(
+            &format!("Surface localization on '{scene}': accuracy vs acceleration"),
+            ("sans-serif", 22),
+        )
+        .map_err(|e| anyhow!("{e}"))?;
+    let panels = body.split_evenly((nrows, cols));
+    for (panel, &r) in panels.iter().zip(&res) {
+        let pts: Vec<&&Row> = sub.iter().filter(|x| x.resolution == r).collect();
+        let xmax = pts.iter().map(|p| p.eval_speedup()).fold(1.0, f64::max) * 2.0;
+        let ymin = pts.iter().map(|p| p.iou_vs_dense).fold(1.0, f64::min);
+        let ylo = (ymin - 0.1 * (1.0 - ymin).max(0.01)).max(0.0);
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                format!(
+                    "{r}^3 ({} dense evaluations)",
+                    pts.first().map(|p| p.dense_evaluations).unwrap_or(0)
+                ),
+                ("sans-serif", 16),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d((0.8f64..xmax).log_scale(), ylo..1.0 + (1.0 - ylo) * 0.06)
+            .map_err(|e| anyhow!("{e}"))?;
+        chart
+            .configure_mesh()
+            .x_desc("acceleration (dense evals / evals)")
+            .y_desc("IoU vs dense")
+            .label_style(("sans-serif", 12))
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+        let mut seen = std::collections::HashSet::new();
+        for p in &pts {
+            let color = method_color(&p.method);
+            let x = p.eval_speedup();
+            let y = p.iou_vs_dense;
+            // MISE often lands on the hierarchical point: draw it as a ring around it.
+            let ring = p.method == "mise";
+            let style = if ring {
+                color.stroke_width(2)
+            } else {
+                color.filled()
+            };
+            let radius = if ring { 9 } else { 5 };
+            let series = chart
+                .draw_series(std::iter::once(Circle::new((x, y), radius, style)))
+                .map_err(|e| anyhow!("{e}"))?;
+            if seen.insert(p.method.clone()) {
+                series
+                    .label(p.method.clone())
+                    .legend(move |(x, y)| Circle::new((x, y), radius.min(6), style));
+            }
+            if let Some(t) = p.param {
+                let label = EmptyElement::at((x, y))
+                    + Text::new(
+                        format!("{t}"),
+                        (7, -14),
+                        ("sans-serif", 11).into_font().color(&color),
+                    );
+                chart
+                    .draw_series(std::iter::once(label))
+                    .map_err(|e| anyhow!("{e}"))?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 12))
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}

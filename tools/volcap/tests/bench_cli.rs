@@ -1,0 +1,130 @@
+//! `volcap bench localize` run as a user would.
+
+use std::process::Command;
+
+fn volcap() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_volcap"))
+}
+
+#[test]
+fn json_rows_cover_every_method_and_nothing_else_is_on_stdout() {
+    let out = volcap()
+        .args([
+            "bench",
+            "localize",
+            "--scene",
+            "sphere",
+            "--scene",
+            "capsule-human",
+            "--res",
+            "33,65",
+            "--runs",
+            "1",
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let rows: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("each line is JSON"))
+        .collect();
+    // 2 scenes x 2 resolutions x (dense + mise + 7 thresholds + 3 hierarchical).
+    assert_eq!(rows.len(), 2 * 2 * 12);
+    for r in &rows {
+        for key in [
+            "scene",
+            "resolution",
+            "method",
+            "param",
+            "evaluations",
+            "dense_evaluations",
+            "band_bound",
+            "iou_vs_dense",
+            "lost_components",
+            "ms",
+        ] {
+            assert!(r.get(key).is_some(), "missing {key} in {r}");
+        }
+        let evals = r["evaluations"].as_u64().unwrap();
+        let dense = r["dense_evaluations"].as_u64().unwrap();
+        assert!(evals <= dense);
+        let res = r["resolution"].as_u64().unwrap();
+        assert_eq!(dense, res * res * res);
+        let iou = r["iou_vs_dense"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&iou));
+        if r["method"] == "hierarchical" || r["method"] == "dense" {
+            assert_eq!(iou, 1.0, "{r}");
+            assert_eq!(r["lost_components"], 0);
+        }
+        assert!(r["ms"].as_f64().unwrap() > 0.0);
+    }
+    let thresholds: Vec<f64> = rows
+        .iter()
+        .filter(|r| {
+            r["method"] == "octree-threshold" && r["scene"] == "sphere" && r["resolution"] == 33
+        })
+        .map(|r| r["param"].as_f64().unwrap())
+        .collect();
+    assert_eq!(thresholds.len(), 7);
+}
+
+#[test]
+fn report_and_plot_are_written() {
+    let dir = std::env::temp_dir().join(format!("volcap-bench-{}", std::process::id()));
+    let out = volcap()
+        .args([
+            "bench",
+            "localize",
+            "--scene",
+            "torus",
+            "--res",
+            "33,65",
+            "--runs",
+            "1",
+            "--methods",
+            "hierarchical,mise",
+        ])
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let md = std::fs::read_to_string(dir.join("accuracy-vs-time.md")).unwrap();
+    assert!(md.contains("| torus | 65 | hierarchical |"));
+    assert!(md.contains("| torus | 65 | dense |"));
+    let png = std::fs::read(dir.join("accuracy-vs-time.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    assert!(png.len() > 10_000);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_arguments_are_named() {
+    for (args, needle) in [
+        (vec!["--scene", "cube"], "unknown scene 'cube'"),
+        (vec!["--res", "100"], "--res 100"),
+        (vec!["--methods", "octree-threshold@2"], "must be in (0, 1)"),
+        (vec!["--methods", "bogus"], "unknown method 'bogus'"),
+        (vec!["--runs", "0"], "--runs must be at least 1"),
+    ] {
+        let out = volcap()
+            .args(["bench", "localize", "--json"])
+            .args(&args)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+        assert!(out.stdout.is_empty());
+    }
+}
