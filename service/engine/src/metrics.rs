@@ -144,91 +144,141 @@ pub fn chamfer(a: &[DVec3], b: &[DVec3]) -> f64 {
     0.5 * (mean_nearest(a, b) + mean_nearest(b, a))
 }
 
-/// Distance from `p` to triangle `abc` (Ericson, Real-Time Collision Detection 5.1.5).
-pub fn point_triangle_distance(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
+/// Closest point to `p` on triangle `abc` and its barycentric coordinates (Ericson,
+/// Real-Time Collision Detection 5.1.5). Degenerate triangles fall back to the nearest vertex.
+pub fn closest_point_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, [f64; 3]) {
     let ab = b - a;
     let ac = c - a;
     let ap = p - a;
     let d1 = ab.dot(ap);
     let d2 = ac.dot(ap);
     if d1 <= 0.0 && d2 <= 0.0 {
-        return (p - a).length();
+        return (a, [1.0, 0.0, 0.0]);
     }
     let bp = p - b;
     let d3 = ab.dot(bp);
     let d4 = ac.dot(bp);
     if d3 >= 0.0 && d4 <= d3 {
-        return (p - b).length();
+        return (b, [0.0, 1.0, 0.0]);
     }
     let vc = d1 * d4 - d3 * d2;
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
         let v = d1 / (d1 - d3);
-        return (p - (a + ab * v)).length();
+        return (a + ab * v, [1.0 - v, v, 0.0]);
     }
     let cp = p - c;
     let d5 = ab.dot(cp);
     let d6 = ac.dot(cp);
     if d6 >= 0.0 && d5 <= d6 {
-        return (p - c).length();
+        return (c, [0.0, 0.0, 1.0]);
     }
     let vb = d5 * d2 - d1 * d6;
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
         let w = d2 / (d2 - d6);
-        return (p - (a + ac * w)).length();
+        return (a + ac * w, [1.0 - w, 0.0, w]);
     }
     let va = d3 * d6 - d5 * d4;
     if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return (p - (b + (c - b) * w)).length();
+        return (b + (c - b) * w, [0.0, 1.0 - w, w]);
     }
     let denom = va + vb + vc;
     if denom.abs() < f64::MIN_POSITIVE {
-        // Degenerate triangle: fall back to the nearest vertex.
-        return (p - a).length().min((p - b).length()).min((p - c).length());
+        let da = (p - a).length_squared();
+        let db = (p - b).length_squared();
+        let dc = (p - c).length_squared();
+        return if da <= db && da <= dc {
+            (a, [1.0, 0.0, 0.0])
+        } else if db <= dc {
+            (b, [0.0, 1.0, 0.0])
+        } else {
+            (c, [0.0, 0.0, 1.0])
+        };
     }
     let v = vb / denom;
     let w = vc / denom;
-    (p - (a + ab * v + ac * w)).length()
+    (a + ab * v + ac * w, [1.0 - v - w, v, w])
 }
 
-/// Exact point-to-surface distance from each point to a mesh (mean), using a k-d tree of
-/// triangle centroids and a search radius that provably contains the nearest triangle.
+/// Distance from `p` to triangle `abc`.
+pub fn point_triangle_distance(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    (p - closest_point_triangle(p, a, b, c).0).length()
+}
+
+/// Nearest-triangle queries over a triangle soup: a k-d tree of centroids and a search
+/// radius that provably contains the nearest triangle (any triangle closer than the best so
+/// far has its centroid within best + the largest centroid-to-vertex distance).
+pub struct TriangleIndex {
+    tris: Vec<[DVec3; 3]>,
+    tree: KdTree<f64, 3>,
+    rmax: f64,
+}
+
+impl TriangleIndex {
+    pub fn new(tris: Vec<[DVec3; 3]>) -> Self {
+        let cents: Vec<DVec3> = tris.iter().map(|[a, b, c]| (*a + *b + *c) / 3.0).collect();
+        let rmax = tris
+            .iter()
+            .zip(&cents)
+            .map(|([a, b, c], m)| {
+                (*a - *m)
+                    .length()
+                    .max((*b - *m).length())
+                    .max((*c - *m).length())
+            })
+            .fold(0.0, f64::max);
+        Self {
+            tree: tree(&cents),
+            tris,
+            rmax,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.tris.is_empty()
+    }
+
+    /// (triangle index, closest point, barycentric coordinates, distance); `None` when empty.
+    pub fn nearest(&self, p: DVec3) -> Option<(usize, DVec3, [f64; 3], f64)> {
+        if self.tris.is_empty() {
+            return None;
+        }
+        let q = p.to_array();
+        let nn = self.tree.nearest_one::<SquaredEuclidean>(&q);
+        let ti = nn.item as usize;
+        let [a, b, c] = self.tris[ti];
+        let (cp, bary) = closest_point_triangle(p, a, b, c);
+        let mut best = (ti, cp, bary, (p - cp).length());
+        let r = best.3 + self.rmax;
+        for cand in self.tree.within_unsorted::<SquaredEuclidean>(&q, r * r) {
+            let ci = cand.item as usize;
+            let [a, b, c] = self.tris[ci];
+            let (cp, bary) = closest_point_triangle(p, a, b, c);
+            let d = (p - cp).length();
+            if d < best.3 {
+                best = (ci, cp, bary, d);
+            }
+        }
+        Some(best)
+    }
+}
+
+/// Exact point-to-surface distance from each point to a mesh (mean).
 pub fn point_to_surface(points: &[DVec3], mesh: &Mesh) -> f64 {
     if points.is_empty() || mesh.triangles.is_empty() {
         return f64::INFINITY;
     }
-    let tris: Vec<[DVec3; 3]> = mesh
-        .triangles
+    let index = TriangleIndex::new(
+        mesh.triangles
+            .iter()
+            .map(|t| t.map(|i| mesh.vertices[i as usize].as_dvec3()))
+            .collect(),
+    );
+    points
         .iter()
-        .map(|t| t.map(|i| mesh.vertices[i as usize].as_dvec3()))
-        .collect();
-    let cents: Vec<DVec3> = tris.iter().map(|[a, b, c]| (*a + *b + *c) / 3.0).collect();
-    let rmax = tris
-        .iter()
-        .zip(&cents)
-        .map(|([a, b, c], m)| {
-            (*a - *m)
-                .length()
-                .max((*b - *m).length())
-                .max((*c - *m).length())
-        })
-        .fold(0.0, f64::max);
-    let t = tree(&cents);
-    let mut sum = 0.0;
-    for p in points {
-        let q = p.to_array();
-        let nn = t.nearest_one::<SquaredEuclidean>(&q);
-        let [a, b, c] = tris[nn.item as usize];
-        let mut best = point_triangle_distance(*p, a, b, c);
-        // Any triangle closer than `best` has its centroid within best + rmax.
-        let r = best + rmax;
-        for cand in t.within_unsorted::<SquaredEuclidean>(&q, r * r) {
-            let [a, b, c] = tris[cand.item as usize];
-            best = best.min(point_triangle_distance(*p, a, b, c));
-        }
-        sum += best;
-    }
-    sum / points.len() as f64
+        .map(|p| index.nearest(*p).map_or(f64::INFINITY, |n| n.3))
+        .sum::<f64>()
+        / points.len() as f64
 }
 
 #[cfg(test)]

@@ -55,13 +55,28 @@ impl Row {
     }
 }
 
-/// A field to benchmark, by scene name.
+/// A field to benchmark, by scene name: an analytic scene, or a simulator scene (a path to a
+/// scene file, or a name under `tests/scenes/`) whose frame-0 clothed-human occupancy oracle
+/// is the field, in that frame's render view.
 fn scene_field(name: &str) -> anyhow::Result<Box<dyn OccupancyField>> {
     if let Some(s) = AnalyticScene::by_name(name) {
         return Ok(Box::new(s));
     }
+    let path = if name.ends_with(".toml") {
+        PathBuf::from(name)
+    } else {
+        PathBuf::from(format!("tests/scenes/{name}.toml"))
+    };
+    if path.exists() {
+        let assets =
+            std::sync::Arc::new(volcap_sim::HumanAssets::embedded().map_err(anyhow::Error::msg)?);
+        let mut sim = crate::simcmd::load_scene(&path, assets)?;
+        sim.render(0)
+            .with_context(|| format!("{}: frame 0", path.display()))?;
+        return Ok(Box::new(sim.oracle(volcap_sim::oracle::DEFAULT_VOXEL_M)));
+    }
     bail!(
-        "unknown scene '{name}' (analytic scenes: {})",
+        "unknown scene '{name}' (analytic scenes: {}; or a simulator scene file / a name under tests/scenes/)",
         SCENES.join(", ")
     )
 }
@@ -219,6 +234,12 @@ pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
             .plot_scene
             .clone()
             .or_else(|| scenes.iter().find(|s| *s == "capsule-human").cloned())
+            .or_else(|| {
+                scenes
+                    .iter()
+                    .find(|s| AnalyticScene::by_name(s).is_none())
+                    .cloned()
+            })
             .unwrap_or_else(|| scenes[0].clone());
         let md = dir.join("accuracy-vs-time.md");
         let png = dir.join("accuracy-vs-time.png");

@@ -2,6 +2,7 @@
 
 mod bench;
 mod plot;
+mod simcmd;
 
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
@@ -23,6 +24,9 @@ enum Cmd {
     /// Benchmarks that put accuracy next to time.
     #[command(subcommand)]
     Bench(BenchCmd),
+    /// The scene simulator: asset pack, rendering, benchmarks, datasets.
+    #[command(subcommand)]
+    Sim(simcmd::SimCmd),
 }
 
 #[derive(Subcommand)]
@@ -70,6 +74,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let res = match cli.cmd {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
+        Cmd::Sim(c) => simcmd::run(c),
     };
     match res {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,327 @@
+//! Training shards like the paper's data: for every rendered image, the image and person
+//! mask plus sampled 3D points with occupancy labels and surface points with colours.
+//!
+//! Layout: `OUT/{train,val}/<subject>/<pose>_<view>.safetensors`, plus `OUT/dataset.json`
+//! (the configuration, the subjects and their split). Each shard holds tensors
+//! `image` u8 [H, W, 3], `mask` u8 [H, W], `points` f32 [N, 3] (render-view NDC, the
+//! engine's convention), `occ` f32 [N] (1 inside, 0 outside), `surface` f32 [M, 3] (NDC),
+//! `surface_rgb` f32 [M, 3], and one metadata key `volcap` holding JSON (`camera`, `subject`,
+//! `subject_table`, `style`, `time_s`, `yaw_deg`, `split`). Points: half inside, half outside; near-surface samples with a
+//! Gaussian offset (sigma, default 5 cm) plus uniform samples in the subject's box.
+//! Everything is deterministic from the seed; the split is by subject identity.
+
+use crate::assets::{GarmentKind, HumanAssets};
+use crate::pose::Style;
+use crate::scene::Scene;
+use crate::sim::{SimError, Simulator};
+use glam::{DVec3, Vec3};
+use rand::seq::{IndexedRandom, SliceRandom};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use safetensors::Dtype;
+use safetensors::tensor::TensorView;
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+use volcap_engine::mesh::Mesh;
+use volcap_engine::metrics::sample_surface;
+
+#[derive(Debug, Clone)]
+pub struct DatasetConfig {
+    pub subjects: usize,
+    pub poses: usize,
+    pub views: usize,
+    /// Image side in pixels.
+    pub size: usize,
+    /// Labelled points per image (half inside, half outside).
+    pub points: usize,
+    /// Surface points with colours per image.
+    pub surface_points: usize,
+    /// Standard deviation of the near-surface offsets, metres.
+    pub sigma_m: f32,
+    /// Fraction of subject identities held out for validation.
+    pub val_fraction: f32,
+    pub voxel_m: f32,
+    pub seed: u64,
+}
+
+impl Default for DatasetConfig {
+    fn default() -> Self {
+        Self {
+            subjects: 4,
+            poses: 2,
+            views: 36,
+            size: 256,
+            points: 8000,
+            surface_points: 4000,
+            sigma_m: 0.05,
+            val_fraction: 0.25,
+            voxel_m: 0.005,
+            seed: 0,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    #[error("{0}")]
+    Config(String),
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error("{path}: {msg}")]
+    Write { path: String, msg: String },
+}
+
+/// A subject identity drawn from the seed, as a scene `[[subject]]` table.
+fn random_subject(assets: &HumanAssets, r: &mut ChaCha8Rng, id: &str) -> String {
+    let gender: f32 = r.random();
+    let pick = |r: &mut ChaCha8Rng, kind: GarmentKind, prefer: &str| -> Option<String> {
+        let all: Vec<&String> = assets
+            .garments
+            .iter()
+            .filter(|(_, g)| g.kind == kind)
+            .map(|(n, _)| n)
+            .collect();
+        let pref: Vec<&String> = all
+            .iter()
+            .copied()
+            .filter(|n| n.starts_with(prefer))
+            .collect();
+        let from = if pref.is_empty() { &all } else { &pref };
+        from.choose(r).map(|s| s.to_string())
+    };
+    let prefer = if gender > 0.5 { "male" } else { "female" };
+    let mut t = format!(
+        "[[subject]]\nid = \"{id}\"\ngender = {gender}\nmuscle = {}\nweight = {}\nheight = {}\n",
+        r.random_range(0.3..0.8f32),
+        r.random_range(0.3..0.8f32),
+        r.random_range(0.3..0.7f32)
+    );
+    let race = r.random_range(0..3usize);
+    t.push_str(&format!(
+        "race = [{}, {}, {}]\n",
+        (race == 0) as u8,
+        (race == 1) as u8,
+        (race == 2) as u8
+    ));
+    for (key, kind, pref) in [
+        ("outfit", GarmentKind::Outfit, prefer),
+        ("shoes", GarmentKind::Shoes, ""),
+        ("hair", GarmentKind::Hair, ""),
+    ] {
+        if let Some(n) = pick(r, kind, pref) {
+            t.push_str(&format!("{key} = \"{n}\"\n"));
+        }
+    }
+    let skins: Vec<&String> = assets.skins.keys().collect();
+    if let Some(s) = skins.choose(r) {
+        t.push_str(&format!("skin = \"{s}\"\n"));
+    }
+    t
+}
+
+fn tensor<'a>(
+    dtype: Dtype,
+    shape: Vec<usize>,
+    data: &'a [u8],
+) -> Result<TensorView<'a>, DatasetError> {
+    TensorView::new(dtype, shape, data).map_err(|e| DatasetError::Config(format!("tensor: {e}")))
+}
+
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// Generate the dataset into `out`; `progress(images_done)` is called after each image.
+pub fn generate(
+    assets: Arc<HumanAssets>,
+    cfg: &DatasetConfig,
+    out: &Path,
+    mut progress: impl FnMut(u64),
+) -> Result<u64, DatasetError> {
+    if cfg.subjects < 2 || cfg.poses == 0 || cfg.views == 0 || cfg.points < 2 {
+        return Err(DatasetError::Config(
+            "need at least 2 subjects, 1 pose, 1 view and 2 points".into(),
+        ));
+    }
+    if !(0.0..1.0).contains(&cfg.val_fraction) {
+        return Err(DatasetError::Config(format!(
+            "val fraction {} must be in [0, 1)",
+            cfg.val_fraction
+        )));
+    }
+    let mut r = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let ids: Vec<String> = (0..cfg.subjects).map(|i| format!("s{i:03}")).collect();
+    let tables: Vec<String> = ids
+        .iter()
+        .map(|id| random_subject(&assets, &mut r, id))
+        .collect();
+    let mut order: Vec<usize> = (0..cfg.subjects).collect();
+    order.shuffle(&mut r);
+    let n_val =
+        ((cfg.subjects as f32 * cfg.val_fraction).round() as usize).clamp(1, cfg.subjects - 1);
+    let val: Vec<bool> = (0..cfg.subjects)
+        .map(|i| order[..n_val].contains(&i))
+        .collect();
+    let werr = |p: &Path, e: &dyn std::fmt::Display| DatasetError::Write {
+        path: p.display().to_string(),
+        msg: e.to_string(),
+    };
+    std::fs::create_dir_all(out).map_err(|e| werr(out, &e))?;
+    let manifest = serde_json::json!({
+        "format": "volcap-sim-dataset/1",
+        "seed": cfg.seed, "subjects": cfg.subjects, "poses": cfg.poses, "views": cfg.views, "size": cfg.size,
+        "points": cfg.points, "surface_points": cfg.surface_points, "sigma_m": cfg.sigma_m, "voxel_m": cfg.voxel_m,
+        "assets": assets.source,
+        "split": ids.iter().zip(&val).map(|(id, v)| (id.clone(), if *v { "val" } else { "train" })).collect::<HashMap<_, _>>(),
+        "subject_tables": ids.iter().zip(&tables).map(|(id, t)| (id.clone(), t.clone())).collect::<HashMap<_, _>>(),
+    });
+    let mpath = out.join("dataset.json");
+    std::fs::write(
+        &mpath,
+        serde_json::to_string_pretty(&manifest).unwrap_or_default(),
+    )
+    .map_err(|e| werr(&mpath, &e))?;
+    let mut done = 0u64;
+    for (si, table) in tables.iter().enumerate() {
+        let split = if val[si] { "val" } else { "train" };
+        let dir = out.join(split).join(&ids[si]);
+        std::fs::create_dir_all(&dir).map_err(|e| werr(&dir, &e))?;
+        for pi in 0..cfg.poses {
+            let style = Style::ALL[r.random_range(0..Style::ALL.len())];
+            let style_name = serde_json::to_value(format!("{style:?}")).unwrap_or_default();
+            let kebab = match style {
+                Style::Walk => "walk",
+                Style::ArmsRaised => "arms-raised",
+                Style::Crouch => "crouch",
+                Style::Turn => "turn",
+                Style::ArmAcross => "arm-across",
+                Style::Lean => "lean",
+            };
+            let frame: u64 = r.random_range(0..60);
+            let text = format!(
+                "[camera]\nwidth = {s}\nheight = {s}\nheight_m = 2.3\nlook_at = [0.0, 0.95, 0.0]\n[lighting]\npreset = \"studio\"\n{table}\
+                 motion = {{ kind = \"procedural\", style = \"{kebab}\", seed = {seed} }}\n",
+                s = cfg.size,
+                seed = r.random::<u32>()
+            );
+            let scene = Scene::parse(&text, Path::new("<dataset>"))
+                .map_err(|e| DatasetError::Config(e.to_string()))?;
+            let mut sim = Simulator::new(scene, assets.clone())?;
+            sim.render(frame)?;
+            let field = sim.oracle(cfg.voxel_m);
+            // World-space samples shared by the views of this pose.
+            let meshes = sim.world_meshes();
+            let mut surf = Mesh::default();
+            for (closed, open) in &meshes {
+                for m in closed.iter().take(1).chain(open.iter()) {
+                    let base = surf.vertices.len() as u32;
+                    surf.vertices.extend_from_slice(m.verts);
+                    surf.triangles
+                        .extend(m.tris.iter().map(|t| t.map(|i| i + base)));
+                }
+            }
+            let (lo, hi) = surf
+                .vertices
+                .iter()
+                .fold((Vec3::MAX, Vec3::MIN), |(l, h), v| (l.min(*v), h.max(*v)));
+            let pad = Vec3::splat(0.1);
+            let half = cfg.points / 2;
+            let (mut ins, mut outs): (Vec<Vec3>, Vec<Vec3>) =
+                (Vec::with_capacity(half), Vec::with_capacity(half));
+            let mut rounds = 0;
+            while (ins.len() < half || outs.len() < half) && rounds < 50 {
+                rounds += 1;
+                let near = sample_surface(&surf, cfg.points, r.random());
+                for (k, p) in near.iter().enumerate() {
+                    let p = if k % 10 == 0 {
+                        // 10% uniform in the padded box.
+                        Vec3::new(
+                            r.random_range(lo.x - pad.x..hi.x + pad.x),
+                            r.random_range(lo.y - pad.y..hi.y + pad.y),
+                            r.random_range(lo.z - pad.z..hi.z + pad.z),
+                        )
+                    } else {
+                        let g = DVec3::new(gauss(&mut r), gauss(&mut r), gauss(&mut r))
+                            * cfg.sigma_m as f64;
+                        (*p + g).as_vec3()
+                    };
+                    if field.oracle.contains(p) {
+                        if ins.len() < half {
+                            ins.push(p);
+                        }
+                    } else if outs.len() < half {
+                        outs.push(p);
+                    }
+                }
+            }
+            let surface: Vec<Vec3> = sample_surface(&surf, cfg.surface_points, r.random())
+                .iter()
+                .map(|p| p.as_vec3())
+                .collect();
+            let surface_rgb: Vec<f32> = surface
+                .iter()
+                .flat_map(|p| field.colors.color(*p))
+                .collect();
+            let labels: Vec<f32> = std::iter::repeat_n(1.0f32, ins.len())
+                .chain(std::iter::repeat_n(0.0, outs.len()))
+                .collect();
+            let world_pts: Vec<Vec3> = ins.iter().chain(&outs).copied().collect();
+            for vi in 0..cfg.views {
+                let yaw = 360.0 * vi as f32 / cfg.views as f32;
+                sim.set_view_yaw(yaw);
+                let f = sim.render(frame)?;
+                let to_ndc = |v: &[Vec3]| -> Vec<f32> {
+                    v.iter()
+                        .flat_map(|p| f.camera.world_to_ndc(*p).to_array())
+                        .collect()
+                };
+                let pts = f32_bytes(&to_ndc(&world_pts));
+                let occ = f32_bytes(&labels);
+                let sp = f32_bytes(&to_ndc(&surface));
+                let sc = f32_bytes(&surface_rgb);
+                let mask = f.person_mask();
+                let (h, w) = (f.height, f.width);
+                // One metadata key holding sorted JSON: byte-identical files for a seed.
+                let info = serde_json::json!({
+                    "camera": f.camera,
+                    "subject": ids[si],
+                    "subject_table": table,
+                    "style": style_name,
+                    "time_s": f.time_s,
+                    "yaw_deg": yaw,
+                    "split": split,
+                });
+                let meta: HashMap<String, String> = [("volcap".to_string(), info.to_string())]
+                    .into_iter()
+                    .collect();
+                let tensors = vec![
+                    ("image", tensor(Dtype::U8, vec![h, w, 3], &f.rgb)?),
+                    ("mask", tensor(Dtype::U8, vec![h, w], &mask)?),
+                    ("occ", tensor(Dtype::F32, vec![labels.len()], &occ)?),
+                    (
+                        "points",
+                        tensor(Dtype::F32, vec![world_pts.len(), 3], &pts)?,
+                    ),
+                    ("surface", tensor(Dtype::F32, vec![surface.len(), 3], &sp)?),
+                    (
+                        "surface_rgb",
+                        tensor(Dtype::F32, vec![surface.len(), 3], &sc)?,
+                    ),
+                ];
+                let path = dir.join(format!("{pi:03}_{vi:02}.safetensors"));
+                safetensors::serialize_to_file(tensors, Some(meta), &path)
+                    .map_err(|e| werr(&path, &e))?;
+                done += 1;
+                progress(done);
+            }
+        }
+    }
+    Ok(done)
+}
+
+fn gauss(r: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = r.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = r.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
