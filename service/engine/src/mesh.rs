@@ -78,8 +78,18 @@ impl Mesh {
         c.map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8)
     }
 
-    /// Write binary little-endian PLY (positions, optional RGB, triangles).
+    /// Write binary little-endian PLY (positions, optional RGB, triangles), converting NDC
+    /// to y up.
     pub fn write_ply(&self, w: &mut impl Write) -> io::Result<()> {
+        self.write_ply_impl(w, true)
+    }
+
+    /// Write PLY with positions as they are (for meshes already in a y-up world frame).
+    pub fn write_ply_as_is(&self, w: &mut impl Write) -> io::Result<()> {
+        self.write_ply_impl(w, false)
+    }
+
+    fn write_ply_impl(&self, w: &mut impl Write, from_ndc: bool) -> io::Result<()> {
         let mut head = format!(
             "ply\nformat binary_little_endian 1.0\ncomment volcap mesh, y up\nelement vertex {}\n\
              property float x\nproperty float y\nproperty float z\n",
@@ -96,7 +106,12 @@ impl Mesh {
             Vec::with_capacity(head.len() + self.vertices.len() * 15 + self.triangles.len() * 13);
         buf.extend_from_slice(head.as_bytes());
         for (i, v) in self.vertices.iter().enumerate() {
-            for c in Self::export_vertex(*v) {
+            let p = if from_ndc {
+                Self::export_vertex(*v)
+            } else {
+                v.to_array()
+            };
+            for c in p {
                 buf.extend_from_slice(&c.to_le_bytes());
             }
             if let Some(cols) = &self.colors {
@@ -105,7 +120,11 @@ impl Mesh {
         }
         for t in &self.triangles {
             buf.push(3);
-            for i in Self::export_triangle(*t) {
+            for i in if from_ndc {
+                Self::export_triangle(*t)
+            } else {
+                *t
+            } {
                 buf.extend_from_slice(&i.to_le_bytes());
             }
         }

@@ -168,9 +168,15 @@ pub struct CameraSpec {
     /// Weak perspective: metres of the world spanned by the image height.
     #[serde(default = "d_height_m")]
     pub height_m: Positive,
-    /// Pinhole: vertical field of view in degrees (square pixels, centred principal point).
+    /// Pinhole: vertical field of view in degrees (square pixels, centred principal point),
+    /// unless the intrinsics below are given.
     #[serde(default = "d_fov")]
     pub fov_y: Positive,
+    /// Pinhole intrinsics in pixels (override `fov_y`): focal lengths and principal point.
+    pub fx: Option<Positive>,
+    pub fy: Option<Positive>,
+    pub cx: Option<Finite>,
+    pub cy: Option<Finite>,
 }
 
 impl Default for CameraSpec {

@@ -93,6 +93,11 @@ fn body_oracle_agrees_with_winding_numbers_and_mesh_volume() {
             checked += 1;
         }
         assert!(inside > 5, "{pose}: only {inside} interior samples");
+        eprintln!(
+            "{pose}: oracle volume {:.5} m^3 vs mesh {mesh_vol:.5} m^3 ({:+.2}%), {checked}/{checked} off-surface points agree with winding numbers ({inside} inside)",
+            oracle.volume_m3(),
+            (oracle.volume_m3() / mesh_vol - 1.0) * 100.0
+        );
         assert!(!oracle.contains(DVec3::new(5.0, 5.0, 5.0).as_vec3()));
     }
 }

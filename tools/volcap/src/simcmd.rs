@@ -99,6 +99,10 @@ pub struct RenderArgs {
     pub frames: Option<u64>,
     #[arg(long)]
     pub out: PathBuf,
+    /// Also write the posed clothed meshes of every frame (`NNNNNN_mesh.ply`, world metres,
+    /// y up; body, eyes and garments as separate pieces of one file).
+    #[arg(long)]
+    pub meshes: bool,
     #[command(flatten)]
     pub assets: AssetArgs,
 }
@@ -175,7 +179,12 @@ fn render(a: &RenderArgs) -> anyhow::Result<()> {
     let pb = bar(frames);
     for i in 0..frames {
         match sim.render(i) {
-            Ok(f) => write_frame(&a.out, &f, &sim)?,
+            Ok(f) => {
+                write_frame(&a.out, &f, &sim)?;
+                if a.meshes {
+                    write_meshes(&a.out, f.index, &sim)?;
+                }
+            }
             Err(SimError::Unplugged { frame }) => {
                 pb.finish_and_clear();
                 println!(
@@ -361,5 +370,25 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
         a.out.display(),
         n as f64 / secs
     );
+    Ok(())
+}
+
+/// The posed clothed meshes of the last frame as one PLY in world metres (y up).
+fn write_meshes(dir: &Path, index: u64, sim: &Simulator) -> anyhow::Result<()> {
+    let mut m = volcap_engine::mesh::Mesh::default();
+    for (closed, open) in sim.world_meshes() {
+        for w in closed.iter().chain(open.iter()) {
+            let base = m.vertices.len() as u32;
+            m.vertices.extend_from_slice(w.verts);
+            m.triangles
+                .extend(w.tris.iter().map(|t| t.map(|i| i + base)));
+        }
+    }
+    let path = dir.join(format!("{index:06}_mesh.ply"));
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(&path).with_context(|| format!("creating {}", path.display()))?,
+    );
+    m.write_ply_as_is(&mut f)
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
