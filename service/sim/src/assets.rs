@@ -307,16 +307,6 @@ impl HumanAssets {
                         ),
                     });
                 }
-                if clo
-                    .verts
-                    .iter()
-                    .any(|v| v.0.iter().any(|&i| i as usize >= nv))
-                {
-                    return Err(AssetError::Invalid {
-                        path: clo_path,
-                        msg: "fitting index beyond the base mesh".into(),
-                    });
-                }
                 let (tris, uv_tris) = gobj.triangles(|_| true);
                 let mat = material(
                     &folder.join(&clo.material),
@@ -359,7 +349,7 @@ impl HumanAssets {
                 .collect();
             poses.insert(name.clone(), m);
         }
-        Ok(Self {
+        let assets = Self {
             version: PACK_VERSION,
             source: format!("MakeHuman 1.x system assets (CC0) from {}", dir.display()),
             base: obj.positions.iter().map(|p| p.to_array()).collect(),
@@ -384,7 +374,12 @@ impl HumanAssets {
             garments,
             skins,
             poses,
-        })
+        };
+        assets.validate().map_err(|msg| AssetError::Invalid {
+            path: dir.to_path_buf(),
+            msg,
+        })?;
+        Ok(assets)
     }
 
     /// Serialize as a gzip-compressed pack.

@@ -303,10 +303,6 @@ impl SubjectEntry {
     }
 }
 
-fn one() -> Unit {
-    Unit(1.0)
-}
-
 /// The effects a scene can declare, one per `[[effect]]` table, named by its single key:
 /// `[[effect]]` then `jpeg = { quality = 75 }`. Only declared effects are built and run.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -352,7 +348,6 @@ pub enum EffectSpec {
 }
 
 fn grey() -> [Unit; 3] {
-    let _ = one;
     [Unit(0.45); 3]
 }
 
