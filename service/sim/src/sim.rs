@@ -567,10 +567,10 @@ impl Simulator {
             cms.push(ColorMesh {
                 verts: s.posed.verts.clone(),
                 tris: s.subject.visible_body_tris.clone(),
-                uv_tris: Vec::new(),
-                uvs: Vec::new(),
-                texture: None,
-                color: SKIN_RGB,
+                uv_tris: s.subject.visible_body_uv_tris.clone(),
+                uvs: self.assets.body_uvs.clone(),
+                texture: s.skin.clone(),
+                color: if s.skin.is_some() { [1.0; 3] } else { SKIN_RGB },
             });
             for (g, gv) in s.subject.garments.iter().zip(&s.posed.garments) {
                 let def = &self.assets.garments[g];

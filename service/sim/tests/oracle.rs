@@ -199,3 +199,51 @@ fn human_oracle_runs_through_the_engine_exactly() {
         );
     }
 }
+
+#[test]
+fn colour_oracle_returns_the_rendered_surface_colour() {
+    let assets = Arc::new(HumanAssets::embedded().unwrap());
+    let scene = Scene::parse(
+        "[[subject]]\nid = \"a\"\noutfit = \"male_casualsuit02\"\nskin = \"young_caucasian_male\"\n\
+         motion = { kind = \"static\", pose = \"rest\" }\n",
+        Path::new("t.toml"),
+    )
+    .unwrap();
+    let mut sim = Simulator::new(scene, assets.clone()).unwrap();
+    sim.render(0).unwrap();
+    let field = sim.oracle(0.005);
+    let meshes = sim.world_meshes();
+    let body = &meshes[0].0[0];
+    let skin = volcap_sim::raster::Texture::decode(
+        &assets.skins["young_caucasian_male"]
+            .texture
+            .as_ref()
+            .unwrap()
+            .bytes,
+    )
+    .unwrap();
+    // Face triangles (highest body vertices, not under any garment): the oracle's colour at a
+    // triangle centroid is the skin texture at the centroid's uv.
+    let mut checked = 0;
+    for (t, uvt) in assets.body_tris.iter().zip(&assets.body_uv_tris) {
+        let c = t.map(|i| body.verts[i as usize]);
+        let centroid = (c[0] + c[1] + c[2]) / 3.0;
+        if centroid.y < 1.55 || centroid.z < 0.05 {
+            continue;
+        }
+        let uv = uvt.map(|i| glam::Vec2::from_array(assets.body_uvs[i as usize]));
+        let want = skin.sample((uv[0] + uv[1] + uv[2]) / 3.0);
+        let got = field.colors.color(centroid);
+        for k in 0..3 {
+            assert!(
+                (got[k] - want[k]).abs() < 1e-3,
+                "face colour {got:?} vs texture {want:?}"
+            );
+        }
+        checked += 1;
+        if checked == 50 {
+            break;
+        }
+    }
+    assert_eq!(checked, 50);
+}
