@@ -115,7 +115,13 @@ fn stage_for(s: &EffectSpec) -> Box<dyn Stage> {
             amplitude_deg,
             seed,
         } => Box::new(CameraShake::new(amplitude_deg.0, seed)),
-        EffectSpec::Unplug { at_frame } => Box::new(Unplug { at: at_frame }),
+        EffectSpec::Unplug {
+            at_frame,
+            for_frames,
+        } => Box::new(Unplug {
+            at: at_frame,
+            until: for_frames.map(|n| at_frame.saturating_add(n)),
+        }),
     }
 }
 
@@ -398,6 +404,7 @@ impl Stage for CameraShake {
 
 struct Unplug {
     at: u64,
+    until: Option<u64>,
 }
 
 impl Stage for Unplug {
@@ -409,7 +416,7 @@ impl Stage for Unplug {
     }
     fn apply(&mut self, _index: u64, _t: f64, _hook: Hook) {}
     fn frame_exists(&self, index: u64) -> bool {
-        index < self.at
+        index < self.at || self.until.is_some_and(|u| index >= u)
     }
 }
 

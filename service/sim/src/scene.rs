@@ -343,8 +343,12 @@ pub enum EffectSpec {
         #[serde(default)]
         seed: u64,
     },
-    /// The camera disappears at frame `at_frame` (fault tests).
-    Unplug { at_frame: u64 },
+    /// The camera disappears at frame `at_frame` (fault tests), for `for_frames` frames or
+    /// for good when absent.
+    Unplug {
+        at_frame: u64,
+        for_frames: Option<u64>,
+    },
 }
 
 fn grey() -> [Unit; 3] {

@@ -553,18 +553,17 @@ impl Simulator {
             .collect()
     }
 
-    /// The occupancy and colour oracle of the last rendered frame, as an engine field over
-    /// that frame's render view. `voxel_m` is the voxel size (e.g. [`crate::oracle::DEFAULT_VOXEL_M`]).
-    pub fn oracle(&self, voxel_m: f32) -> SceneField {
-        let meshes: Vec<WorldMesh> = self
-            .world_meshes()
-            .into_iter()
-            .flat_map(|(c, o)| c.into_iter().chain(o))
-            .collect();
-        let oracle = Oracle::build(&meshes, voxel_m);
-        let mut cms = Vec::new();
+    /// An owned copy of the last rendered frame's posed geometry and materials, to build the
+    /// oracle elsewhere (e.g. on a compute thread while the simulator renders on).
+    pub fn ground_truth(&self) -> GroundTruth {
+        let mut closed = Vec::new();
+        let mut open = Vec::new();
+        let mut colors = Vec::new();
         for s in &self.subjects {
-            cms.push(ColorMesh {
+            let verts = Arc::new(s.posed.verts.clone());
+            closed.push((verts.clone(), Arc::new(self.assets.body_tris.clone())));
+            closed.push((verts.clone(), Arc::new(self.assets.eye_tris.clone())));
+            colors.push(ColorMesh {
                 verts: s.posed.verts.clone(),
                 tris: s.subject.visible_body_tris.clone(),
                 uv_tris: s.subject.visible_body_uv_tris.clone(),
@@ -574,7 +573,8 @@ impl Simulator {
             });
             for (g, gv) in s.subject.garments.iter().zip(&s.posed.garments) {
                 let def = &self.assets.garments[g];
-                cms.push(ColorMesh {
+                open.push((Arc::new(gv.clone()), Arc::new(def.tris.clone())));
+                colors.push(ColorMesh {
                     verts: gv.clone(),
                     tris: def.tris.clone(),
                     uv_tris: def.uv_tris.clone(),
@@ -584,11 +584,20 @@ impl Simulator {
                 });
             }
         }
-        SceneField {
-            oracle,
-            colors: ColorOracle::new(cms),
+        GroundTruth {
+            closed,
+            open,
+            colors,
             camera: self.camera,
         }
+    }
+
+    /// The occupancy and colour oracle of the last rendered frame, as an engine field over
+    /// that frame's render view. `voxel_m` is the voxel size (e.g. [`crate::oracle::DEFAULT_VOXEL_M`]).
+    pub fn oracle(&self, voxel_m: f32) -> SceneField {
+        let gt = self.ground_truth();
+        let camera = gt.camera;
+        gt.into_field(voxel_m, camera)
     }
 
     /// Subject ids and, for procedural motion, the joint angles at the last frame (for the
@@ -612,5 +621,42 @@ impl Simulator {
                     "shoes": s.subject.spec.shoes, "skin": s.subject.spec.skin, "gender": s.subject.spec.gender, "motion": motion})
             })
             .collect()
+    }
+}
+
+type SharedMesh = (Arc<Vec<Vec3>>, Arc<Vec<[u32; 3]>>);
+
+/// Posed geometry and materials of one frame, owned (see [`Simulator::ground_truth`]).
+pub struct GroundTruth {
+    closed: Vec<SharedMesh>,
+    open: Vec<SharedMesh>,
+    colors: Vec<ColorMesh>,
+    /// The camera the frame was rendered with.
+    pub camera: Camera,
+}
+
+impl GroundTruth {
+    /// The occupancy + colour oracle as an engine field over `view`'s render-view NDC cube.
+    pub fn into_field(self, voxel_m: f32, view: Camera) -> SceneField {
+        let meshes: Vec<WorldMesh> = self
+            .closed
+            .iter()
+            .map(|(v, t)| WorldMesh {
+                verts: v,
+                tris: t,
+                closed: true,
+            })
+            .chain(self.open.iter().map(|(v, t)| WorldMesh {
+                verts: v,
+                tris: t,
+                closed: false,
+            }))
+            .collect();
+        let oracle = Oracle::build(&meshes, voxel_m);
+        SceneField {
+            oracle,
+            colors: ColorOracle::new(self.colors),
+            camera: view,
+        }
     }
 }

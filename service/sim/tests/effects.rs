@@ -314,6 +314,15 @@ fn unplug_stops_frames_at_the_declared_index() {
             other => panic!("frame {i}: {:?}", other.map(|f| f.index)),
         }
     }
+    // Replugged after `for_frames`.
+    let mut sim = Simulator::new(
+        scene("[[effect]]\nunplug = { at_frame = 2, for_frames = 3 }\n"),
+        assets(),
+    )
+    .unwrap();
+    assert!(sim.render(1).is_ok());
+    assert!(sim.render(4).is_err());
+    assert!(sim.render(5).is_ok());
 }
 
 #[test]

@@ -1,0 +1,323 @@
+//! LAN publishing over HTTP (axum). Every stream client reads the latest published frame
+//! through a `watch` channel: a slow client skips frames and never stalls the pipeline or
+//! other clients; a disconnected client's slot is freed when its body is dropped.
+
+use crate::pipeline::{PipelineState, STAGES, Shared};
+use axum::Router;
+use axum::body::Body;
+use axum::extract::{Query, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::{get, post};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+pub struct App {
+    pub shared: Arc<Shared>,
+    pub clients: AtomicUsize,
+    pub client_limit: usize,
+    pub token: Option<String>,
+}
+
+pub fn router(app: Arc<App>) -> Router {
+    Router::new()
+        .route("/", get(viewer))
+        .route("/stream.mjpg", get(stream))
+        .route("/snapshot.jpg", get(snapshot_jpg))
+        .route("/snapshot.png", get(snapshot_png))
+        .route("/mesh.glb", get(mesh_glb))
+        .route("/state", get(state))
+        .route("/metrics", get(metrics))
+        .route("/view", post(set_view))
+        .with_state(app)
+}
+
+const BOUNDARY: &str = "volcapframe";
+
+async fn viewer(State(app): State<Arc<App>>) -> Html<String> {
+    Html(include_str!("viewer.html").replace("{{MODE}}", app.shared.mode))
+}
+
+/// Frees a client slot when the stream body is dropped (client gone).
+struct ClientGuard(Arc<App>);
+impl Drop for ClientGuard {
+    fn drop(&mut self) {
+        self.0.clients.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+async fn stream(State(app): State<Arc<App>>) -> Response {
+    let prev = app.clients.fetch_add(1, Ordering::SeqCst);
+    if prev >= app.client_limit {
+        app.clients.fetch_sub(1, Ordering::SeqCst);
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!("client limit of {} reached\n", app.client_limit),
+        )
+            .into_response();
+    }
+    let guard = ClientGuard(app.clone());
+    let mut rx = app.shared.published.subscribe();
+    rx.mark_changed();
+    let body = futures_util::stream::unfold((rx, guard), |(mut rx, guard)| async move {
+        loop {
+            if rx.changed().await.is_err() {
+                return None;
+            }
+            let frame = rx.borrow_and_update().clone();
+            if let Some(f) = frame {
+                let mut part = format!(
+                    "--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {}\r\nX-Frame-Index: {}\r\nX-Latency-Ms: {:.1}\r\n\r\n",
+                    f.jpeg.len(),
+                    f.index,
+                    f.latency_ms
+                )
+                .into_bytes();
+                part.extend_from_slice(&f.jpeg);
+                part.extend_from_slice(b"\r\n");
+                return Some((Ok::<_, std::io::Error>(part), (rx, guard)));
+            }
+        }
+    });
+    Response::builder()
+        .header(
+            header::CONTENT_TYPE,
+            format!("multipart/x-mixed-replace; boundary={BOUNDARY}"),
+        )
+        .header(header::CACHE_CONTROL, "no-cache, no-store")
+        .header(header::CONNECTION, "close")
+        .body(Body::from_stream(body))
+        .unwrap_or_else(|_| StatusCode::INTERNAL_SERVER_ERROR.into_response())
+}
+
+fn latest(app: &App) -> Option<Arc<crate::pipeline::Published>> {
+    app.shared.published.borrow().clone()
+}
+
+async fn snapshot_jpg(State(app): State<Arc<App>>) -> Response {
+    match latest(&app) {
+        Some(f) => ([(header::CONTENT_TYPE, "image/jpeg")], f.jpeg.clone()).into_response(),
+        None => (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response(),
+    }
+}
+
+async fn snapshot_png(State(app): State<Arc<App>>) -> Response {
+    let Some(f) = latest(&app) else {
+        return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
+    };
+    let png = tokio::task::spawn_blocking(move || {
+        let mut out = Vec::new();
+        image::RgbaImage::from_raw(f.size as u32, f.size as u32, f.rgba.clone())
+            .map(|img| {
+                img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+                    .is_ok()
+            })
+            .filter(|ok| *ok)
+            .map(|_| out)
+    })
+    .await
+    .ok()
+    .flatten();
+    match png {
+        Some(p) => ([(header::CONTENT_TYPE, "image/png")], p).into_response(),
+        None => (StatusCode::INTERNAL_SERVER_ERROR, "png encoding failed\n").into_response(),
+    }
+}
+
+/// The current frame as a coloured mesh: hierarchical localization at the render
+/// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms); runs off
+/// the async runtime.
+async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
+    let field = app
+        .shared
+        .latest_field
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .clone();
+    let Some(field) = field else {
+        return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
+    };
+    let (res, coarse) = (app.shared.resolution, app.shared.coarse_level);
+    let glb = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, String> {
+        let spec =
+            volcap_engine::grid::GridSpec::from_resolution(res).map_err(|e| e.to_string())?;
+        let mut grid = volcap_engine::grid::Grid::new(spec);
+        volcap_engine::localize::Localizer::new()
+            .run(
+                volcap_engine::localize::Method::Hierarchical,
+                field.as_ref(),
+                spec,
+                coarse,
+                &mut grid,
+            )
+            .map_err(|e| e.to_string())?;
+        let mut mesh = volcap_engine::mesh::marching_cubes(&grid);
+        mesh.paint(field.as_ref()).map_err(|e| e.to_string())?;
+        Ok(mesh.to_glb())
+    })
+    .await;
+    match glb {
+        Ok(Ok(b)) => ([(header::CONTENT_TYPE, "model/gltf-binary")], b).into_response(),
+        Ok(Err(e)) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("mesh failed: {e}\n"),
+        )
+            .into_response(),
+        Err(_) => (StatusCode::INTERNAL_SERVER_ERROR, "mesh task failed\n").into_response(),
+    }
+}
+
+fn state_json(app: &App) -> serde_json::Value {
+    let sh = &app.shared;
+    let st = sh.state.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    let (state, reason) = match st {
+        PipelineState::Starting => ("starting", String::new()),
+        PipelineState::Running => ("running", String::new()),
+        PipelineState::Degraded(r) => ("degraded", r),
+    };
+    let stages: serde_json::Map<String, serde_json::Value> = STAGES
+        .iter()
+        .zip(&sh.stats)
+        .map(|(n, s)| {
+            let (p50, p99) = s.percentiles();
+            (n.to_string(), serde_json::json!({"p50_ms": p50, "p99_ms": p99, "frames": s.frames.load(Ordering::Relaxed), "dropped": s.dropped.load(Ordering::Relaxed)}))
+        })
+        .collect();
+    let (l50, l99) = sh.e2e.percentiles();
+    let published = sh.e2e.frames.load(Ordering::Relaxed);
+    let up = sh.started.elapsed().as_secs_f64();
+    let (yaw, pitch) = *sh.view.lock().unwrap_or_else(|p| p.into_inner());
+    serde_json::json!({
+        "state": state, "reason": reason, "mode": sh.mode,
+        "mode_note": if sh.mode == "oracle" { "ground-truth field rendered through the engine: not a reconstruction" } else { "" },
+        "resolution": sh.resolution,
+        "frames_published": published,
+        "fps": if up > 0.0 { published as f64 / up } else { 0.0 },
+        "latency_ms": {"p50": l50, "p99": l99},
+        "stages": stages,
+        "clients": app.clients.load(Ordering::SeqCst),
+        "client_limit": app.client_limit,
+        "view": {"yaw": yaw, "pitch": pitch},
+        "uptime_s": up,
+    })
+}
+
+async fn state(State(app): State<Arc<App>>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "application/json")],
+        state_json(&app).to_string(),
+    )
+        .into_response()
+}
+
+async fn metrics(State(app): State<Arc<App>>) -> Response {
+    let sh = &app.shared;
+    let mut s = String::new();
+    s.push_str("# TYPE volcap_frames_published_total counter\n");
+    s.push_str(&format!(
+        "volcap_frames_published_total {}\n",
+        sh.e2e.frames.load(Ordering::Relaxed)
+    ));
+    s.push_str("# TYPE volcap_stage_ms summary\n");
+    for (n, st) in STAGES.iter().zip(&sh.stats) {
+        let (p50, p99) = st.percentiles();
+        s.push_str(&format!("volcap_stage_ms{{stage=\"{n}\",quantile=\"0.5\"}} {p50}\nvolcap_stage_ms{{stage=\"{n}\",quantile=\"0.99\"}} {p99}\n"));
+    }
+    s.push_str("# TYPE volcap_stage_dropped_total counter\n");
+    for (n, st) in STAGES.iter().zip(&sh.stats) {
+        s.push_str(&format!(
+            "volcap_stage_dropped_total{{stage=\"{n}\"}} {}\n",
+            st.dropped.load(Ordering::Relaxed)
+        ));
+    }
+    let (l50, l99) = sh.e2e.percentiles();
+    s.push_str(&format!("# TYPE volcap_latency_ms summary\nvolcap_latency_ms{{quantile=\"0.5\"}} {l50}\nvolcap_latency_ms{{quantile=\"0.99\"}} {l99}\n"));
+    s.push_str(&format!(
+        "# TYPE volcap_clients gauge\nvolcap_clients {}\n",
+        app.clients.load(Ordering::SeqCst)
+    ));
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()
+}
+
+/// Constant-time comparison of the bearer token.
+fn token_ok(expected: &str, headers: &HeaderMap) -> bool {
+    let got = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .unwrap_or("");
+    let (a, b) = (expected.as_bytes(), got.as_bytes());
+    let mut diff = (a.len() ^ b.len()) as u8;
+    for (i, x) in a.iter().enumerate() {
+        diff |= x ^ b.get(i).copied().unwrap_or(0);
+    }
+    diff == 0 && a.len() == b.len()
+}
+
+#[derive(serde::Deserialize)]
+struct ViewQuery {
+    yaw: f32,
+    pitch: f32,
+}
+
+async fn set_view(
+    State(app): State<Arc<App>>,
+    headers: HeaderMap,
+    q: Result<Query<ViewQuery>, axum::extract::rejection::QueryRejection>,
+) -> Response {
+    let Some(expected) = &app.token else {
+        return (
+            StatusCode::FORBIDDEN,
+            "view controls are off: set http.token in the config\n",
+        )
+            .into_response();
+    };
+    if !token_ok(expected, &headers) {
+        return (StatusCode::UNAUTHORIZED, "bad or missing bearer token\n").into_response();
+    }
+    let Ok(Query(q)) = q else {
+        return (
+            StatusCode::BAD_REQUEST,
+            "need ?yaw=DEG&pitch=DEG (numbers)\n",
+        )
+            .into_response();
+    };
+    if !q.yaw.is_finite() || !q.pitch.is_finite() || q.pitch.abs() > 80.0 {
+        return (
+            StatusCode::BAD_REQUEST,
+            format!(
+                "yaw {} / pitch {}: need finite values, |pitch| <= 80\n",
+                q.yaw, q.pitch
+            ),
+        )
+            .into_response();
+    }
+    *app.shared.view.lock().unwrap_or_else(|p| p.into_inner()) = (q.yaw.rem_euclid(360.0), q.pitch);
+    (StatusCode::OK, "ok\n").into_response()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn token_compare() {
+        let mut h = HeaderMap::new();
+        assert!(!token_ok("secret-token", &h));
+        h.insert(
+            header::AUTHORIZATION,
+            "Bearer secret-token".parse().unwrap(),
+        );
+        assert!(token_ok("secret-token", &h));
+        h.insert(
+            header::AUTHORIZATION,
+            "Bearer secret-tokeN".parse().unwrap(),
+        );
+        assert!(!token_ok("secret-token", &h));
+        h.insert(
+            header::AUTHORIZATION,
+            "Bearer secret-token-longer".parse().unwrap(),
+        );
+        assert!(!token_ok("secret-token", &h));
+    }
+}

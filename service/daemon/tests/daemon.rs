@@ -1,0 +1,485 @@
+//! volcapd end to end on loopback: real clients, endpoints, faults, many slow clients.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+struct Daemon {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Daemon tests run one at a time: they measure rates on a 2-core machine.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+fn start(config: &Path) -> Daemon {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_volcapd"))
+        .current_dir(root())
+        .args(["--config"])
+        .arg(config)
+        .args(["--http", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .split("http://")
+        .nth(1)
+        .and_then(|s| s.split('/').next())
+        .unwrap_or_else(|| panic!("no URL in {line:?}"))
+        .to_string();
+    Daemon { child, addr }
+}
+
+/// Minimal HTTP/1.1 GET/POST on loopback: (status, headers, body).
+fn request(addr: &str, method: &str, path: &str, extra: &str) -> (u16, String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    write!(s, "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: 0\r\n{extra}\r\n").unwrap();
+    let mut buf = Vec::new();
+    s.read_to_end(&mut buf).unwrap();
+    let split = buf.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&buf[..split]).to_string();
+    let status = head.split_whitespace().nth(1).unwrap().parse().unwrap();
+    let mut body = buf[split + 4..].to_vec();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        body = dechunk(&body);
+    }
+    (status, head, body)
+}
+
+fn dechunk(mut b: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    while let Some(p) = b.windows(2).position(|w| w == b"\r\n") {
+        let n =
+            usize::from_str_radix(std::str::from_utf8(&b[..p]).unwrap().trim(), 16).unwrap_or(0);
+        if n == 0 {
+            break;
+        }
+        out.extend_from_slice(&b[p + 2..p + 2 + n]);
+        b = &b[p + 2 + n + 2..];
+    }
+    out
+}
+
+fn state(addr: &str) -> serde_json::Value {
+    serde_json::from_slice(&request(addr, "GET", "/state", "").2).unwrap()
+}
+
+fn wait_for(
+    addr: &str,
+    what: &str,
+    timeout: Duration,
+    f: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let t = Instant::now();
+    loop {
+        let s = state(addr);
+        if f(&s) {
+            return s;
+        }
+        assert!(t.elapsed() < timeout, "timed out waiting for {what}: {s}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+fn sim_config() -> PathBuf {
+    root().join("board-config/sim.toml")
+}
+
+fn have(tool: &str) -> bool {
+    let ok = Command::new(tool)
+        .arg("-version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        assert!(
+            std::env::var("CI").is_err(),
+            "{tool} is required in CI (.ci/run installs it)"
+        );
+        eprintln!("skipping: {tool} not installed");
+    }
+    ok
+}
+
+#[test]
+fn endpoints_serve_the_oracle_render() {
+    let _serial = serial();
+    let d = start(&sim_config());
+    let s = wait_for(&d.addr, "running", Duration::from_secs(30), |s| {
+        s["state"] == "running" && s["frames_published"].as_u64() > Some(2)
+    });
+    assert_eq!(s["mode"], "oracle");
+    assert!(
+        s["mode_note"]
+            .as_str()
+            .unwrap()
+            .contains("not a reconstruction")
+    );
+    let (st, head, jpg) = request(&d.addr, "GET", "/snapshot.jpg", "");
+    assert_eq!(st, 200);
+    assert!(head.contains("image/jpeg"));
+    let img = image::load_from_memory(&jpg).unwrap();
+    assert_eq!((img.width(), img.height()), (129, 129));
+    let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
+    assert_eq!(st, 200);
+    let png = image::load_from_memory(&png).unwrap().to_rgba8();
+    assert_eq!(png.get_pixel(0, 0)[3], 0, "transparent background");
+    assert!(png.pixels().any(|p| p[3] == 255), "the person is opaque");
+    let (_, _, viewer) = request(&d.addr, "GET", "/", "");
+    let viewer = String::from_utf8(viewer).unwrap();
+    assert!(viewer.contains("/stream.mjpg") && viewer.contains("oracle"));
+    let (_, _, m) = request(&d.addr, "GET", "/metrics", "");
+    let m = String::from_utf8(m).unwrap();
+    assert!(
+        m.contains("volcap_frames_published_total")
+            && m.contains("volcap_stage_ms{stage=\"render\",quantile=\"0.99\"}")
+    );
+    let (st, head, glb) = request(&d.addr, "GET", "/mesh.glb", "");
+    assert_eq!(st, 200);
+    assert!(head.contains("model/gltf-binary"));
+    assert!(
+        glb.starts_with(b"glTF") && glb.len() > 10_000,
+        "{} bytes",
+        glb.len()
+    );
+    // View controls are off without a token.
+    assert_eq!(request(&d.addr, "POST", "/view?yaw=90&pitch=0", "").0, 403);
+    assert_eq!(request(&d.addr, "GET", "/nope", "").0, 404);
+}
+
+#[test]
+fn real_clients_decode_the_stream() {
+    let _serial = serial();
+    let d = start(&sim_config());
+    wait_for(&d.addr, "frames", Duration::from_secs(30), |s| {
+        s["frames_published"].as_u64() > Some(2)
+    });
+    let url = format!("http://{}/stream.mjpg", d.addr);
+    if have("ffprobe") {
+        let o = Command::new("ffprobe")
+            .args([
+                "-v",
+                "error",
+                "-show_entries",
+                "stream=codec_name,width,height",
+                "-of",
+                "json",
+                &url,
+            ])
+            .output()
+            .unwrap();
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["streams"][0]["codec_name"], "mjpeg");
+        assert_eq!(j["streams"][0]["width"], 129);
+    }
+    if have("ffmpeg") {
+        let o = Command::new("ffmpeg")
+            .args([
+                "-v",
+                "error",
+                "-i",
+                &url,
+                "-frames:v",
+                "5",
+                "-f",
+                "rawvideo",
+                "-pix_fmt",
+                "rgb24",
+                "-",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(o.stdout.len(), 5 * 129 * 129 * 3, "five decoded frames");
+    }
+}
+
+#[test]
+fn token_enables_view_controls_and_client_limit_holds() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-tok-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cfg = dir.join("b.toml");
+    let scene = root().join("tests/scenes/front-walk.toml");
+    std::fs::write(&cfg, format!("[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[http]\nclient_limit = 2\ntoken = \"s3cret-token\"\n", scene.display())).unwrap();
+    let d = start(&cfg);
+    wait_for(&d.addr, "frames", Duration::from_secs(30), |s| {
+        s["frames_published"].as_u64() > Some(1)
+    });
+    assert_eq!(
+        request(
+            &d.addr,
+            "POST",
+            "/view?yaw=90&pitch=10",
+            "Authorization: Bearer wrong-token\r\n"
+        )
+        .0,
+        401
+    );
+    assert_eq!(
+        request(
+            &d.addr,
+            "POST",
+            "/view?yaw=abc&pitch=10",
+            "Authorization: Bearer s3cret-token\r\n"
+        )
+        .0,
+        400
+    );
+    assert_eq!(
+        request(
+            &d.addr,
+            "POST",
+            "/view?yaw=90&pitch=10",
+            "Authorization: Bearer s3cret-token\r\n"
+        )
+        .0,
+        200
+    );
+    assert_eq!(state(&d.addr)["view"]["yaw"], 90.0);
+    // Two streams fill the limit; the third is refused; closing one frees a slot at once.
+    let open = |addr: &str| {
+        let mut s = TcpStream::connect(addr).unwrap();
+        write!(s, "GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+        let mut b = [0u8; 64];
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        let n = s.read(&mut b).unwrap();
+        (s, String::from_utf8_lossy(&b[..n]).to_string())
+    };
+    let (a, ha) = open(&d.addr);
+    let (_b, hb) = open(&d.addr);
+    assert!(ha.starts_with("HTTP/1.1 200") && hb.starts_with("HTTP/1.1 200"));
+    let (_c, hc) = open(&d.addr);
+    assert!(hc.starts_with("HTTP/1.1 503"), "{hc}");
+    drop(a);
+    wait_for(&d.addr, "a freed slot", Duration::from_secs(10), |s| {
+        s["clients"] == 1
+    });
+    let (_e, he) = open(&d.addr);
+    assert!(he.starts_with("HTTP/1.1 200"));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn unplug_is_a_state_and_the_camera_recovers() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-unplug-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("scene.toml"),
+        "[camera]\nwidth = 128\nheight = 128\n[[subject]]\nid = \"a\"\noutfit = \"male_casualsuit02\"\n\
+         motion = { kind = \"procedural\", style = \"walk\" }\n[[effect]]\nunplug = { at_frame = 20, for_frames = 45 }\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("b.toml"),
+        "[camera]\nbackend = \"sim\"\nscene = \"scene.toml\"\n[render]\nresolution = 65\n",
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    wait_for(&d.addr, "running", Duration::from_secs(30), |s| {
+        s["state"] == "running"
+    });
+    let s = wait_for(&d.addr, "unplugged", Duration::from_secs(30), |s| {
+        s["state"] == "degraded"
+    });
+    assert!(s["reason"].as_str().unwrap().contains("unplugged"), "{s}");
+    let before = s["frames_published"].as_u64().unwrap();
+    let s = wait_for(&d.addr, "recovery", Duration::from_secs(30), |s| {
+        s["state"] == "running" && s["frames_published"].as_u64() > Some(before + 2)
+    });
+    assert_eq!(s["mode"], "oracle");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_config_and_bad_scene_exit_with_a_clear_error() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |cfg: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_volcapd"))
+            .current_dir(root())
+            .arg("--config")
+            .arg(cfg)
+            .output()
+            .unwrap()
+    };
+    let o = run(&dir.join("missing.toml"));
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("missing.toml"));
+    std::fs::write(
+        dir.join("b.toml"),
+        "[camera]\nbackend = \"sim\"\nscene = \"nope.toml\"\n",
+    )
+    .unwrap();
+    let o = run(&dir.join("b.toml"));
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("nope.toml"));
+    std::fs::write(dir.join("s.toml"), "[camera]\nwidth = 3\n").unwrap();
+    std::fs::write(
+        dir.join("c.toml"),
+        "[camera]\nbackend = \"sim\"\nscene = \"s.toml\"\n",
+    )
+    .unwrap();
+    let o = run(&dir.join("c.toml"));
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("s.toml") && e.contains("line 2"), "{e}");
+    let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
+        .current_dir(root())
+        .args(["--check-config", "--config", "board-config/sim.toml"])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// 100 slow clients on loopback (bounded: 100 connections, ~8 s): the pipeline keeps its
+/// rate, memory stays bounded, every client is served and freed.
+#[test]
+fn hundred_slow_clients_do_not_stall_the_pipeline() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-many-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = root().join("tests/scenes/front-walk.toml");
+    std::fs::write(
+        dir.join("b.toml"),
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[http]\nclient_limit = 120\n",
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    wait_for(&d.addr, "frames", Duration::from_secs(30), |s| {
+        s["frames_published"].as_u64() > Some(3)
+    });
+    let rate = |secs: f64| {
+        let a = state(&d.addr)["frames_published"].as_u64().unwrap();
+        std::thread::sleep(Duration::from_secs_f64(secs));
+        let b = state(&d.addr)["frames_published"].as_u64().unwrap();
+        (b - a) as f64 / secs
+    };
+    let base = rate(3.0);
+    let clients: Vec<_> = (0..100)
+        .map(|_| {
+            let addr = d.addr.clone();
+            std::thread::spawn(move || {
+                let mut s = TcpStream::connect(&addr).unwrap();
+                write!(s, "GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+                s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+                // Slow: read a little now and then, for a bounded time.
+                let mut got = 0usize;
+                let mut b = [0u8; 512];
+                let t = Instant::now();
+                while t.elapsed() < Duration::from_secs(4) {
+                    match s.read(&mut b) {
+                        Ok(0) | Err(_) => break,
+                        Ok(n) => got += n,
+                    }
+                    std::thread::sleep(Duration::from_millis(300));
+                }
+                got
+            })
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let with = rate(3.0);
+    let s = state(&d.addr);
+    let got: Vec<usize> = clients.into_iter().map(|c| c.join().unwrap()).collect();
+    assert!(got.iter().all(|&g| g > 0), "every client received data");
+    assert!(s["clients"].as_u64().unwrap() >= 90, "{s}");
+    eprintln!("published fps: {base:.2} without clients, {with:.2} with 100 slow clients");
+    assert!(
+        with >= 0.9 * base,
+        "pipeline slowed: {with:.2} vs {base:.2} frames/s"
+    );
+    wait_for(&d.addr, "clients freed", Duration::from_secs(10), |s| {
+        s["clients"] == 0
+    });
+    // Memory bounded: resident set of the daemon stays modest.
+    if let Ok(status) = std::fs::read_to_string(format!("/proc/{}/status", d.child.id())) {
+        let rss_kb: u64 = status
+            .lines()
+            .find(|l| l.starts_with("VmRSS"))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0);
+        eprintln!("daemon RSS {rss_kb} kB");
+        assert!(rss_kb < 1_500_000, "RSS {rss_kb} kB");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Headless Chromium loads the viewer and its screenshot shows the stream.
+#[test]
+fn chromium_shows_the_stream_in_the_viewer() {
+    let _serial = serial();
+    if !have("chromium") {
+        return;
+    }
+    let d = start(&sim_config());
+    wait_for(&d.addr, "frames", Duration::from_secs(30), |s| {
+        s["frames_published"].as_u64() > Some(2)
+    });
+    let dir = std::env::temp_dir().join(format!("volcapd-chr-{}", std::process::id()));
+    let shot = dir.join("viewer.png");
+    let o = Command::new("chromium")
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--window-size=720,640",
+            "--virtual-time-budget=4000",
+        ])
+        .arg(format!("--user-data-dir={}", dir.join("profile").display()))
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("http://{}/", d.addr))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let img = image::open(&shot).unwrap().to_rgb8();
+    // The stream area: the person's blue shirt and jeans are there, not just the page.
+    let blue = img
+        .pixels()
+        .filter(|p| p[2] > 90 && p[2] as i32 > p[0] as i32 + 40)
+        .count();
+    assert!(
+        blue > 2000,
+        "only {blue} stream-coloured pixels in the screenshot"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
