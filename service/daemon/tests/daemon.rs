@@ -483,3 +483,30 @@ fn chromium_shows_the_stream_in_the_viewer() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn two_people_is_a_reported_state_not_a_garbled_render() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-two-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = root().join("tests/scenes/two-people.toml");
+    std::fs::write(
+        dir.join("b.toml"),
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n",
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    let s = wait_for(&d.addr, "degraded", Duration::from_secs(30), |s| {
+        s["state"] == "degraded"
+    });
+    assert!(s["reason"].as_str().unwrap().contains("2 people"), "{s}");
+    assert_eq!(
+        s["frames_published"], 0,
+        "nothing rendered from a two-person field"
+    );
+    assert_eq!(request(&d.addr, "GET", "/snapshot.jpg", "").0, 503);
+    std::fs::remove_dir_all(&dir).ok();
+}
