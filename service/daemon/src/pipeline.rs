@@ -175,9 +175,16 @@ pub fn start(
                         let t = Instant::now();
                         match sim.render(index) {
                             Ok(frame) => {
-                                let people = sim.scene().subjects.len();
+                                // People in view: subjects covering a visible area of the camera frame.
+                                let mut area = [0u32; 256];
+                                for &id in &frame.ids {
+                                    area[id as usize] += 1;
+                                }
+                                let min_px = (frame.width * frame.height / 2000).max(20) as u32;
+                                let people = (1..volcap_sim::sim::OCCLUDER_ID as usize)
+                                    .filter(|&i| area[i] >= min_px)
+                                    .count();
                                 let gt = sim.ground_truth();
-                                let _ = frame;
                                 sh.stats[0].record(t.elapsed().as_secs_f64() * 1e3);
                                 if out.put(Captured {
                                     index,

@@ -362,8 +362,9 @@ fn bad_config_and_bad_scene_exit_with_a_clear_error() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// 100 slow clients on loopback (bounded: 100 connections, ~8 s): the pipeline keeps its
-/// rate, memory stays bounded, every client is served and freed.
+/// 100 slow clients on loopback (bounded: 100 connections, ~16 s): the pipeline keeps its
+/// rate (6 s windows: at ~7 frames/s one frame is 2%), memory stays bounded, every client is
+/// served and freed.
 #[test]
 fn hundred_slow_clients_do_not_stall_the_pipeline() {
     let _serial = serial();
@@ -388,7 +389,7 @@ fn hundred_slow_clients_do_not_stall_the_pipeline() {
         let b = state(&d.addr)["frames_published"].as_u64().unwrap();
         (b - a) as f64 / secs
     };
-    let base = rate(3.0);
+    let base = rate(6.0);
     let clients: Vec<_> = (0..100)
         .map(|_| {
             let addr = d.addr.clone();
@@ -400,7 +401,7 @@ fn hundred_slow_clients_do_not_stall_the_pipeline() {
                 let mut got = 0usize;
                 let mut b = [0u8; 512];
                 let t = Instant::now();
-                while t.elapsed() < Duration::from_secs(4) {
+                while t.elapsed() < Duration::from_secs(8) {
                     match s.read(&mut b) {
                         Ok(0) | Err(_) => break,
                         Ok(n) => got += n,
@@ -411,8 +412,8 @@ fn hundred_slow_clients_do_not_stall_the_pipeline() {
             })
         })
         .collect();
-    std::thread::sleep(Duration::from_millis(500));
-    let with = rate(3.0);
+    std::thread::sleep(Duration::from_millis(800));
+    let with = rate(6.0);
     let s = state(&d.addr);
     let got: Vec<usize> = clients.into_iter().map(|c| c.join().unwrap()).collect();
     assert!(got.iter().all(|&g| g > 0), "every client received data");
