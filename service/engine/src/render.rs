@@ -73,6 +73,7 @@ pub struct Renderer {
     rgba: Vec<u8>,
     final_nodes: Vec<u32>,
     culled: Vec<u32>,
+    hit_pixels: Vec<usize>,
     pts: Vec<Vec3>,
     cols: Vec<[f32; 3]>,
     occ: Vec<f32>,
@@ -192,7 +193,7 @@ impl Renderer {
         self.depth.clear();
         self.depth.resize(plane, -1.0);
         self.pts.clear();
-        let mut hit_pixels: Vec<usize> = Vec::new();
+        self.hit_pixels.clear();
         for c in 0..plane {
             let k = self.hit[c];
             if k < 0 {
@@ -216,9 +217,9 @@ impl Renderer {
             self.depth[c] = z;
             let (i, j) = (c % n, c / n);
             self.pts.push(Vec3::new(spec.coord(i), spec.coord(j), z));
-            hit_pixels.push(c);
+            self.hit_pixels.push(c);
         }
-        stats.hits = hit_pixels.len() as u64;
+        stats.hits = self.hit_pixels.len() as u64;
 
         // 5. Colour (and optional shading).
         self.cols.clear();
@@ -276,7 +277,7 @@ impl Renderer {
         for px in self.rgba.chunks_exact_mut(4) {
             px.copy_from_slice(&bg);
         }
-        for (&c, col) in hit_pixels.iter().zip(&self.cols) {
+        for (&c, col) in self.hit_pixels.iter().zip(&self.cols) {
             let px = &mut self.rgba[c * 4..c * 4 + 4];
             px[0] = to_u8(col[0]);
             px[1] = to_u8(col[1]);

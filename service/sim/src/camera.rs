@@ -36,8 +36,20 @@ pub struct Screen {
     pub depth: f32,
 }
 
+/// A camera with its view basis computed once, for projecting many points (rasterizer
+/// vertices, oracle queries); [`Camera`]'s own methods build one per call.
+#[derive(Debug, Clone, Copy)]
+pub struct Projector {
+    cam: Camera,
+    r: Vec3,
+    u: Vec3,
+    f: Vec3,
+    cx: f32,
+    cy: f32,
+}
+
 impl Camera {
-    fn basis(&self) -> (Vec3, Vec3, Vec3) {
+    pub fn projector(&self) -> Projector {
         let f = (self.target - self.eye).normalize_or(Vec3::NEG_Z);
         let up = if f.cross(Vec3::Y).length_squared() < 1e-8 {
             Vec3::Z
@@ -46,42 +58,25 @@ impl Camera {
         };
         let r = f.cross(up).normalize();
         let u = r.cross(f);
-        (r, u, f)
-    }
-
-    fn centre(&self) -> (f32, f32) {
-        match self.projection {
+        let (cx, cy) = match self.projection {
             Projection::Pinhole { cx, cy, .. } => (cx, cy),
             Projection::WeakPerspective { .. } => (
                 0.5 * (self.width as f32 - 1.0),
                 0.5 * (self.height as f32 - 1.0),
             ),
+        };
+        Projector {
+            cam: *self,
+            r,
+            u,
+            f,
+            cx,
+            cy,
         }
     }
 
     pub fn to_screen(&self, p: Vec3) -> Screen {
-        let (r, u, f) = self.basis();
-        let d = p - self.eye;
-        let (xr, yu, depth) = (d.dot(r), d.dot(u), d.dot(f));
-        let (cx, cy) = self.centre();
-        match self.projection {
-            Projection::Pinhole { fx, fy, .. } => {
-                let z = depth.max(1e-6);
-                Screen {
-                    px: cx + fx * xr / z,
-                    py: cy - fy * yu / z,
-                    depth,
-                }
-            }
-            Projection::WeakPerspective { height_m } => {
-                let s = (self.height as f32 - 1.0) / height_m;
-                Screen {
-                    px: cx + s * xr,
-                    py: cy - s * yu,
-                    depth,
-                }
-            }
-        }
+        self.projector().to_screen(p)
     }
 
     /// True for projections where screen-space interpolation needs `1/depth` weighting.
@@ -91,29 +86,64 @@ impl Camera {
 
     /// Render-view NDC of a world point.
     pub fn world_to_ndc(&self, p: Vec3) -> Vec3 {
-        let s = self.to_screen(p);
-        Vec3::new(
-            2.0 * s.px / (self.width as f32 - 1.0) - 1.0,
-            2.0 * s.py / (self.height as f32 - 1.0) - 1.0,
-            1.0 - 2.0 * (s.depth - self.near) / (self.far - self.near),
-        )
+        self.projector().world_to_ndc(p)
     }
 
     /// World point of a render-view NDC position (inverse of [`Self::world_to_ndc`]).
     pub fn ndc_to_world(&self, n: Vec3) -> Vec3 {
-        let (r, u, f) = self.basis();
-        let depth = self.near + 0.5 * (1.0 - n.z) * (self.far - self.near);
-        let px = 0.5 * (n.x + 1.0) * (self.width as f32 - 1.0);
-        let py = 0.5 * (n.y + 1.0) * (self.height as f32 - 1.0);
-        let (cx, cy) = self.centre();
-        let (xr, yu) = match self.projection {
-            Projection::Pinhole { fx, fy, .. } => ((px - cx) * depth / fx, -(py - cy) * depth / fy),
+        self.projector().ndc_to_world(n)
+    }
+}
+
+impl Projector {
+    pub fn to_screen(&self, p: Vec3) -> Screen {
+        let d = p - self.cam.eye;
+        let (xr, yu, depth) = (d.dot(self.r), d.dot(self.u), d.dot(self.f));
+        match self.cam.projection {
+            Projection::Pinhole { fx, fy, .. } => {
+                let z = depth.max(1e-6);
+                Screen {
+                    px: self.cx + fx * xr / z,
+                    py: self.cy - fy * yu / z,
+                    depth,
+                }
+            }
             Projection::WeakPerspective { height_m } => {
-                let s = (self.height as f32 - 1.0) / height_m;
-                ((px - cx) / s, -(py - cy) / s)
+                let s = (self.cam.height as f32 - 1.0) / height_m;
+                Screen {
+                    px: self.cx + s * xr,
+                    py: self.cy - s * yu,
+                    depth,
+                }
+            }
+        }
+    }
+
+    pub fn world_to_ndc(&self, p: Vec3) -> Vec3 {
+        let c = &self.cam;
+        let s = self.to_screen(p);
+        Vec3::new(
+            2.0 * s.px / (c.width as f32 - 1.0) - 1.0,
+            2.0 * s.py / (c.height as f32 - 1.0) - 1.0,
+            1.0 - 2.0 * (s.depth - c.near) / (c.far - c.near),
+        )
+    }
+
+    pub fn ndc_to_world(&self, n: Vec3) -> Vec3 {
+        let c = &self.cam;
+        let depth = c.near + 0.5 * (1.0 - n.z) * (c.far - c.near);
+        let px = 0.5 * (n.x + 1.0) * (c.width as f32 - 1.0);
+        let py = 0.5 * (n.y + 1.0) * (c.height as f32 - 1.0);
+        let (xr, yu) = match c.projection {
+            Projection::Pinhole { fx, fy, .. } => {
+                ((px - self.cx) * depth / fx, -(py - self.cy) * depth / fy)
+            }
+            Projection::WeakPerspective { height_m } => {
+                let s = (c.height as f32 - 1.0) / height_m;
+                ((px - self.cx) / s, -(py - self.cy) / s)
             }
         };
-        self.eye + r * xr + u * yu + f * depth
+        c.eye + self.r * xr + self.u * yu + self.f * depth
     }
 }
 

@@ -189,19 +189,11 @@ pub fn generate(
         std::fs::create_dir_all(&dir).map_err(|e| werr(&dir, &e))?;
         for pi in 0..cfg.poses {
             let style = Style::ALL[r.random_range(0..Style::ALL.len())];
-            let style_name = serde_json::to_value(format!("{style:?}")).unwrap_or_default();
-            let kebab = match style {
-                Style::Walk => "walk",
-                Style::ArmsRaised => "arms-raised",
-                Style::Crouch => "crouch",
-                Style::Turn => "turn",
-                Style::ArmAcross => "arm-across",
-                Style::Lean => "lean",
-            };
             let frame: u64 = r.random_range(0..60);
             let text = format!(
                 "[camera]\nwidth = {s}\nheight = {s}\nheight_m = 2.3\nlook_at = [0.0, 0.95, 0.0]\n[lighting]\npreset = \"studio\"\n{table}\
-                 motion = {{ kind = \"procedural\", style = \"{kebab}\", seed = {seed} }}\n",
+                 motion = {{ kind = \"procedural\", style = \"{}\", seed = {seed} }}\n",
+                style.name(),
                 s = cfg.size,
                 seed = r.random::<u32>()
             );
@@ -271,9 +263,10 @@ pub fn generate(
                 let yaw = 360.0 * vi as f32 / cfg.views as f32;
                 sim.set_view_yaw(yaw);
                 let f = sim.render(frame)?;
+                let view = f.camera.projector();
                 let to_ndc = |v: &[Vec3]| -> Vec<f32> {
                     v.iter()
-                        .flat_map(|p| f.camera.world_to_ndc(*p).to_array())
+                        .flat_map(|p| view.world_to_ndc(*p).to_array())
                         .collect()
                 };
                 let pts = f32_bytes(&to_ndc(&world_pts));
@@ -287,7 +280,7 @@ pub fn generate(
                     "camera": f.camera,
                     "subject": ids[si],
                     "subject_table": table,
-                    "style": style_name,
+                    "style": style.name(),
                     "time_s": f.time_s,
                     "yaw_deg": yaw,
                     "split": split,

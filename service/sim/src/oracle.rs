@@ -379,8 +379,9 @@ pub struct SceneField {
 
 impl OccupancyField for SceneField {
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        let view = self.camera.projector();
         for (o, p) in out.iter_mut().zip(points) {
-            *o = self.oracle.occupancy(self.camera.ndc_to_world(*p));
+            *o = self.oracle.occupancy(view.ndc_to_world(*p));
         }
         Ok(())
     }
@@ -388,8 +389,9 @@ impl OccupancyField for SceneField {
 
 impl ColorField for SceneField {
     fn color(&self, points: &[Vec3], out: &mut [[f32; 3]]) -> Result<(), FieldError> {
+        let view = self.camera.projector();
         for (o, p) in out.iter_mut().zip(points) {
-            *o = self.colors.color(self.camera.ndc_to_world(*p));
+            *o = self.colors.color(view.ndc_to_world(*p));
         }
         Ok(())
     }

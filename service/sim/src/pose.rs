@@ -32,6 +32,18 @@ impl Style {
         Style::ArmAcross,
         Style::Lean,
     ];
+
+    /// The name used in scene files (the serde name).
+    pub fn name(self) -> &'static str {
+        match self {
+            Style::Walk => "walk",
+            Style::ArmsRaised => "arms-raised",
+            Style::Crouch => "crouch",
+            Style::Turn => "turn",
+            Style::ArmAcross => "arm-across",
+            Style::Lean => "lean",
+        }
+    }
 }
 
 /// Joint angles (degrees) the generator drives, before limits.
@@ -289,6 +301,14 @@ mod tests {
                     assert!(a.knee.iter().all(|k| (0.0..=140.0).contains(k)));
                 }
             }
+        }
+    }
+
+    #[test]
+    fn names_are_the_scene_file_names() {
+        for st in Style::ALL {
+            let parsed: Style = serde_json::from_value(serde_json::json!(st.name())).unwrap();
+            assert_eq!(parsed, st);
         }
     }
 

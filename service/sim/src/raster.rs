@@ -188,9 +188,10 @@ pub fn vertex_normals(verts: &[Vec3], tris: &[[u32; 3]], out: &mut Vec<Vec3>) {
 impl Rasterizer {
     pub fn draw(&mut self, fb: &mut Framebuffer, cam: &Camera, sh: &Sh9, m: &DrawMesh) {
         let persp = cam.is_perspective();
+        let proj = cam.projector();
         self.scr.clear();
         self.scr.extend(m.verts.iter().map(|v| {
-            let s = cam.to_screen(*v);
+            let s = proj.to_screen(*v);
             let inv_w = if persp { 1.0 / s.depth.max(1e-6) } else { 1.0 };
             (s.px, s.py, s.depth, inv_w)
         }));

@@ -612,7 +612,7 @@ impl Simulator {
                     Motion::Static(_) => serde_json::json!({"kind": "static"}),
                     Motion::Procedural(p) => {
                         let a = p.angles(t as f32);
-                        serde_json::json!({"kind": "procedural", "style": format!("{:?}", p.style), "root_yaw": a.root_yaw,
+                        serde_json::json!({"kind": "procedural", "style": p.style.name(), "root_yaw": a.root_yaw,
                             "hip_flex": a.hip_flex, "knee": a.knee, "shoulder_abd": a.shoulder_abd, "shoulder_flex": a.shoulder_flex,
                             "elbow": a.elbow, "spine_flex": a.spine_flex, "spine_side": a.spine_side})
                     }
