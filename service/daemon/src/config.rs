@@ -10,22 +10,68 @@ use std::path::{Path, PathBuf};
 pub enum Backend {
     /// The scene simulator (embedded default camera).
     Sim,
+    /// Replay of an MJPEG file or an image folder.
+    File,
+    /// A V4L2 device (webcams; OAK cameras in UVC mode). Needs the `v4l2` build feature.
+    V4l2,
+    /// An OAK camera over DepthAI-Core. Needs the `depthai` build feature.
+    Depthai,
+}
+
+impl Backend {
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Sim => "sim",
+            Backend::File => "file",
+            Backend::V4l2 => "v4l2",
+            Backend::Depthai => "depthai",
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FieldMode {
     /// Render the simulator's ground-truth field through the engine. A debugging mode, always
-    /// labelled as such: it is not a reconstruction.
+    /// labelled as such: it is not a reconstruction. Needs the `sim` backend.
     Oracle,
+    /// Publish the camera frame itself (letterboxed): a labelled debugging view for real
+    /// cameras until the trained models land; no reconstruction.
+    Camera,
 }
 
+impl FieldMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            FieldMode::Oracle => "oracle",
+            FieldMode::Camera => "camera",
+        }
+    }
+}
+
+/// The camera section. Which keys apply depends on the backend; a key given for another
+/// backend is an error, so a typo cannot silently do nothing.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraConfig {
     pub backend: Backend,
-    /// Scene file for the `sim` backend, relative to the config file.
-    pub scene: PathBuf,
+    /// `sim`: scene file, relative to the config file.
+    pub scene: Option<PathBuf>,
+    /// `file`: an MJPEG file or a folder of images, relative to the config file.
+    pub path: Option<PathBuf>,
+    /// `file`: start again at the end (default true); false ends the stream.
+    #[serde(rename = "loop")]
+    pub looping: Option<bool>,
+    /// `v4l2`: a device node (`/dev/video0`, `/dev/v4l/by-id/...`) or `name:TEXT` to pick the
+    /// first capture device whose name contains TEXT.
+    pub device: Option<String>,
+    /// `v4l2`: `auto` (MJPEG, else YUYV), `mjpeg` or `yuyv`.
+    pub format: Option<crate::capture::v4l2::FormatPref>,
+    /// `v4l2`, `depthai`: frame size.
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    /// `file`, `v4l2`, `depthai`: frames per second.
+    pub fps: Option<f32>,
 }
 
 fn d_res() -> GridRes {
@@ -68,8 +114,9 @@ pub struct RenderConfig {
     /// RGBA in [0, 1]; alpha 0 gives transparent PNG snapshots.
     #[serde(default = "d_bg")]
     pub background: [f32; 4],
-    #[serde(default = "d_field")]
-    pub field: FieldMode,
+    /// Default: `oracle` with the `sim` backend, `camera` with the others.
+    #[serde(default)]
+    pub field: Option<FieldMode>,
     /// Oracle voxel size in metres.
     #[serde(default = "d_voxel")]
     pub oracle_voxel_m: f32,
@@ -77,9 +124,6 @@ pub struct RenderConfig {
 
 fn d_bg() -> [f32; 4] {
     [0.12, 0.13, 0.16, 0.0]
-}
-fn d_field() -> FieldMode {
-    FieldMode::Oracle
 }
 
 impl Default for RenderConfig {
@@ -90,7 +134,7 @@ impl Default for RenderConfig {
             yaw: 0.0,
             pitch: 0.0,
             background: d_bg(),
-            field: d_field(),
+            field: None,
             oracle_voxel_m: d_voxel(),
         }
     }
@@ -140,46 +184,49 @@ pub struct Config {
     pub file: PathBuf,
 }
 
+/// A value that parsed but is not acceptable: the dotted key and why.
+#[derive(Debug)]
+pub struct Bad {
+    pub key: String,
+    pub msg: String,
+}
+
+fn bad<T>(key: impl Into<String>, msg: impl Into<String>) -> Result<T, Bad> {
+    Err(Bad {
+        key: key.into(),
+        msg: msg.into(),
+    })
+}
+
+/// The 1-based line where `key` of `[table]` is set, if it is set in the text.
+pub fn line_of(text: &str, dotted: &str) -> Option<usize> {
+    let (table, key) = dotted.rsplit_once('.').unwrap_or(("", dotted));
+    let mut current = String::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.trim();
+        if let Some(h) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            current = h.trim().to_string();
+            continue;
+        }
+        if current == table
+            && let Some((k, _)) = line.split_once('=')
+            && k.trim().trim_matches('"') == key
+        {
+            return Some(i + 1);
+        }
+    }
+    None
+}
+
 impl Config {
     pub fn parse(text: &str, file: &Path) -> Result<Self, String> {
         let mut c: Config = toml::from_str(text)
             .map_err(|e| format!("{}: {}", file.display(), e.to_string().trim_end()))?;
         c.file = file.to_path_buf();
-        if c.http.client_limit == 0 || c.http.client_limit > 10_000 {
-            return Err(format!(
-                "{}: http.client_limit = {} must be in 1..=10000",
-                file.display(),
-                c.http.client_limit
-            ));
-        }
-        if !(0.002..=0.05).contains(&c.render.oracle_voxel_m) {
-            return Err(format!(
-                "{}: render.oracle_voxel_m = {} must be in [0.002, 0.05]",
-                file.display(),
-                c.render.oracle_voxel_m
-            ));
-        }
-        let l = (c.render.resolution.0 - 1).trailing_zeros();
-        if c.render.coarse_level < 1 || c.render.coarse_level >= l {
-            return Err(format!(
-                "{}: render.coarse_level = {} must be in 1..{l} for resolution {}",
-                file.display(),
-                c.render.coarse_level,
-                c.render.resolution.0
-            ));
-        }
-        if c.render.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
-            return Err(format!(
-                "{}: render.background values must be in [0, 1]",
-                file.display()
-            ));
-        }
-        if c.http.token.as_deref().is_some_and(|t| t.len() < 8) {
-            return Err(format!(
-                "{}: http.token must be at least 8 characters",
-                file.display()
-            ));
-        }
+        c.validate().map_err(|b| match line_of(text, &b.key) {
+            Some(n) => format!("{}: line {n}: {}: {}", file.display(), b.key, b.msg),
+            None => format!("{}: {}: {}", file.display(), b.key, b.msg),
+        })?;
         Ok(c)
     }
 
@@ -188,16 +235,169 @@ impl Config {
         Self::parse(&text, file)
     }
 
-    /// The scene file, resolved relative to the config file.
-    pub fn scene_path(&self) -> PathBuf {
-        if self.camera.scene.is_absolute() {
-            self.camera.scene.clone()
-        } else {
-            self.file
-                .parent()
-                .unwrap_or(Path::new("."))
-                .join(&self.camera.scene)
+    /// Checks that serde cannot express: ranges, combinations, per-backend keys.
+    pub fn validate(&self) -> Result<(), Bad> {
+        self.check_camera()?;
+        let r = &self.render;
+        if self.field() == FieldMode::Oracle && self.camera.backend != Backend::Sim {
+            return bad(
+                "render.field",
+                format!(
+                    "\"oracle\" needs camera.backend = \"sim\" (only the simulator has ground truth); use \"camera\" with backend \"{}\"",
+                    self.camera.backend.name()
+                ),
+            );
         }
+        if self.http.client_limit == 0 || self.http.client_limit > 10_000 {
+            return bad(
+                "http.client_limit",
+                format!("{} must be in 1..=10000", self.http.client_limit),
+            );
+        }
+        if !(0.002..=0.05).contains(&r.oracle_voxel_m) {
+            return bad(
+                "render.oracle_voxel_m",
+                format!("{} must be in [0.002, 0.05]", r.oracle_voxel_m),
+            );
+        }
+        let l = (r.resolution.0 - 1).trailing_zeros();
+        if r.coarse_level < 1 || r.coarse_level >= l {
+            return bad(
+                "render.coarse_level",
+                format!(
+                    "{} must be in 1..{l} for resolution {}",
+                    r.coarse_level, r.resolution.0
+                ),
+            );
+        }
+        if r.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            return bad("render.background", "values must be in [0, 1]");
+        }
+        if !r.yaw.is_finite() || !r.pitch.is_finite() || r.pitch.abs() > 80.0 {
+            return bad(
+                "render.pitch",
+                format!(
+                    "yaw {} / pitch {}: need finite values, |pitch| <= 80",
+                    r.yaw, r.pitch
+                ),
+            );
+        }
+        if self.http.token.as_deref().is_some_and(|t| t.len() < 8) {
+            return bad("http.token", "must be at least 8 characters");
+        }
+        Ok(())
+    }
+
+    fn check_camera(&self) -> Result<(), Bad> {
+        let c = &self.camera;
+        let b = c.backend.name();
+        let given: [(&str, bool, &[Backend]); 8] = [
+            ("scene", c.scene.is_some(), &[Backend::Sim]),
+            ("path", c.path.is_some(), &[Backend::File]),
+            ("loop", c.looping.is_some(), &[Backend::File]),
+            ("device", c.device.is_some(), &[Backend::V4l2]),
+            ("format", c.format.is_some(), &[Backend::V4l2]),
+            (
+                "width",
+                c.width.is_some(),
+                &[Backend::V4l2, Backend::Depthai],
+            ),
+            (
+                "height",
+                c.height.is_some(),
+                &[Backend::V4l2, Backend::Depthai],
+            ),
+            (
+                "fps",
+                c.fps.is_some(),
+                &[Backend::File, Backend::V4l2, Backend::Depthai],
+            ),
+        ];
+        for (key, present, applies) in given {
+            if present && !applies.contains(&c.backend) {
+                return bad(
+                    format!("camera.{key}"),
+                    format!(
+                        "does not apply to backend \"{b}\" (it is for {})",
+                        applies
+                            .iter()
+                            .map(|a| a.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                );
+            }
+        }
+        let required: &[(&str, bool)] = match c.backend {
+            Backend::Sim => &[("scene", c.scene.is_some())],
+            Backend::File => &[("path", c.path.is_some())],
+            Backend::V4l2 => &[
+                ("device", c.device.is_some()),
+                ("width", c.width.is_some()),
+                ("height", c.height.is_some()),
+                ("fps", c.fps.is_some()),
+            ],
+            Backend::Depthai => &[
+                ("width", c.width.is_some()),
+                ("height", c.height.is_some()),
+                ("fps", c.fps.is_some()),
+            ],
+        };
+        for (key, present) in required {
+            if !present {
+                return bad(
+                    format!("camera.{key}"),
+                    format!("is required for backend \"{b}\""),
+                );
+            }
+        }
+        for (key, v) in [("width", c.width), ("height", c.height)] {
+            if let Some(v) = v
+                && !(16..=8192).contains(&v)
+            {
+                return bad(format!("camera.{key}"), format!("{v} must be in 16..=8192"));
+            }
+        }
+        if c.backend == Backend::V4l2
+            && c.format == Some(crate::capture::v4l2::FormatPref::Yuyv)
+            && c.width.is_some_and(|w| !w.is_multiple_of(2))
+        {
+            return bad("camera.width", "must be even for format \"yuyv\"");
+        }
+        if let Some(f) = c.fps
+            && !(f.is_finite() && (0.5..=240.0).contains(&f))
+        {
+            return bad("camera.fps", format!("{f} must be in [0.5, 240]"));
+        }
+        if c.device
+            .as_deref()
+            .is_some_and(|d| d.trim().is_empty() || d == "name:")
+        {
+            return bad("camera.device", "must name a device node or \"name:TEXT\"");
+        }
+        Ok(())
+    }
+
+    /// The field mode, defaulted by backend.
+    pub fn field(&self) -> FieldMode {
+        self.render.field.unwrap_or(match self.camera.backend {
+            Backend::Sim => FieldMode::Oracle,
+            _ => FieldMode::Camera,
+        })
+    }
+
+    /// A path from the config, resolved relative to the config file.
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.file.parent().unwrap_or(Path::new(".")).join(p)
+        }
+    }
+
+    /// The scene file of the `sim` backend, resolved relative to the config file.
+    pub fn scene_path(&self) -> Option<PathBuf> {
+        self.camera.scene.as_deref().map(|p| self.resolve(p))
     }
 }
 
@@ -214,7 +414,8 @@ mod tests {
         let c = Config::load(p).unwrap();
         assert_eq!(c.camera.backend, Backend::Sim);
         assert!(c.http.bind.ip().is_loopback());
-        assert!(c.scene_path().exists(), "{}", c.scene_path().display());
+        let scene = c.scene_path().unwrap();
+        assert!(scene.exists(), "{}", scene.display());
     }
 
     #[test]
@@ -232,11 +433,33 @@ mod tests {
             "{e}"
         );
         let e = Config::parse(
-            "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\nfps = 3\n",
+            "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\nfsp = 3\n",
             Path::new("b.toml"),
         )
         .unwrap_err();
-        assert!(e.contains("line 4") && e.contains("fps"), "{e}");
+        assert!(e.contains("line 4") && e.contains("fsp"), "{e}");
+        // A key of another backend names its line too.
+        let e = Config::parse(
+            "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n\nfps = 3\n",
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("line 5") && e.contains("camera.fps") && e.contains("does not apply"),
+            "{e}"
+        );
+        let e = Config::parse(
+            "[camera]\nbackend = \"v4l2\"\ndevice = \"/dev/video0\"\nwidth = 640\nheight = 480\n",
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(e.contains("camera.fps") && e.contains("required"), "{e}");
+        let e = Config::parse(
+            "[camera]\nbackend = \"file\"\npath = \"r.mjpg\"\n[render]\nfield = \"oracle\"\n",
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(e.contains("line 5") && e.contains("render.field"), "{e}");
         let e = Config::parse(
             "[camera]\nbackend = \"v4l9\"\nscene = \"x\"\n",
             Path::new("b.toml"),

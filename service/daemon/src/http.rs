@@ -5,18 +5,46 @@
 use crate::pipeline::{PipelineState, STAGES, Shared};
 use axum::Router;
 use axum::body::Body;
-use axum::extract::{Query, State};
+use axum::extract::{ConnectInfo, Query, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::{get, post};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 pub struct App {
     pub shared: Arc<Shared>,
     pub clients: AtomicUsize,
     pub client_limit: usize,
     pub token: Option<String>,
+    /// Connected stream clients, for per-client figures in `/state`.
+    pub table: Mutex<BTreeMap<u64, Arc<ClientStat>>>,
+    pub next_id: AtomicU64,
+}
+
+impl App {
+    pub fn new(shared: Arc<Shared>, client_limit: usize, token: Option<String>) -> Self {
+        Self {
+            shared,
+            clients: AtomicUsize::new(0),
+            client_limit,
+            token,
+            table: Mutex::new(BTreeMap::new()),
+            next_id: AtomicU64::new(1),
+        }
+    }
+}
+
+/// One stream client: frames sent, frames it skipped (published while it was still
+/// writing an earlier one), since when.
+pub struct ClientStat {
+    pub peer: String,
+    pub since: Instant,
+    pub sent: AtomicU64,
+    pub skipped: AtomicU64,
 }
 
 pub fn router(app: Arc<App>) -> Router {
@@ -39,14 +67,22 @@ async fn viewer(State(app): State<Arc<App>>) -> Html<String> {
 }
 
 /// Frees a client slot when the stream body is dropped (client gone).
-struct ClientGuard(Arc<App>);
+struct ClientGuard(Arc<App>, u64, Arc<ClientStat>);
 impl Drop for ClientGuard {
     fn drop(&mut self) {
+        self.0
+            .table
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .remove(&self.1);
         self.0.clients.fetch_sub(1, Ordering::SeqCst);
     }
 }
 
-async fn stream(State(app): State<Arc<App>>) -> Response {
+async fn stream(
+    State(app): State<Arc<App>>,
+    peer: Option<axum::Extension<ConnectInfo<SocketAddr>>>,
+) -> Response {
     let prev = app.clients.fetch_add(1, Ordering::SeqCst);
     if prev >= app.client_limit {
         app.clients.fetch_sub(1, Ordering::SeqCst);
@@ -56,29 +92,58 @@ async fn stream(State(app): State<Arc<App>>) -> Response {
         )
             .into_response();
     }
-    let guard = ClientGuard(app.clone());
+    let id = app.next_id.fetch_add(1, Ordering::Relaxed);
+    let stat = Arc::new(ClientStat {
+        peer: peer
+            .map(|axum::Extension(ConnectInfo(a))| a.to_string())
+            .unwrap_or_default(),
+        since: Instant::now(),
+        sent: AtomicU64::new(0),
+        skipped: AtomicU64::new(0),
+    });
+    app.table
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .insert(id, stat.clone());
+    let guard = ClientGuard(app.clone(), id, stat);
     let mut rx = app.shared.published.subscribe();
     rx.mark_changed();
-    let body = futures_util::stream::unfold((rx, guard), |(mut rx, guard)| async move {
-        loop {
-            if rx.changed().await.is_err() {
-                return None;
-            }
-            let frame = rx.borrow_and_update().clone();
-            if let Some(f) = frame {
-                let mut part = format!(
+    let body = futures_util::stream::unfold(
+        (rx, guard, None::<u64>),
+        |(mut rx, guard, mut last)| async move {
+            loop {
+                if rx.changed().await.is_err() {
+                    return None;
+                }
+                let frame = rx.borrow_and_update().clone();
+                if let Some(f) = frame {
+                    if let Some(prev) = last
+                        && f.index > prev + 1
+                        && !f.placeholder
+                    {
+                        guard
+                            .2
+                            .skipped
+                            .fetch_add(f.index - prev - 1, Ordering::Relaxed);
+                    }
+                    if !f.placeholder {
+                        last = Some(f.index);
+                    }
+                    guard.2.sent.fetch_add(1, Ordering::Relaxed);
+                    let mut part = format!(
                     "--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {}\r\nX-Frame-Index: {}\r\nX-Latency-Ms: {:.1}\r\n\r\n",
                     f.jpeg.len(),
                     f.index,
                     f.latency_ms
                 )
                 .into_bytes();
-                part.extend_from_slice(&f.jpeg);
-                part.extend_from_slice(b"\r\n");
-                return Some((Ok::<_, std::io::Error>(part), (rx, guard)));
+                    part.extend_from_slice(&f.jpeg);
+                    part.extend_from_slice(b"\r\n");
+                    return Some((Ok::<_, std::io::Error>(part), (rx, guard, last)));
+                }
             }
-        }
-    });
+        },
+    );
     Response::builder()
         .header(
             header::CONTENT_TYPE,
@@ -187,15 +252,38 @@ fn state_json(app: &App) -> serde_json::Value {
     let published = sh.e2e.frames.load(Ordering::Relaxed);
     let up = sh.started.elapsed().as_secs_f64();
     let (yaw, pitch) = *sh.view.lock().unwrap_or_else(|p| p.into_inner());
+    let camera = sh.camera.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    let per_client: Vec<serde_json::Value> = app
+        .table
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .iter()
+        .map(|(id, c)| {
+            let secs = c.since.elapsed().as_secs_f64();
+            let sent = c.sent.load(Ordering::Relaxed);
+            serde_json::json!({
+                "id": id, "peer": c.peer, "connected_s": secs, "frames_sent": sent,
+                "frames_skipped": c.skipped.load(Ordering::Relaxed),
+                "fps": if secs > 0.0 { sent as f64 / secs } else { 0.0 },
+            })
+        })
+        .collect();
     serde_json::json!({
         "state": state, "reason": reason, "mode": sh.mode,
-        "mode_note": if sh.mode == "oracle" { "ground-truth field rendered through the engine: not a reconstruction" } else { "" },
+        "mode_note": match sh.mode {
+            "oracle" => "ground-truth field rendered through the engine: not a reconstruction",
+            "camera" => "the camera frame itself: no reconstruction",
+            _ => "",
+        },
         "resolution": sh.resolution,
         "frames_published": published,
         "fps": if up > 0.0 { published as f64 / up } else { 0.0 },
         "latency_ms": {"p50": l50, "p99": l99},
         "stages": stages,
+        "camera": camera,
+        "showing_placeholder": sh.published.borrow().as_ref().is_some_and(|f| f.placeholder),
         "clients": app.clients.load(Ordering::SeqCst),
+        "per_client": per_client,
         "client_limit": app.client_limit,
         "view": {"yaw": yaw, "pitch": pitch},
         "uptime_s": up,

@@ -3,16 +3,14 @@
 //! Until the trained models land (issue #6) the field is the simulator's ground truth,
 //! labelled `oracle` everywhere: it is never presented as a reconstruction.
 
-mod config;
-mod http;
-mod pipeline;
+use volcapd::{capture, config, http, pipeline};
 
 use clap::Parser;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 #[derive(Parser)]
@@ -52,36 +50,24 @@ fn main() -> ExitCode {
     if let Some(a) = cli.http {
         cfg.http.bind = a;
     }
-    let assets = match volcap_sim::HumanAssets::embedded() {
-        Ok(a) => Arc::new(a),
-        Err(e) => {
-            eprintln!("volcapd: {e}");
-            return ExitCode::from(EXIT_CONFIG);
-        }
-    };
-    let scene_path = cfg.scene_path();
-    // One backend and one field mode exist today; matching keeps new ones from being ignored.
-    let config::Backend::Sim = cfg.camera.backend;
-    let mode = match cfg.render.field {
-        config::FieldMode::Oracle => "oracle",
-    };
+    let mode = cfg.field().name();
     tracing::info!(config = %cli.config.display(), board = %cfg.description, "starting");
-    let sim = match volcap_sim::Scene::load(&scene_path)
-        .map_err(|e| e.to_string())
-        .and_then(|s| volcap_sim::Simulator::new(s, assets).map_err(|e| e.to_string()))
-    {
-        Ok(s) => s,
+    let (factory, source) = match camera_factory(&cfg) {
+        Ok(f) => f,
         Err(e) => {
-            eprintln!("volcapd: scene error ({}): {e}", cli.config.display());
+            eprintln!(
+                "volcapd: {} ({}): {e}",
+                cfg.camera.backend.name(),
+                cli.config.display()
+            );
             return ExitCode::from(EXIT_CONFIG);
         }
     };
     if cli.check_config {
         println!(
-            "{}: ok ({}; scene {}, mode {mode})",
+            "{}: ok ({}; camera {source}, mode {mode})",
             cli.config.display(),
             cfg.description,
-            scene_path.display()
         );
         return ExitCode::SUCCESS;
     }
@@ -90,6 +76,11 @@ fn main() -> ExitCode {
         stats: Default::default(),
         e2e: Default::default(),
         state: std::sync::Mutex::new(pipeline::PipelineState::Starting),
+        camera: std::sync::Mutex::new(pipeline::CameraStatus {
+            source: source.clone(),
+            state: "opening",
+            ..Default::default()
+        }),
         view: std::sync::Mutex::new((cfg.render.yaw, cfg.render.pitch)),
         stop: AtomicBool::new(false),
         started: Instant::now(),
@@ -122,24 +113,25 @@ fn main() -> ExitCode {
         }
     };
     let addr = listener.local_addr().unwrap_or(cfg.http.bind);
-    let threads = pipeline::start(&cfg, sim, shared.clone());
-    let app = Arc::new(http::App {
-        shared: shared.clone(),
-        clients: AtomicUsize::new(0),
-        client_limit: cfg.http.client_limit,
-        token: cfg.http.token.clone(),
-    });
+    let threads = pipeline::start(&cfg, factory, shared.clone());
+    let app = Arc::new(http::App::new(
+        shared.clone(),
+        cfg.http.client_limit,
+        cfg.http.token.clone(),
+    ));
     println!(
-        "volcapd: viewer at http://{addr}/ (mode: {mode}, {}^3, scene {})",
+        "volcapd: viewer at http://{addr}/ (mode: {mode}, {}^3, camera {source})",
         cfg.render.resolution.0,
-        scene_path.display()
     );
     let served = rt.block_on(async move {
-        axum::serve(listener, http::router(app))
-            .with_graceful_shutdown(async {
-                let _ = tokio::signal::ctrl_c().await;
-            })
-            .await
+        axum::serve(
+            listener,
+            http::router(app).into_make_service_with_connect_info::<SocketAddr>(),
+        )
+        .with_graceful_shutdown(async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
     });
     shared.stop.store(true, Ordering::Relaxed);
     for t in threads {
@@ -152,4 +144,97 @@ fn main() -> ExitCode {
             ExitCode::from(EXIT_RUNTIME)
         }
     }
+}
+
+/// The configured camera backend, checked as far as it can be before the thread starts (the
+/// scene parses, the recording exists, the backend is built in). Returns the factory that
+/// builds it on the capture thread and a description.
+fn camera_factory(cfg: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
+    use capture::Camera;
+    match cfg.camera.backend {
+        config::Backend::Sim => {
+            let scene_path = cfg.scene_path().ok_or("camera.scene is required")?;
+            let assets = volcap_sim::HumanAssets::embedded().map_err(|e| e.to_string())?;
+            let sim = volcap_sim::Scene::load(&scene_path)
+                .map_err(|e| format!("scene error: {e}"))
+                .and_then(|s| {
+                    volcap_sim::Simulator::new(s, Arc::new(assets))
+                        .map_err(|e| format!("scene error: {e}"))
+                })?;
+            let cam = capture::sim::SimCamera::new(sim, scene_path.display().to_string());
+            let source = cam.describe();
+            Ok((
+                Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),
+                source,
+            ))
+        }
+        config::Backend::File => {
+            let path = cfg
+                .camera
+                .path
+                .as_deref()
+                .map(|p| cfg.resolve(p))
+                .ok_or("camera.path is required")?;
+            if !path.exists() {
+                return Err(format!("camera.path: {} does not exist", path.display()));
+            }
+            let cam = capture::file::FileCamera::new(
+                path,
+                cfg.camera.fps.unwrap_or(15.0),
+                cfg.camera.looping.unwrap_or(true),
+            );
+            let source = cam.describe();
+            Ok((
+                Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),
+                source,
+            ))
+        }
+        config::Backend::V4l2 => v4l2_factory(cfg),
+        config::Backend::Depthai => depthai_factory(cfg),
+    }
+}
+
+#[cfg(feature = "v4l2")]
+fn v4l2_factory(cfg: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
+    use capture::v4l2::{DeviceSpec, V4l2Camera, V4l2Settings, sys::V4lDevice};
+    let c = &cfg.camera;
+    let settings = V4l2Settings {
+        device: DeviceSpec::parse(c.device.as_deref().unwrap_or("/dev/video0")),
+        format: c.format.unwrap_or_default(),
+        size: (c.width.unwrap_or(640), c.height.unwrap_or(480)),
+        fps: c.fps.unwrap_or(30.0).round() as u32,
+    };
+    let cam = V4l2Camera::new(V4lDevice::default(), settings);
+    let source = capture::Camera::describe(&cam);
+    Ok((
+        Box::new(move || Ok(Box::new(cam) as Box<dyn capture::Camera>)),
+        source,
+    ))
+}
+
+#[cfg(not(feature = "v4l2"))]
+fn v4l2_factory(_: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
+    Err("this volcapd was built without V4L2 support; rebuild with `--features v4l2` (needs libclang-dev)".into())
+}
+
+#[cfg(feature = "depthai")]
+fn depthai_factory(cfg: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
+    let c = &cfg.camera;
+    let (size, fps) = (
+        (c.width.unwrap_or(640), c.height.unwrap_or(400)),
+        c.fps.unwrap_or(30.0),
+    );
+    let source = format!("depthai:CAM_A {}x{}@{fps}", size.0, size.1);
+    Ok((
+        Box::new(move || {
+            Ok(Box::new(capture::depthai::DepthaiCamera::new(size, fps))
+                as Box<dyn capture::Camera>)
+        }),
+        source,
+    ))
+}
+
+#[cfg(not(feature = "depthai"))]
+fn depthai_factory(_: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
+    Err("this volcapd was built without DepthAI support; rebuild with `--features depthai`, or run an OAK camera in UVC mode with backend \"v4l2\"".into())
 }

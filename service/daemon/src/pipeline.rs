@@ -1,18 +1,18 @@
-//! The real-time pipeline on dedicated threads: capture -> field (oracle: ground truth) ->
-//! localization + mesh-free render -> encode -> publish. Stages are joined by bounded
+//! The real-time pipeline on dedicated threads: capture (a supervised camera backend) ->
+//! field (oracle: ground truth; camera: the frame itself) -> localization + mesh-free
+//! render -> encode -> publish. Stages are joined by bounded
 //! latest-wins slots, so latency never grows; every frame a slot overwrites is counted as a
 //! drop of the stage that produced it.
 
-use crate::config::Config;
+use crate::capture::{Backoff, Camera, CameraState, Frame, Skip, Step, Supervisor};
+use crate::config::{Config, FieldMode};
 use glam::{Quat, Vec3};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 use volcap_engine::grid::GridSpec;
 use volcap_engine::render::{RenderOptions, Renderer};
-use volcap_sim::camera::Camera;
-use volcap_sim::sim::GroundTruth;
-use volcap_sim::{SimError, Simulator};
+use volcap_sim::camera::Camera as SimView;
 
 /// A one-item slot: `put` replaces what is there (and reports the overwrite), `take` waits.
 pub struct Slot<T> {
@@ -100,6 +100,25 @@ pub struct Published {
     pub size: usize,
     pub index: u64,
     pub latency_ms: f64,
+    /// A placeholder that says why there is no render.
+    pub placeholder: bool,
+}
+
+/// The camera as `/state` and D-Bus report it.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct CameraStatus {
+    /// Backend and device.
+    pub source: String,
+    /// opening, running, lost, stopped.
+    pub state: &'static str,
+    /// Typed reason while lost/stopped (no-device, busy, no-signal, unplugged, ...).
+    pub fault: &'static str,
+    pub reason: String,
+    pub frames: u64,
+    pub truncated: u64,
+    pub corrupt: u64,
+    pub faults: u64,
+    pub opens: u64,
 }
 
 /// Shared between the pipeline threads and the HTTP server.
@@ -107,168 +126,295 @@ pub struct Shared {
     pub stats: [StageStats; 4],
     pub e2e: StageStats,
     pub state: Mutex<PipelineState>,
+    pub camera: Mutex<CameraStatus>,
     pub view: Mutex<(f32, f32)>,
     pub stop: AtomicBool,
     pub started: Instant,
     pub published: tokio::sync::watch::Sender<Option<Arc<Published>>>,
     pub mode: &'static str,
     pub resolution: usize,
-    /// The latest frame's field, for meshes on request.
+    /// The latest frame's field (oracle mode), for meshes on request.
     pub latest_field: Mutex<Option<Arc<volcap_sim::oracle::SceneField>>>,
     pub coarse_level: u32,
 }
 
+impl Shared {
+    fn set_state(&self, s: PipelineState) {
+        *self.state.lock().unwrap_or_else(|p| p.into_inner()) = s;
+    }
+}
+
 pub const STAGES: [&str; 4] = ["capture", "field", "render", "encode"];
 
-struct Captured {
-    index: u64,
-    at: Instant,
-    gt: GroundTruth,
-    people: usize,
-}
+/// Builds the camera on the capture thread (DepthAI handles cannot move between threads).
+pub type CameraFactory = Box<dyn FnOnce() -> Result<Box<dyn Camera>, String> + Send>;
 
 struct Rendered {
     index: u64,
     at: Instant,
     rgba: Vec<u8>,
     size: usize,
+    placeholder: bool,
 }
 
-fn orbit(cam: &Camera, yaw_deg: f32, pitch_deg: f32) -> Camera {
+fn orbit(cam: &SimView, yaw_deg: f32, pitch_deg: f32) -> SimView {
     let off = cam.eye - cam.target;
     let side = off.cross(Vec3::Y).normalize_or(Vec3::X);
     let q = Quat::from_rotation_y(yaw_deg.to_radians())
         * Quat::from_axis_angle(side, -pitch_deg.to_radians());
-    Camera {
+    SimView {
         eye: cam.target + q * off,
         ..*cam
     }
 }
 
-/// Start the pipeline threads. `sim` is the capture backend.
+/// The camera frame fitted into a `size x size` RGBA square (aspect kept, nearest sample,
+/// integer indices), transparent around it.
+pub fn letterbox(rgb: &[u8], w: usize, h: usize, size: usize) -> Vec<u8> {
+    let mut out = vec![0u8; size * size * 4];
+    if w == 0 || h == 0 || rgb.len() < w * h * 3 {
+        return out;
+    }
+    let (fw, fh) = if w >= h {
+        (size, (size * h / w).max(1))
+    } else {
+        ((size * w / h).max(1), size)
+    };
+    let (ox, oy) = ((size - fw) / 2, (size - fh) / 2);
+    for y in 0..fh {
+        let sy = (y * h + h / 2) / fh;
+        for x in 0..fw {
+            let sx = (x * w + w / 2) / fw;
+            let i = (sy.min(h - 1) * w + sx.min(w - 1)) * 3;
+            let o = ((oy + y) * size + ox + x) * 4;
+            out[o..o + 3].copy_from_slice(&rgb[i..i + 3]);
+            out[o + 3] = 255;
+        }
+    }
+    out
+}
+
+fn camera_status_from(sup: &Supervisor<dyn Camera>, st: &mut CameraStatus) {
+    st.source = sup.describe();
+    st.frames = sup.frames;
+    st.faults = sup.faults;
+    st.opens = sup.opens;
+    let (state, fault, reason) = match sup.state() {
+        CameraState::Opening => ("opening", "", String::new()),
+        CameraState::Running => ("running", "", String::new()),
+        CameraState::Lost { fault, retry_in } => (
+            "lost",
+            fault.kind(),
+            format!("{fault}; retrying in {:.1} s", retry_in.as_secs_f32()),
+        ),
+        CameraState::Stopped(fault) => ("stopped", fault.kind(), fault.to_string()),
+    };
+    st.state = state;
+    st.fault = fault;
+    st.reason = reason;
+}
+
+/// Start the pipeline threads.
 pub fn start(
     cfg: &Config,
-    mut sim: Simulator,
+    factory: CameraFactory,
     shared: Arc<Shared>,
 ) -> Vec<std::thread::JoinHandle<()>> {
-    let captured: Arc<Slot<Captured>> = Arc::default();
+    let captured: Arc<Slot<Frame>> = Arc::default();
     let rendered: Arc<Slot<Rendered>> = Arc::default();
-    let fps = sim.scene().camera.fps.0 as f64;
+    let size = cfg.render.resolution.0;
+    let bg = cfg.render.background;
     let mut threads = Vec::new();
 
-    // Capture: the simulator paced at the scene's fps.
+    // Capture: the supervised camera; losses become states and placeholder frames.
     {
-        let (sh, out) = (shared.clone(), captured.clone());
+        let (sh, out, placeholders) = (shared.clone(), captured.clone(), rendered.clone());
         threads.push(
             std::thread::Builder::new()
                 .name("capture".into())
                 .spawn(move || {
-                    let period = Duration::from_secs_f64(1.0 / fps);
-                    let mut next = Instant::now();
-                    let mut index = 0u64;
-                    while !sh.stop.load(Ordering::Relaxed) {
-                        let now = Instant::now();
-                        if next > now {
-                            std::thread::sleep(next - now);
+                    let cam = match factory() {
+                        Ok(c) => c,
+                        Err(e) => {
+                            tracing::error!("camera: {e}");
+                            sh.set_state(PipelineState::Degraded(format!("camera: {e}")));
+                            return;
                         }
-                        next += period;
-                        let t = Instant::now();
-                        match sim.render(index) {
-                            Ok(frame) => {
-                                // People in view: subjects covering a visible area of the camera frame.
-                                let mut area = [0u32; 256];
-                                for &id in &frame.ids {
-                                    area[id as usize] += 1;
+                    };
+                    let mut sup: Supervisor<dyn Camera> = Supervisor::new(cam, Backoff::default());
+                    let mut last_placeholder: Option<Instant> = None;
+                    let mut last_kind = "";
+                    let mut skips = 0u64;
+                    while !sh.stop.load(Ordering::Relaxed) {
+                        let step = sup.step(Duration::from_millis(200));
+                        {
+                            let mut st = sh.camera.lock().unwrap_or_else(|p| p.into_inner());
+                            camera_status_from(&sup, &mut st);
+                            if let Step::Skipped(s) = &step {
+                                match s {
+                                    Skip::Truncated(_) => st.truncated += 1,
+                                    Skip::Corrupt(_) => st.corrupt += 1,
                                 }
-                                let min_px = (frame.width * frame.height / 2000).max(20) as u32;
-                                let people = (1..volcap_sim::sim::OCCLUDER_ID as usize)
-                                    .filter(|&i| area[i] >= min_px)
-                                    .count();
-                                let gt = sim.ground_truth();
-                                sh.stats[0].record(t.elapsed().as_secs_f64() * 1e3);
-                                if out.put(Captured {
-                                    index,
-                                    at: t,
-                                    gt,
-                                    people,
-                                }) {
+                            }
+                        }
+                        match step {
+                            Step::Frame(f) => {
+                                if last_kind != "running" {
+                                    tracing::info!(source = %sup.describe(), "camera running");
+                                    last_kind = "running";
+                                }
+                                sh.stats[0].record(f.at.elapsed().as_secs_f64() * 1e3);
+                                if out.put(f) {
                                     sh.stats[0].dropped.fetch_add(1, Ordering::Relaxed);
                                 }
                             }
-                            Err(SimError::Unplugged { frame }) => {
-                                *sh.state.lock().unwrap_or_else(|p| p.into_inner()) =
-                                    PipelineState::Degraded(format!(
-                                        "camera unplugged (frame {frame}); retrying"
-                                    ));
+                            Step::Skipped(s) => {
+                                skips += 1;
+                                if skips <= 10 || skips.is_power_of_two() {
+                                    tracing::warn!(skipped = skips, "camera frame skipped: {s:?}");
+                                }
                             }
-                            Err(e) => {
-                                *sh.state.lock().unwrap_or_else(|p| p.into_inner()) =
-                                    PipelineState::Degraded(format!("capture failed: {e}"));
+                            Step::State(state) => {
+                                let (kind, why) = match &state {
+                                    CameraState::Lost { fault, retry_in } => (
+                                        fault.kind(),
+                                        format!(
+                                            "camera lost: {fault}; retrying in {:.1} s",
+                                            retry_in.as_secs_f32()
+                                        ),
+                                    ),
+                                    CameraState::Stopped(fault) => {
+                                        (fault.kind(), format!("camera stopped: {fault}"))
+                                    }
+                                    other => ("", format!("camera {other:?}")),
+                                };
+                                if kind != last_kind {
+                                    tracing::warn!(source = %sup.describe(), "{why}");
+                                    last_kind = kind;
+                                }
+                                sh.set_state(PipelineState::Degraded(why.clone()));
+                                if last_placeholder
+                                    .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
+                                {
+                                    last_placeholder = Some(Instant::now());
+                                    placeholders.put(Rendered {
+                                        index: 0,
+                                        at: Instant::now(),
+                                        rgba: crate::placeholder::frame(
+                                            size,
+                                            bg,
+                                            "NO CAMERA",
+                                            &why,
+                                        ),
+                                        size,
+                                        placeholder: true,
+                                    });
+                                }
                             }
                         }
-                        index += 1;
                     }
+                    sup.shutdown();
                 })
                 .expect("spawning the capture thread"),
         );
     }
 
-    // Field + render: the oracle field through the engine's localization and renderer.
+    // Field + render: the oracle field through the engine's localization and renderer, or
+    // the camera frame itself.
     {
         let (sh, input, out) = (shared.clone(), captured.clone(), rendered.clone());
-        let spec = GridSpec::from_resolution(cfg.render.resolution.0)
-            .unwrap_or_else(|_| unreachable!("validated in config"));
+        let spec =
+            GridSpec::from_resolution(size).unwrap_or_else(|_| unreachable!("validated in config"));
         let opts = RenderOptions {
             coarse_level: cfg.render.coarse_level,
             background: cfg.render.background,
             shade: false,
         };
         let voxel = cfg.render.oracle_voxel_m;
+        let mode = cfg.field();
         threads.push(
             std::thread::Builder::new()
                 .name("render".into())
                 .spawn(move || {
                     let mut renderer = Renderer::new();
+                    let degraded = |why: String, f: &Frame| {
+                        let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
+                        sh.set_state(PipelineState::Degraded(why));
+                        if out.put(Rendered {
+                            index: f.seq,
+                            at: f.at,
+                            rgba,
+                            size,
+                            placeholder: true,
+                        }) {
+                            sh.stats[2].dropped.fetch_add(1, Ordering::Relaxed);
+                        }
+                    };
                     while !sh.stop.load(Ordering::Relaxed) {
-                        let Some(c) = input.take(Duration::from_millis(200)) else {
+                        let Some(f) = input.take(Duration::from_millis(200)) else {
                             continue;
                         };
-                        if c.people != 1 {
-                            *sh.state.lock().unwrap_or_else(|p| p.into_inner()) =
-                                PipelineState::Degraded(if c.people == 0 {
-                                    "no person in view".into()
-                                } else {
-                                    format!("{} people in view; one is supported", c.people)
-                                });
-                            continue;
-                        }
-                        let t = Instant::now();
-                        let (yaw, pitch) = *sh.view.lock().unwrap_or_else(|p| p.into_inner());
-                        let view = orbit(&c.gt.camera, yaw, pitch);
-                        let field = Arc::new(c.gt.into_field(voxel, view));
-                        sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
-                        *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
-                            Some(field.clone());
-                        let t = Instant::now();
-                        match renderer.render(field.as_ref(), field.as_ref(), spec, &opts) {
-                            Ok(_) => {
+                        let rgba = match mode {
+                            FieldMode::Camera => {
+                                let t = Instant::now();
+                                let rgba = letterbox(&f.rgb, f.width, f.height, size);
                                 sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
-                                if out.put(Rendered {
-                                    index: c.index,
-                                    at: c.at,
-                                    rgba: renderer.rgba().to_vec(),
-                                    size: renderer.size(),
-                                }) {
-                                    sh.stats[2].dropped.fetch_add(1, Ordering::Relaxed);
+                                rgba
+                            }
+                            FieldMode::Oracle => {
+                                let Some(truth) = &f.truth else {
+                                    degraded(
+                                        "oracle mode needs the sim camera's ground truth".into(),
+                                        &f,
+                                    );
+                                    continue;
+                                };
+                                if truth.people != 1 {
+                                    degraded(
+                                        if truth.people == 0 {
+                                            "no person in view".into()
+                                        } else {
+                                            format!(
+                                                "{} people in view; one is supported",
+                                                truth.people
+                                            )
+                                        },
+                                        &f,
+                                    );
+                                    continue;
                                 }
-                                *sh.state.lock().unwrap_or_else(|p| p.into_inner()) =
-                                    PipelineState::Running;
+                                let t = Instant::now();
+                                let (yaw, pitch) =
+                                    *sh.view.lock().unwrap_or_else(|p| p.into_inner());
+                                let view = orbit(&truth.gt.camera, yaw, pitch);
+                                let Some(truth) = f.truth else { continue };
+                                let field = Arc::new(truth.gt.into_field(voxel, view));
+                                sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
+                                *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
+                                    Some(field.clone());
+                                let t = Instant::now();
+                                if let Err(e) =
+                                    renderer.render(field.as_ref(), field.as_ref(), spec, &opts)
+                                {
+                                    sh.set_state(PipelineState::Degraded(format!(
+                                        "render failed: {e}"
+                                    )));
+                                    continue;
+                                }
+                                sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
+                                renderer.rgba().to_vec()
                             }
-                            Err(e) => {
-                                *sh.state.lock().unwrap_or_else(|p| p.into_inner()) =
-                                    PipelineState::Degraded(format!("render failed: {e}"));
-                            }
+                        };
+                        if out.put(Rendered {
+                            index: f.seq,
+                            at: f.at,
+                            rgba,
+                            size,
+                            placeholder: false,
+                        }) {
+                            sh.stats[2].dropped.fetch_add(1, Ordering::Relaxed);
                         }
+                        sh.set_state(PipelineState::Running);
                     }
                 })
                 .expect("spawning the render thread"),
@@ -278,7 +424,6 @@ pub fn start(
     // Encode + publish.
     {
         let (sh, input) = (shared.clone(), rendered);
-        let bg = cfg.render.background;
         threads.push(
             std::thread::Builder::new()
                 .name("encode".into())
@@ -311,15 +456,20 @@ pub fn start(
                         if !ok {
                             continue;
                         }
-                        sh.stats[3].record(t.elapsed().as_secs_f64() * 1e3);
+                        if !r.placeholder {
+                            sh.stats[3].record(t.elapsed().as_secs_f64() * 1e3);
+                        }
                         let latency_ms = r.at.elapsed().as_secs_f64() * 1e3;
-                        sh.e2e.record(latency_ms);
+                        if !r.placeholder {
+                            sh.e2e.record(latency_ms);
+                        }
                         sh.published.send_replace(Some(Arc::new(Published {
                             jpeg,
                             rgba: r.rgba,
                             size: r.size,
                             index: r.index,
                             latency_ms,
+                            placeholder: r.placeholder,
                         })));
                     }
                 })
@@ -327,4 +477,33 @@ pub fn start(
         );
     }
     threads
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn letterbox_keeps_aspect_and_centres() {
+        // 4x2 frame, left half red, right half blue, into 8x8.
+        let mut rgb = Vec::new();
+        for _y in 0..2 {
+            for x in 0..4 {
+                rgb.extend_from_slice(if x < 2 { &[255, 0, 0] } else { &[0, 0, 255] });
+            }
+        }
+        let out = letterbox(&rgb, 4, 2, 8);
+        let px = |x: usize, y: usize| &out[(y * 8 + x) * 4..(y * 8 + x) * 4 + 4];
+        // Rows 2..6 hold the picture, the rest is transparent.
+        assert_eq!(px(0, 0)[3], 0);
+        assert_eq!(px(0, 7)[3], 0);
+        assert_eq!(px(0, 2), [255, 0, 0, 255]);
+        assert_eq!(px(7, 5), [0, 0, 255, 255]);
+        // Portrait frames are pillarboxed.
+        let out = letterbox(&[7u8; 2 * 4 * 3], 2, 4, 8);
+        assert_eq!(out[3], 0);
+        assert_eq!(&out[(8 * 4 + 2) * 4..(8 * 4 + 2) * 4 + 4], [7, 7, 7, 255]);
+        // A short buffer gives an empty frame, not a panic.
+        assert!(letterbox(&[1, 2], 4, 2, 8).iter().all(|&b| b == 0));
+    }
 }

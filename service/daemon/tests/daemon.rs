@@ -311,11 +311,26 @@ fn unplug_is_a_state_and_the_camera_recovers() {
         s["state"] == "degraded"
     });
     assert!(s["reason"].as_str().unwrap().contains("unplugged"), "{s}");
+    // The camera's typed state, and a placeholder frame that says why.
+    let s = wait_for(&d.addr, "placeholder", Duration::from_secs(10), |s| {
+        s["showing_placeholder"] == true
+    });
+    assert_eq!(s["camera"]["state"], "lost", "{s}");
+    assert_eq!(s["camera"]["fault"], "unplugged", "{s}");
+    let (code, _, jpeg) = request(&d.addr, "GET", "/snapshot.jpg", "");
+    assert_eq!(code, 200);
+    let img = image::load_from_memory(&jpeg).unwrap().to_rgb8();
+    assert_eq!(img.width(), 65);
+    // The placeholder's text is drawn in light pixels on the dark background.
+    assert!(img.pixels().filter(|p| p[0] > 180).count() > 30);
     let before = s["frames_published"].as_u64().unwrap();
     let s = wait_for(&d.addr, "recovery", Duration::from_secs(30), |s| {
         s["state"] == "running" && s["frames_published"].as_u64() > Some(before + 2)
     });
     assert_eq!(s["mode"], "oracle");
+    assert_eq!(s["camera"]["state"], "running", "{s}");
+    assert!(s["camera"]["faults"].as_u64() >= Some(1), "{s}");
+    assert_eq!(s["showing_placeholder"], false, "{s}");
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -508,6 +523,124 @@ fn two_people_is_a_reported_state_not_a_garbled_render() {
         s["frames_published"], 0,
         "nothing rendered from a two-person field"
     );
-    assert_eq!(request(&d.addr, "GET", "/snapshot.jpg", "").0, 503);
+    // What is shown is a placeholder that says why, not a render.
+    let s = wait_for(&d.addr, "placeholder", Duration::from_secs(10), |s| {
+        s["showing_placeholder"] == true
+    });
+    assert_eq!(s["frames_published"], 0, "{s}");
+    let (code, _, jpeg) = request(&d.addr, "GET", "/snapshot.jpg", "");
+    assert_eq!(code, 200);
+    let img = image::load_from_memory(&jpeg).unwrap().to_rgb8();
+    assert!(
+        img.pixels().filter(|p| p[0] > 180).count() > 30,
+        "text drawn"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn test_jpeg(w: u32, h: u32, shade: u8) -> Vec<u8> {
+    let img = image::RgbImage::from_fn(w, h, |x, _| image::Rgb([shade, (x * 4) as u8, 60]));
+    let mut out = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 85)
+        .encode_image(&img)
+        .unwrap();
+    out
+}
+
+/// A recorded session with corrupt and truncated frames through the `file` backend: bad
+/// frames are counted and skipped, good ones are published (camera mode: the frame itself).
+#[test]
+fn file_backend_counts_and_skips_bad_frames() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-file-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let good = test_jpeg(160, 120, 220);
+    let mut rec = Vec::new();
+    for k in 0..12 {
+        match k % 4 {
+            1 => rec.extend_from_slice(&good[..good.len() / 2]),
+            3 => {
+                let mut bad = good.clone();
+                for b in &mut bad[4..good.len() - 2] {
+                    if *b != 0xFF {
+                        *b = 0x21;
+                    }
+                }
+                rec.extend_from_slice(&bad);
+            }
+            _ => rec.extend_from_slice(&good),
+        }
+    }
+    std::fs::write(dir.join("rec.mjpg"), &rec).unwrap();
+    std::fs::write(
+        dir.join("b.toml"),
+        "[camera]\nbackend = \"file\"\npath = \"rec.mjpg\"\nfps = 30\n[render]\nresolution = 129\n",
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    let s = wait_for(&d.addr, "a few loops", Duration::from_secs(30), |s| {
+        s["frames_published"].as_u64() > Some(12)
+    });
+    assert_eq!(s["mode"], "camera", "{s}");
+    assert_eq!(s["state"], "running", "{s}");
+    let cam = &s["camera"];
+    assert_eq!(cam["state"], "running", "{s}");
+    let (t, c, f) = (
+        cam["truncated"].as_u64().unwrap(),
+        cam["corrupt"].as_u64().unwrap(),
+        cam["frames"].as_u64().unwrap(),
+    );
+    // One in four frames of each kind bad: the counts follow the good ones.
+    assert!(t >= 3 && c >= 3 && f >= 6, "{s}");
+    assert!(t.abs_diff(f / 2) <= 2 && c.abs_diff(f / 2) <= 2, "{s}");
+    // The published frame is the recording, letterboxed into the square.
+    let (code, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
+    assert_eq!(code, 200);
+    let img = image::load_from_memory(&png).unwrap().to_rgba8();
+    assert_eq!(img.dimensions(), (129, 129));
+    let centre = img.get_pixel(64, 64);
+    assert!(centre[3] == 255 && centre[0] > 190, "{centre:?}");
+    assert_eq!(img.get_pixel(64, 2)[3], 0, "letterbox bars are transparent");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Backends that are not built in, and bad camera keys, are configuration errors (exit 2)
+/// that say what to do.
+#[test]
+fn camera_config_errors_are_clear() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-camcfg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |text: &str| {
+        std::fs::write(dir.join("b.toml"), text).unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
+            .args(["--check-config", "--config"])
+            .arg(dir.join("b.toml"))
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stderr).to_string(),
+        )
+    };
+    let (code, e) = run("[camera]\nbackend = \"file\"\npath = \"gone.mjpg\"\n");
+    assert_eq!(code, Some(2));
+    assert!(
+        e.contains("gone.mjpg") && e.contains("does not exist"),
+        "{e}"
+    );
+    let (code, e) = run(
+        "[camera]\nbackend = \"v4l2\"\ndevice = \"/dev/video0\"\nwidth = 640\nheight = 480\nfps = 30\nformat = \"h264\"\n",
+    );
+    assert_eq!(code, Some(2));
+    assert!(e.contains("line 7") && e.contains("h264"), "{e}");
+    let v4l2 = "[camera]\nbackend = \"v4l2\"\ndevice = \"/dev/video0\"\nwidth = 640\nheight = 480\nfps = 30\n";
+    let (code, e) = run(v4l2);
+    if cfg!(feature = "v4l2") {
+        assert_eq!(code, Some(0), "{e}");
+    } else {
+        assert_eq!(code, Some(2));
+        assert!(e.contains("--features v4l2"), "{e}");
+    }
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -1,0 +1,8 @@
+//! `volcapd` as a library: the daemon's modules, used by its binary, its integration tests
+//! and the fuzz targets.
+
+pub mod capture;
+pub mod config;
+pub mod http;
+pub mod pipeline;
+pub mod placeholder;
