@@ -111,6 +111,9 @@ pub struct RenderConfig {
     pub yaw: f32,
     #[serde(default)]
     pub pitch: f32,
+    /// Eye distance from the look-at point in metres; 0 keeps the scene camera's.
+    #[serde(default)]
+    pub distance: f32,
     /// RGBA in [0, 1]; alpha 0 gives transparent PNG snapshots.
     #[serde(default = "d_bg")]
     pub background: [f32; 4],
@@ -133,6 +136,7 @@ impl Default for RenderConfig {
             coarse_level: d_coarse(),
             yaw: 0.0,
             pitch: 0.0,
+            distance: 0.0,
             background: d_bg(),
             field: None,
             oracle_voxel_m: d_voxel(),
@@ -169,6 +173,85 @@ impl Default for HttpConfig {
     }
 }
 
+/// Which D-Bus bus to serve `org.volcap.Capture1` on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Bus {
+    /// Development and tests.
+    #[default]
+    Session,
+    /// Production (systemd service; the policy file in `systemd/` governs access).
+    System,
+    /// No D-Bus: health on HTTP only.
+    None,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DbusConfig {
+    #[serde(default)]
+    pub bus: Bus,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Precision {
+    #[default]
+    F32,
+    Int8,
+}
+
+/// The networks (issue #6): which size and precision the board runs. Until the trained
+/// models land, the field is `oracle` (sim) or `camera`, and these are checked and reported
+/// only.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    /// `compact` (the default, fast on a CPU) or `large`.
+    #[serde(default = "d_model")]
+    pub name: String,
+    #[serde(default)]
+    pub precision: Precision,
+    /// Folder with the ONNX files and model cards, relative to the config file.
+    #[serde(default = "d_model_dir")]
+    pub dir: PathBuf,
+}
+
+fn d_model() -> String {
+    "compact".into()
+}
+fn d_model_dir() -> PathBuf {
+    PathBuf::from("../models")
+}
+
+impl Default for ModelConfig {
+    fn default() -> Self {
+        Self {
+            name: d_model(),
+            precision: Precision::F32,
+            dir: d_model_dir(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ComputeBackend {
+    /// Native threads on the CPU (the engine's localization and renderer, tract).
+    #[default]
+    Cpu,
+}
+
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ComputeConfig {
+    #[serde(default)]
+    pub backend: ComputeBackend,
+    /// Threads for the network runtime; 0 = one per core.
+    #[serde(default)]
+    pub threads: usize,
+}
+
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
@@ -180,6 +263,12 @@ pub struct Config {
     pub render: RenderConfig,
     #[serde(default)]
     pub http: HttpConfig,
+    #[serde(default)]
+    pub dbus: DbusConfig,
+    #[serde(default)]
+    pub model: ModelConfig,
+    #[serde(default)]
+    pub compute: ComputeConfig,
     #[serde(skip)]
     pub file: PathBuf,
 }
@@ -273,12 +362,27 @@ impl Config {
         if r.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
             return bad("render.background", "values must be in [0, 1]");
         }
-        if !r.yaw.is_finite() || !r.pitch.is_finite() || r.pitch.abs() > 80.0 {
+        let live = crate::pipeline::Live::from_config(self);
+        if let Err(e) = live.check() {
+            let key = if e.starts_with("distance") {
+                "render.distance"
+            } else {
+                "render.pitch"
+            };
+            return bad(key, e);
+        }
+        if !["compact", "large"].contains(&self.model.name.as_str()) {
             return bad(
-                "render.pitch",
+                "model.name",
+                format!("{:?}: one of \"compact\", \"large\"", self.model.name),
+            );
+        }
+        if self.compute.threads > 256 {
+            return bad(
+                "compute.threads",
                 format!(
-                    "yaw {} / pitch {}: need finite values, |pitch| <= 80",
-                    r.yaw, r.pitch
+                    "{} must be in 0..=256 (0 = one per core)",
+                    self.compute.threads
                 ),
             );
         }

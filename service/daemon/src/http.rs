@@ -2,7 +2,7 @@
 //! through a `watch` channel: a slow client skips frames and never stalls the pipeline or
 //! other clients; a disconnected client's slot is freed when its body is dropped.
 
-use crate::pipeline::{PipelineState, STAGES, Shared};
+use crate::pipeline::{STAGES, Shared};
 use axum::Router;
 use axum::body::Body;
 use axum::extract::{ConnectInfo, Query, State};
@@ -18,8 +18,9 @@ use std::time::Instant;
 pub struct App {
     pub shared: Arc<Shared>,
     pub clients: AtomicUsize,
-    pub client_limit: usize,
-    pub token: Option<String>,
+    /// Both reloadable (D-Bus `Reload`).
+    pub client_limit: AtomicUsize,
+    pub token: Mutex<Option<String>>,
     /// Connected stream clients, for per-client figures in `/state`.
     pub table: Mutex<BTreeMap<u64, Arc<ClientStat>>>,
     pub next_id: AtomicU64,
@@ -30,8 +31,8 @@ impl App {
         Self {
             shared,
             clients: AtomicUsize::new(0),
-            client_limit,
-            token,
+            client_limit: AtomicUsize::new(client_limit),
+            token: Mutex::new(token),
             table: Mutex::new(BTreeMap::new()),
             next_id: AtomicU64::new(1),
         }
@@ -84,11 +85,12 @@ async fn stream(
     peer: Option<axum::Extension<ConnectInfo<SocketAddr>>>,
 ) -> Response {
     let prev = app.clients.fetch_add(1, Ordering::SeqCst);
-    if prev >= app.client_limit {
+    let limit = app.client_limit.load(Ordering::SeqCst);
+    if prev >= limit {
         app.clients.fetch_sub(1, Ordering::SeqCst);
         return (
             StatusCode::SERVICE_UNAVAILABLE,
-            format!("client limit of {} reached\n", app.client_limit),
+            format!("client limit of {limit} reached\n"),
         )
             .into_response();
     }
@@ -202,7 +204,8 @@ async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     let Some(field) = field else {
         return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
     };
-    let (res, coarse) = (app.shared.resolution, app.shared.coarse_level);
+    let live = app.shared.live();
+    let (res, coarse) = (live.resolution, live.coarse_level);
     let glb = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, String> {
         let spec =
             volcap_engine::grid::GridSpec::from_resolution(res).map_err(|e| e.to_string())?;
@@ -235,11 +238,7 @@ async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
 fn state_json(app: &App) -> serde_json::Value {
     let sh = &app.shared;
     let st = sh.state.lock().unwrap_or_else(|p| p.into_inner()).clone();
-    let (state, reason) = match st {
-        PipelineState::Starting => ("starting", String::new()),
-        PipelineState::Running => ("running", String::new()),
-        PipelineState::Degraded(r) => ("degraded", r),
-    };
+    let (state, reason) = st.name_reason();
     let stages: serde_json::Map<String, serde_json::Value> = STAGES
         .iter()
         .zip(&sh.stats)
@@ -251,7 +250,7 @@ fn state_json(app: &App) -> serde_json::Value {
     let (l50, l99) = sh.e2e.percentiles();
     let published = sh.e2e.frames.load(Ordering::Relaxed);
     let up = sh.started.elapsed().as_secs_f64();
-    let (yaw, pitch) = *sh.view.lock().unwrap_or_else(|p| p.into_inner());
+    let live = sh.live();
     let camera = sh.camera.lock().unwrap_or_else(|p| p.into_inner()).clone();
     let per_client: Vec<serde_json::Value> = app
         .table
@@ -275,7 +274,8 @@ fn state_json(app: &App) -> serde_json::Value {
             "camera" => "the camera frame itself: no reconstruction",
             _ => "",
         },
-        "resolution": sh.resolution,
+        "resolution": live.resolution,
+        "paused": live.paused,
         "frames_published": published,
         "fps": if up > 0.0 { published as f64 / up } else { 0.0 },
         "latency_ms": {"p50": l50, "p99": l99},
@@ -284,8 +284,8 @@ fn state_json(app: &App) -> serde_json::Value {
         "showing_placeholder": sh.published.borrow().as_ref().is_some_and(|f| f.placeholder),
         "clients": app.clients.load(Ordering::SeqCst),
         "per_client": per_client,
-        "client_limit": app.client_limit,
-        "view": {"yaw": yaw, "pitch": pitch},
+        "client_limit": app.client_limit.load(Ordering::SeqCst),
+        "view": {"yaw": live.yaw, "pitch": live.pitch, "distance": live.distance},
         "uptime_s": up,
     })
 }
@@ -346,6 +346,8 @@ fn token_ok(expected: &str, headers: &HeaderMap) -> bool {
 struct ViewQuery {
     yaw: f32,
     pitch: f32,
+    distance: Option<f32>,
+    resolution: Option<usize>,
 }
 
 async fn set_view(
@@ -353,35 +355,108 @@ async fn set_view(
     headers: HeaderMap,
     q: Result<Query<ViewQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Response {
-    let Some(expected) = &app.token else {
+    let expected = app.token.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    let Some(expected) = expected else {
         return (
             StatusCode::FORBIDDEN,
             "view controls are off: set http.token in the config\n",
         )
             .into_response();
     };
-    if !token_ok(expected, &headers) {
+    if !token_ok(&expected, &headers) {
         return (StatusCode::UNAUTHORIZED, "bad or missing bearer token\n").into_response();
     }
     let Ok(Query(q)) = q else {
         return (
             StatusCode::BAD_REQUEST,
-            "need ?yaw=DEG&pitch=DEG (numbers)\n",
+            "need ?yaw=DEG&pitch=DEG[&distance=M][&resolution=N] (numbers)\n",
         )
             .into_response();
     };
-    if !q.yaw.is_finite() || !q.pitch.is_finite() || q.pitch.abs() > 80.0 {
-        return (
-            StatusCode::BAD_REQUEST,
-            format!(
-                "yaw {} / pitch {}: need finite values, |pitch| <= 80\n",
-                q.yaw, q.pitch
-            ),
-        )
-            .into_response();
+    match app.shared.update_live(|l| {
+        l.yaw = q.yaw.rem_euclid(360.0);
+        l.pitch = q.pitch;
+        if let Some(d) = q.distance {
+            l.distance = d;
+        }
+        if let Some(r) = q.resolution {
+            l.resolution = r;
+            l.coarse_level = l
+                .coarse_level
+                .min((r.max(2) - 1).trailing_zeros().saturating_sub(1));
+        }
+    }) {
+        Ok(_) => (StatusCode::OK, "ok\n").into_response(),
+        Err(e) => (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
     }
-    *app.shared.view.lock().unwrap_or_else(|p| p.into_inner()) = (q.yaw.rem_euclid(360.0), q.pitch);
-    (StatusCode::OK, "ok\n").into_response()
+}
+
+/// Limits of the HTTP server: it binds only the configured address (the caller's listener).
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    /// Time for a client to send its request head; slower clients are dropped.
+    pub header_timeout: std::time::Duration,
+    /// Largest request head (request line + headers) we buffer.
+    pub max_header_bytes: usize,
+    /// Open connections at once; more are closed at accept (stream clients have their own
+    /// limit on top).
+    pub max_connections: usize,
+    /// Request bodies (no endpoint takes one).
+    pub max_body_bytes: usize,
+}
+
+impl Limits {
+    pub fn for_clients(client_limit: usize) -> Self {
+        Self {
+            header_timeout: std::time::Duration::from_secs(10),
+            max_header_bytes: 16 * 1024,
+            max_connections: client_limit + 64,
+            max_body_bytes: 4096,
+        }
+    }
+}
+
+/// Serve `app` on `listener` with `limits` until `shutdown` resolves.
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    app: Arc<App>,
+    limits: Limits,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> std::io::Result<()> {
+    let router = router(app).layer(axum::extract::DefaultBodyLimit::max(limits.max_body_bytes));
+    let permits = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
+    tokio::pin!(shutdown);
+    loop {
+        let (stream, peer) = tokio::select! {
+            _ = &mut shutdown => return Ok(()),
+            r = listener.accept() => match r {
+                Ok(x) => x,
+                Err(e) => {
+                    // Out of descriptors and the like: back off, keep serving.
+                    tracing::warn!("accept failed: {e}");
+                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                    continue;
+                }
+            },
+        };
+        let Ok(permit) = permits.clone().try_acquire_owned() else {
+            drop(stream);
+            continue;
+        };
+        let _ = stream.set_nodelay(true);
+        let svc = router.clone().layer(axum::Extension(ConnectInfo(peer)));
+        let svc = hyper_util::service::TowerToHyperService::new(svc);
+        tokio::spawn(async move {
+            let conn = hyper::server::conn::http1::Builder::new()
+                .timer(hyper_util::rt::TokioTimer::new())
+                .header_read_timeout(limits.header_timeout)
+                .max_buf_size(limits.max_header_bytes.max(8192))
+                .max_headers(64)
+                .serve_connection(hyper_util::rt::TokioIo::new(stream), svc);
+            let _ = conn.await;
+            drop(permit);
+        });
+    }
 }
 
 #[cfg(test)]

@@ -3,6 +3,8 @@
 
 pub mod capture;
 pub mod config;
+pub mod dbus;
 pub mod http;
+pub mod notify;
 pub mod pipeline;
 pub mod placeholder;

@@ -1,17 +1,18 @@
-//! `volcapd`: the appliance daemon. Captures frames (today: the embedded scene simulator),
-//! runs the real-time pipeline on dedicated threads and publishes the renders over HTTP.
-//! Until the trained models land (issue #6) the field is the simulator's ground truth,
-//! labelled `oracle` everywhere: it is never presented as a reconstruction.
-
-use volcapd::{capture, config, http, pipeline};
+//! `volcapd`: the appliance daemon. Captures frames from the configured camera backend,
+//! runs the real-time pipeline on dedicated threads, publishes the renders over HTTP,
+//! reports health and takes control over D-Bus, and talks to systemd (READY, STATUS,
+//! watchdog). Until the trained models land (issue #6) the field is the simulator's ground
+//! truth (`oracle`) or the camera frame itself (`camera`), labelled everywhere: never
+//! presented as a reconstruction.
 
 use clap::Parser;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use volcapd::{capture, config, dbus, http, notify, pipeline};
 
 #[derive(Parser)]
 #[command(name = "volcapd", version, about = "volcap appliance daemon")]
@@ -22,14 +23,21 @@ struct Cli {
     /// Override the HTTP bind address from the config (e.g. 127.0.0.1:0 for any free port).
     #[arg(long)]
     http: Option<SocketAddr>,
-    /// Parse and check the configuration (and its scene), then exit.
+    /// Override the D-Bus bus from the config: session, system or none.
+    #[arg(long)]
+    bus: Option<String>,
+    /// Parse and check the configuration (and its camera source), then exit.
     #[arg(long)]
     check_config: bool,
+    /// Print the D-Bus introspection XML generated from the code, then exit.
+    #[arg(long, hide = true)]
+    print_introspection: bool,
 }
 
-/// Exit code for configuration and input errors (systemd: do not restart blindly).
+/// Exit code for configuration and input errors: systemd does not restart on it
+/// (`RestartPreventExitStatus=2`), a person has to fix the file.
 const EXIT_CONFIG: u8 = 2;
-/// Exit code for runtime faults.
+/// Exit code for runtime faults (restarted by systemd).
 const EXIT_RUNTIME: u8 = 1;
 
 fn main() -> ExitCode {
@@ -50,13 +58,23 @@ fn main() -> ExitCode {
     if let Some(a) = cli.http {
         cfg.http.bind = a;
     }
+    if let Some(b) = &cli.bus {
+        cfg.dbus.bus = match b.as_str() {
+            "session" => config::Bus::Session,
+            "system" => config::Bus::System,
+            "none" => config::Bus::None,
+            other => {
+                eprintln!("volcapd: --bus {other:?}: one of session, system, none");
+                return ExitCode::from(EXIT_CONFIG);
+            }
+        };
+    }
     let mode = cfg.field().name();
-    tracing::info!(config = %cli.config.display(), board = %cfg.description, "starting");
-    let (factory, source) = match camera_factory(&cfg) {
+    let (factory, source) = match capture::factory(&cfg) {
         Ok(f) => f,
         Err(e) => {
             eprintln!(
-                "volcapd: {} ({}): {e}",
+                "volcapd: camera {} ({}): {e}",
                 cfg.camera.backend.name(),
                 cli.config.display()
             );
@@ -65,31 +83,36 @@ fn main() -> ExitCode {
     };
     if cli.check_config {
         println!(
-            "{}: ok ({}; camera {source}, mode {mode})",
+            "{}: ok ({}; camera {source}, mode {mode}, model {} {:?}, bus {:?})",
             cli.config.display(),
             cfg.description,
+            cfg.model.name,
+            cfg.model.precision,
+            cfg.dbus.bus,
         );
         return ExitCode::SUCCESS;
     }
+    tracing::info!(config = %cli.config.display(), board = %cfg.description, "starting");
     let (tx, _rx) = tokio::sync::watch::channel(None);
-    let shared = Arc::new(pipeline::Shared {
-        stats: Default::default(),
-        e2e: Default::default(),
-        state: std::sync::Mutex::new(pipeline::PipelineState::Starting),
-        camera: std::sync::Mutex::new(pipeline::CameraStatus {
-            source: source.clone(),
-            state: "opening",
-            ..Default::default()
-        }),
-        view: std::sync::Mutex::new((cfg.render.yaw, cfg.render.pitch)),
-        stop: AtomicBool::new(false),
-        started: Instant::now(),
-        published: tx,
-        mode,
-        resolution: cfg.render.resolution.0,
-        latest_field: std::sync::Mutex::new(None),
-        coarse_level: cfg.render.coarse_level,
+    let shared = Arc::new(pipeline::Shared::new(&cfg, source.clone(), tx));
+    let app = Arc::new(http::App::new(
+        shared.clone(),
+        cfg.http.client_limit,
+        cfg.http.token.clone(),
+    ));
+    let ctl = Arc::new(dbus::Control {
+        shared: shared.clone(),
+        app: app.clone(),
+        config: Mutex::new(cfg.clone()),
+        backend: Mutex::new(source.clone()),
+        make_camera: capture::factory,
+        http_override: cli.http,
+        bus_override: cli.bus.as_ref().map(|_| cfg.dbus.bus),
     });
+    if cli.print_introspection {
+        print!("{}", dbus::introspection_xml(ctl));
+        return ExitCode::SUCCESS;
+    }
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -114,29 +137,32 @@ fn main() -> ExitCode {
     };
     let addr = listener.local_addr().unwrap_or(cfg.http.bind);
     let threads = pipeline::start(&cfg, factory, shared.clone());
-    let app = Arc::new(http::App::new(
-        shared.clone(),
-        cfg.http.client_limit,
-        cfg.http.token.clone(),
-    ));
+    let notifier = notify::spawn(shared.clone());
+    if let Err(e) = &notifier {
+        tracing::warn!("no systemd notifier thread: {e}");
+    }
     println!(
         "volcapd: viewer at http://{addr}/ (mode: {mode}, {}^3, camera {source})",
         cfg.render.resolution.0,
     );
+    let bus = cfg.dbus.bus;
+    let limits = http::Limits::for_clients(cfg.http.client_limit);
     let served = rt.block_on(async move {
-        axum::serve(
-            listener,
-            http::router(app).into_make_service_with_connect_info::<SocketAddr>(),
-        )
-        .with_graceful_shutdown(async {
-            let _ = tokio::signal::ctrl_c().await;
-        })
-        .await
+        tokio::spawn(dbus::serve(ctl, bus));
+        http::serve(listener, app, limits, shutdown_signal()).await
     });
     shared.stop.store(true, Ordering::Relaxed);
+    // Join the pipeline, but do not wait on a thread stuck in a driver call.
+    let deadline = Instant::now() + Duration::from_secs(3);
     for t in threads {
-        let _ = t.join();
+        while !t.is_finished() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if t.is_finished() {
+            let _ = t.join();
+        }
     }
+    rt.shutdown_timeout(Duration::from_millis(500));
     match served {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -146,95 +172,19 @@ fn main() -> ExitCode {
     }
 }
 
-/// The configured camera backend, checked as far as it can be before the thread starts (the
-/// scene parses, the recording exists, the backend is built in). Returns the factory that
-/// builds it on the capture thread and a description.
-fn camera_factory(cfg: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
-    use capture::Camera;
-    match cfg.camera.backend {
-        config::Backend::Sim => {
-            let scene_path = cfg.scene_path().ok_or("camera.scene is required")?;
-            let assets = volcap_sim::HumanAssets::embedded().map_err(|e| e.to_string())?;
-            let sim = volcap_sim::Scene::load(&scene_path)
-                .map_err(|e| format!("scene error: {e}"))
-                .and_then(|s| {
-                    volcap_sim::Simulator::new(s, Arc::new(assets))
-                        .map_err(|e| format!("scene error: {e}"))
-                })?;
-            let cam = capture::sim::SimCamera::new(sim, scene_path.display().to_string());
-            let source = cam.describe();
-            Ok((
-                Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),
-                source,
-            ))
-        }
-        config::Backend::File => {
-            let path = cfg
-                .camera
-                .path
-                .as_deref()
-                .map(|p| cfg.resolve(p))
-                .ok_or("camera.path is required")?;
-            if !path.exists() {
-                return Err(format!("camera.path: {} does not exist", path.display()));
+/// SIGTERM (systemd stop) or SIGINT (Ctrl-C).
+async fn shutdown_signal() {
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
             }
-            let cam = capture::file::FileCamera::new(
-                path,
-                cfg.camera.fps.unwrap_or(15.0),
-                cfg.camera.looping.unwrap_or(true),
-            );
-            let source = cam.describe();
-            Ok((
-                Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),
-                source,
-            ))
+            Err(_) => std::future::pending::<()>().await,
         }
-        config::Backend::V4l2 => v4l2_factory(cfg),
-        config::Backend::Depthai => depthai_factory(cfg),
-    }
-}
-
-#[cfg(feature = "v4l2")]
-fn v4l2_factory(cfg: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
-    use capture::v4l2::{DeviceSpec, V4l2Camera, V4l2Settings, sys::V4lDevice};
-    let c = &cfg.camera;
-    let settings = V4l2Settings {
-        device: DeviceSpec::parse(c.device.as_deref().unwrap_or("/dev/video0")),
-        format: c.format.unwrap_or_default(),
-        size: (c.width.unwrap_or(640), c.height.unwrap_or(480)),
-        fps: c.fps.unwrap_or(30.0).round() as u32,
     };
-    let cam = V4l2Camera::new(V4lDevice::default(), settings);
-    let source = capture::Camera::describe(&cam);
-    Ok((
-        Box::new(move || Ok(Box::new(cam) as Box<dyn capture::Camera>)),
-        source,
-    ))
-}
-
-#[cfg(not(feature = "v4l2"))]
-fn v4l2_factory(_: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
-    Err("this volcapd was built without V4L2 support; rebuild with `--features v4l2` (needs libclang-dev)".into())
-}
-
-#[cfg(feature = "depthai")]
-fn depthai_factory(cfg: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
-    let c = &cfg.camera;
-    let (size, fps) = (
-        (c.width.unwrap_or(640), c.height.unwrap_or(400)),
-        c.fps.unwrap_or(30.0),
-    );
-    let source = format!("depthai:CAM_A {}x{}@{fps}", size.0, size.1);
-    Ok((
-        Box::new(move || {
-            Ok(Box::new(capture::depthai::DepthaiCamera::new(size, fps))
-                as Box<dyn capture::Camera>)
-        }),
-        source,
-    ))
-}
-
-#[cfg(not(feature = "depthai"))]
-fn depthai_factory(_: &config::Config) -> Result<(pipeline::CameraFactory, String), String> {
-    Err("this volcapd was built without DepthAI support; rebuild with `--features depthai`, or run an OAK camera in UVC mode with backend \"v4l2\"".into())
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        _ = term => {}
+    }
+    tracing::info!("stopping");
 }

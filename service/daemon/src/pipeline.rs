@@ -53,6 +53,7 @@ impl<T> Slot<T> {
 #[derive(Default)]
 pub struct StageStats {
     samples: Mutex<Vec<f64>>,
+    times: Mutex<std::collections::VecDeque<Instant>>,
     pub frames: AtomicU64,
     pub dropped: AtomicU64,
 }
@@ -64,7 +65,24 @@ impl StageStats {
             s.remove(0);
         }
         s.push(ms);
+        drop(s);
+        let mut t = self.times.lock().unwrap_or_else(|p| p.into_inner());
+        if t.len() >= 256 {
+            t.pop_front();
+        }
+        t.push_back(Instant::now());
         self.frames.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Frames per second over the last 5 s (0 when none).
+    pub fn recent_fps(&self) -> f64 {
+        let t = self.times.lock().unwrap_or_else(|p| p.into_inner());
+        let window = Duration::from_secs(5);
+        let n = t.iter().filter(|x| x.elapsed() <= window).count();
+        match t.iter().find(|x| x.elapsed() <= window) {
+            Some(first) if n > 1 => (n - 1) as f64 / first.elapsed().as_secs_f64().max(1e-3),
+            _ => 0.0,
+        }
     }
 
     /// (p50, p99) in ms over the last 256 frames.
@@ -91,6 +109,23 @@ pub enum PipelineState {
     /// No person in view, several people, or the camera is gone: a reported state, not a
     /// garbled render.
     Degraded(String),
+    /// Paused by the operator (D-Bus `Pause`): frames are captured and dropped.
+    Paused,
+    /// Cannot go on without the operator (the camera backend cannot be built).
+    Failed(String),
+}
+
+impl PipelineState {
+    /// The state's name (starting, running, degraded, paused, failed) and its reason.
+    pub fn name_reason(&self) -> (&'static str, String) {
+        match self {
+            PipelineState::Starting => ("starting", String::new()),
+            PipelineState::Running => ("running", String::new()),
+            PipelineState::Degraded(r) => ("degraded", r.clone()),
+            PipelineState::Paused => ("paused", "paused over D-Bus".into()),
+            PipelineState::Failed(r) => ("failed", r.clone()),
+        }
+    }
 }
 
 /// A published frame.
@@ -121,26 +156,138 @@ pub struct CameraStatus {
     pub opens: u64,
 }
 
-/// Shared between the pipeline threads and the HTTP server.
+/// What can be changed while running (HTTP view controls, D-Bus, config reload).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Live {
+    /// Orbit about the scene's look-at point, degrees.
+    pub yaw: f32,
+    pub pitch: f32,
+    /// Eye distance from the look-at point in metres; 0 keeps the camera's own.
+    pub distance: f32,
+    /// Grid points per axis (2^L + 1) = output size in pixels.
+    pub resolution: usize,
+    pub coarse_level: u32,
+    /// RGBA in [0, 1]; alpha 0 gives transparent PNG snapshots.
+    pub background: [f32; 4],
+    pub paused: bool,
+}
+
+impl Live {
+    pub fn from_config(cfg: &Config) -> Self {
+        Self {
+            yaw: cfg.render.yaw.rem_euclid(360.0),
+            pitch: cfg.render.pitch,
+            distance: cfg.render.distance,
+            resolution: cfg.render.resolution.0,
+            coarse_level: cfg.render.coarse_level,
+            background: cfg.render.background,
+            paused: false,
+        }
+    }
+
+    /// The one validation of every live setting, whoever sets it.
+    pub fn check(&self) -> Result<(), String> {
+        if !self.yaw.is_finite() || !self.pitch.is_finite() || self.pitch.abs() > 80.0 {
+            return Err(format!(
+                "yaw {} / pitch {}: need finite values, |pitch| <= 80",
+                self.yaw, self.pitch
+            ));
+        }
+        if !(self.distance == 0.0 || (0.5..=10.0).contains(&self.distance)) {
+            return Err(format!(
+                "distance {}: 0 (the camera's own) or 0.5..=10 metres",
+                self.distance
+            ));
+        }
+        if ![33, 65, 129, 257, 513].contains(&self.resolution) {
+            return Err(format!(
+                "resolution {}: one of 33, 65, 129, 257, 513 (levels 5..=9)",
+                self.resolution
+            ));
+        }
+        let l = (self.resolution - 1).trailing_zeros();
+        if self.coarse_level < 1 || self.coarse_level >= l {
+            return Err(format!(
+                "coarse level {} must be in 1..{l} for resolution {}",
+                self.coarse_level, self.resolution
+            ));
+        }
+        if self.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            return Err("background values must be in [0, 1]".into());
+        }
+        Ok(())
+    }
+}
+
+/// Shared between the pipeline threads, the HTTP server, D-Bus and the watchdog.
 pub struct Shared {
     pub stats: [StageStats; 4],
     pub e2e: StageStats,
     pub state: Mutex<PipelineState>,
     pub camera: Mutex<CameraStatus>,
-    pub view: Mutex<(f32, f32)>,
+    pub live: Mutex<Live>,
     pub stop: AtomicBool,
     pub started: Instant,
     pub published: tokio::sync::watch::Sender<Option<Arc<Published>>>,
     pub mode: &'static str,
-    pub resolution: usize,
     /// The latest frame's field (oracle mode), for meshes on request.
     pub latest_field: Mutex<Option<Arc<volcap_sim::oracle::SceneField>>>,
-    pub coarse_level: u32,
+    /// A new camera for the capture thread to switch to (config reload).
+    pub camera_swap: Mutex<Option<CameraFactory>>,
+    /// One counter per pipeline thread, bumped every loop turn (idle turns included): a
+    /// counter that stops moving is a stalled thread, and the watchdog stops its pings.
+    pub beats: [AtomicU64; 3],
 }
 
+pub const THREADS: [&str; 3] = ["capture", "render", "encode"];
+
 impl Shared {
-    fn set_state(&self, s: PipelineState) {
+    pub fn new(
+        cfg: &Config,
+        camera_source: String,
+        published: tokio::sync::watch::Sender<Option<Arc<Published>>>,
+    ) -> Self {
+        Self {
+            stats: Default::default(),
+            e2e: Default::default(),
+            state: Mutex::new(PipelineState::Starting),
+            camera: Mutex::new(CameraStatus {
+                source: camera_source,
+                state: "opening",
+                ..Default::default()
+            }),
+            live: Mutex::new(Live::from_config(cfg)),
+            stop: AtomicBool::new(false),
+            started: Instant::now(),
+            published,
+            mode: cfg.field().name(),
+            latest_field: Mutex::new(None),
+            camera_swap: Mutex::new(None),
+            beats: Default::default(),
+        }
+    }
+
+    pub fn set_state(&self, s: PipelineState) {
         *self.state.lock().unwrap_or_else(|p| p.into_inner()) = s;
+    }
+
+    pub fn live(&self) -> Live {
+        *self.live.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Change live settings through `f`; refused (and nothing changed) when the result is
+    /// not valid.
+    pub fn update_live(&self, f: impl FnOnce(&mut Live)) -> Result<Live, String> {
+        let mut g = self.live.lock().unwrap_or_else(|p| p.into_inner());
+        let mut next = *g;
+        f(&mut next);
+        next.check()?;
+        *g = next;
+        Ok(next)
+    }
+
+    fn beat(&self, thread: usize) {
+        self.beats[thread].fetch_add(1, Ordering::Relaxed);
     }
 }
 
@@ -157,13 +304,17 @@ struct Rendered {
     placeholder: bool,
 }
 
-fn orbit(cam: &SimView, yaw_deg: f32, pitch_deg: f32) -> SimView {
+fn orbit(cam: &SimView, yaw_deg: f32, pitch_deg: f32, distance: f32) -> SimView {
     let off = cam.eye - cam.target;
     let side = off.cross(Vec3::Y).normalize_or(Vec3::X);
     let q = Quat::from_rotation_y(yaw_deg.to_radians())
         * Quat::from_axis_angle(side, -pitch_deg.to_radians());
+    let mut dir = q * off;
+    if distance > 0.0 {
+        dir = dir.normalize_or(Vec3::Z) * distance;
+    }
     SimView {
-        eye: cam.target + q * off,
+        eye: cam.target + dir,
         ..*cam
     }
 }
@@ -222,8 +373,6 @@ pub fn start(
 ) -> Vec<std::thread::JoinHandle<()>> {
     let captured: Arc<Slot<Frame>> = Arc::default();
     let rendered: Arc<Slot<Rendered>> = Arc::default();
-    let size = cfg.render.resolution.0;
-    let bg = cfg.render.background;
     let mut threads = Vec::new();
 
     // Capture: the supervised camera; losses become states and placeholder frames.
@@ -237,7 +386,7 @@ pub fn start(
                         Ok(c) => c,
                         Err(e) => {
                             tracing::error!("camera: {e}");
-                            sh.set_state(PipelineState::Degraded(format!("camera: {e}")));
+                            sh.set_state(PipelineState::Failed(format!("camera: {e}")));
                             return;
                         }
                     };
@@ -246,6 +395,25 @@ pub fn start(
                     let mut last_kind = "";
                     let mut skips = 0u64;
                     while !sh.stop.load(Ordering::Relaxed) {
+                        sh.beat(0);
+                        let swap = sh
+                            .camera_swap
+                            .lock()
+                            .unwrap_or_else(|p| p.into_inner())
+                            .take();
+                        if let Some(factory) = swap {
+                            match factory() {
+                                Ok(cam) => {
+                                    sup.shutdown();
+                                    tracing::info!(source = %cam.describe(), "switching camera (config reload)");
+                                    sup = Supervisor::new(cam, Backoff::default());
+                                    last_kind = "";
+                                }
+                                Err(e) => tracing::error!(
+                                    "camera switch refused, keeping the current one: {e}"
+                                ),
+                            }
+                        }
                         let step = sup.step(Duration::from_millis(200));
                         {
                             let mut st = sh.camera.lock().unwrap_or_else(|p| p.into_inner());
@@ -297,6 +465,8 @@ pub fn start(
                                     .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
                                 {
                                     last_placeholder = Some(Instant::now());
+                                    let live = sh.live();
+                                    let (size, bg) = (live.resolution, live.background);
                                     placeholders.put(Rendered {
                                         index: 0,
                                         at: Instant::now(),
@@ -323,13 +493,6 @@ pub fn start(
     // the camera frame itself.
     {
         let (sh, input, out) = (shared.clone(), captured.clone(), rendered.clone());
-        let spec =
-            GridSpec::from_resolution(size).unwrap_or_else(|_| unreachable!("validated in config"));
-        let opts = RenderOptions {
-            coarse_level: cfg.render.coarse_level,
-            background: cfg.render.background,
-            shade: false,
-        };
         let voxel = cfg.render.oracle_voxel_m;
         let mode = cfg.field();
         threads.push(
@@ -337,7 +500,7 @@ pub fn start(
                 .name("render".into())
                 .spawn(move || {
                     let mut renderer = Renderer::new();
-                    let degraded = |why: String, f: &Frame| {
+                    let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
                         let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
                         sh.set_state(PipelineState::Degraded(why));
                         if out.put(Rendered {
@@ -351,9 +514,16 @@ pub fn start(
                         }
                     };
                     while !sh.stop.load(Ordering::Relaxed) {
+                        sh.beat(1);
                         let Some(f) = input.take(Duration::from_millis(200)) else {
                             continue;
                         };
+                        let live = sh.live();
+                        if live.paused {
+                            sh.set_state(PipelineState::Paused);
+                            continue;
+                        }
+                        let (size, bg) = (live.resolution, live.background);
                         let rgba = match mode {
                             FieldMode::Camera => {
                                 let t = Instant::now();
@@ -366,6 +536,8 @@ pub fn start(
                                     degraded(
                                         "oracle mode needs the sim camera's ground truth".into(),
                                         &f,
+                                        size,
+                                        bg,
                                     );
                                     continue;
                                 };
@@ -380,19 +552,28 @@ pub fn start(
                                             )
                                         },
                                         &f,
+                                        size,
+                                        bg,
                                     );
                                     continue;
                                 }
                                 let t = Instant::now();
-                                let (yaw, pitch) =
-                                    *sh.view.lock().unwrap_or_else(|p| p.into_inner());
-                                let view = orbit(&truth.gt.camera, yaw, pitch);
+                                let view =
+                                    orbit(&truth.gt.camera, live.yaw, live.pitch, live.distance);
                                 let Some(truth) = f.truth else { continue };
                                 let field = Arc::new(truth.gt.into_field(voxel, view));
                                 sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
                                 *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
                                     Some(field.clone());
                                 let t = Instant::now();
+                                let Ok(spec) = GridSpec::from_resolution(size) else {
+                                    continue;
+                                };
+                                let opts = RenderOptions {
+                                    coarse_level: live.coarse_level,
+                                    background: bg,
+                                    shade: false,
+                                };
                                 if let Err(e) =
                                     renderer.render(field.as_ref(), field.as_ref(), spec, &opts)
                                 {
@@ -429,9 +610,11 @@ pub fn start(
                 .name("encode".into())
                 .spawn(move || {
                     while !sh.stop.load(Ordering::Relaxed) {
+                        sh.beat(2);
                         let Some(r) = input.take(Duration::from_millis(200)) else {
                             continue;
                         };
+                        let bg = sh.live().background;
                         let t = Instant::now();
                         // JPEG has no alpha: composite over the background colour.
                         let rgb: Vec<u8> = r

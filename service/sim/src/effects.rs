@@ -61,6 +61,10 @@ pub trait Stage: Send {
     fn frame_exists(&self, _index: u64) -> bool {
         true
     }
+    /// `Source` stages: whether reading frame `index` never returns.
+    fn frame_hangs(&self, _index: u64) -> bool {
+        false
+    }
 }
 
 /// Build the stages for exactly the declared effects, in physical order.
@@ -122,6 +126,7 @@ fn stage_for(s: &EffectSpec) -> Box<dyn Stage> {
             at: at_frame,
             until: for_frames.map(|n| at_frame.saturating_add(n)),
         }),
+        EffectSpec::Hang { at_frame } => Box::new(Hang { at: at_frame }),
     }
 }
 
@@ -417,6 +422,23 @@ impl Stage for Unplug {
     fn apply(&mut self, _index: u64, _t: f64, _hook: Hook) {}
     fn frame_exists(&self, index: u64) -> bool {
         index < self.at || self.until.is_some_and(|u| index >= u)
+    }
+}
+
+struct Hang {
+    at: u64,
+}
+
+impl Stage for Hang {
+    fn kind(&self) -> &'static str {
+        "hang"
+    }
+    fn phase(&self) -> Phase {
+        Phase::Source
+    }
+    fn apply(&mut self, _index: u64, _t: f64, _hook: Hook) {}
+    fn frame_hangs(&self, index: u64) -> bool {
+        index >= self.at
     }
 }
 

@@ -349,6 +349,9 @@ pub enum EffectSpec {
         at_frame: u64,
         for_frames: Option<u64>,
     },
+    /// The camera driver stops answering at frame `at_frame` (watchdog tests): the read of
+    /// that frame never returns.
+    Hang { at_frame: u64 },
 }
 
 fn grey() -> [Unit; 3] {
@@ -368,11 +371,12 @@ impl EffectSpec {
             EffectSpec::Occluder { .. } => "occluder",
             EffectSpec::CameraShake { .. } => "camera-shake",
             EffectSpec::Unplug { .. } => "unplug",
+            EffectSpec::Hang { .. } => "hang",
         }
     }
 
     /// Every effect kind, for documentation and benchmarks.
-    pub const KINDS: [&'static str; 10] = [
+    pub const KINDS: [&'static str; 11] = [
         "sensor-noise",
         "motion-blur",
         "exposure-drift",
@@ -383,6 +387,7 @@ impl EffectSpec {
         "occluder",
         "camera-shake",
         "unplug",
+        "hang",
     ];
 }
 

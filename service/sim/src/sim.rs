@@ -18,6 +18,10 @@ pub enum SimError {
     /// The scene's `unplug` effect: the camera is gone from this frame on.
     #[error("camera unplugged at frame {frame}")]
     Unplugged { frame: u64 },
+    /// The scene's `hang` effect: the camera driver stops answering at this frame. The
+    /// simulator returns at once; a camera built on it must then block, as a hung driver does.
+    #[error("camera driver hung at frame {frame}")]
+    Hung { frame: u64 },
     #[error(transparent)]
     Scene(#[from] SceneError),
     #[error(transparent)]
@@ -396,10 +400,14 @@ impl Simulator {
     /// Render frame `index`.
     pub fn render(&mut self, index: u64) -> Result<SimFrame, SimError> {
         let t = self.time_of(index);
-        let mut exists = true;
+        let (mut exists, mut hangs) = (true, false);
         self.run_stages(Phase::Source, index, t, |s, i, _| {
-            exists &= s.frame_exists(i)
+            exists &= s.frame_exists(i);
+            hangs |= s.frame_hangs(i);
         });
+        if hangs {
+            return Err(SimError::Hung { frame: index });
+        }
         if !exists {
             return Err(SimError::Unplugged { frame: index });
         }

@@ -34,7 +34,7 @@ fn effect(kind: &str) -> String {
     format!("[[effect]]\n{body}\n")
 }
 
-const EXAMPLES: [(&str, &str); 10] = [
+const EXAMPLES: [(&str, &str); 11] = [
     (
         "sensor-noise",
         "sensor-noise = { shot = 0.05, read = 0.02 }",
@@ -60,7 +60,13 @@ const EXAMPLES: [(&str, &str); 10] = [
     ),
     ("camera-shake", "camera-shake = { amplitude_deg = 3 }"),
     ("unplug", "unplug = { at_frame = 2 }"),
+    ("hang", "hang = { at_frame = 2 }"),
 ];
+
+/// Effects that decide whether a frame arrives at all, rather than how it looks.
+fn source_only(kind: &str) -> bool {
+    kind == "unplug" || kind == "hang"
+}
 
 #[test]
 fn examples_cover_every_effect_kind() {
@@ -87,12 +93,12 @@ fn only_declared_stages_are_invoked() {
 
     let all: String = EXAMPLES
         .iter()
-        .filter(|e| e.0 != "unplug")
+        .filter(|e| !source_only(e.0))
         .map(|e| effect(e.0))
         .collect();
     let mut sim = Simulator::new(scene(&all), assets()).unwrap();
     sim.render(0).unwrap();
-    for (k, _) in EXAMPLES.iter().filter(|e| e.0 != "unplug") {
+    for (k, _) in EXAMPLES.iter().filter(|e| !source_only(e.0)) {
         assert_eq!(sim.stage_invocations().get(k), Some(&1), "{k}");
     }
 }
@@ -101,7 +107,7 @@ fn only_declared_stages_are_invoked() {
 fn removing_an_effect_gives_the_pure_render_bit_for_bit() {
     let mut pure = Simulator::new(scene(""), assets()).unwrap();
     let p = pure.render(1).unwrap();
-    for (kind, _) in EXAMPLES.iter().filter(|e| e.0 != "unplug") {
+    for (kind, _) in EXAMPLES.iter().filter(|e| !source_only(e.0)) {
         let with = scene(&effect(kind));
         let mut removed = Simulator::new(with.without_effects(), assets()).unwrap();
         let r = removed.render(1).unwrap();
@@ -323,6 +329,16 @@ fn unplug_stops_frames_at_the_declared_index() {
     assert!(sim.render(1).is_ok());
     assert!(sim.render(4).is_err());
     assert!(sim.render(5).is_ok());
+}
+
+#[test]
+fn hang_is_declared_per_frame_and_counted() {
+    let mut sim = Simulator::new(scene(&effect("hang")), assets()).unwrap();
+    assert!(sim.render(1).is_ok());
+    for i in 2..4 {
+        assert!(matches!(sim.render(i), Err(SimError::Hung { frame }) if frame == i));
+    }
+    assert_eq!(sim.stage_invocations().get("hang"), Some(&3));
 }
 
 #[test]

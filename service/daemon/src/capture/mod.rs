@@ -241,6 +241,101 @@ impl<C: Camera + ?Sized> Supervisor<C> {
     }
 }
 
+use crate::config::{Backend, Config};
+use crate::pipeline::CameraFactory;
+use std::sync::Arc;
+
+/// The configured camera backend, checked as far as it can be before the thread starts (the
+/// scene parses, the recording exists, the backend is built in). Returns the factory that
+/// builds it on the capture thread and a description.
+pub fn factory(cfg: &Config) -> Result<(CameraFactory, String), String> {
+    match cfg.camera.backend {
+        Backend::Sim => {
+            let scene_path = cfg.scene_path().ok_or("camera.scene is required")?;
+            let assets = volcap_sim::HumanAssets::embedded().map_err(|e| e.to_string())?;
+            let sim = volcap_sim::Scene::load(&scene_path)
+                .map_err(|e| format!("scene error: {e}"))
+                .and_then(|s| {
+                    volcap_sim::Simulator::new(s, Arc::new(assets))
+                        .map_err(|e| format!("scene error: {e}"))
+                })?;
+            let cam = sim::SimCamera::new(sim, scene_path.display().to_string());
+            let source = cam.describe();
+            Ok((
+                Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),
+                source,
+            ))
+        }
+        Backend::File => {
+            let path = cfg
+                .camera
+                .path
+                .as_deref()
+                .map(|p| cfg.resolve(p))
+                .ok_or("camera.path is required")?;
+            if !path.exists() {
+                return Err(format!("camera.path: {} does not exist", path.display()));
+            }
+            let cam = file::FileCamera::new(
+                path,
+                cfg.camera.fps.unwrap_or(15.0),
+                cfg.camera.looping.unwrap_or(true),
+            );
+            let source = cam.describe();
+            Ok((
+                Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),
+                source,
+            ))
+        }
+        Backend::V4l2 => v4l2_factory(cfg),
+        Backend::Depthai => depthai_factory(cfg),
+    }
+}
+
+#[cfg(feature = "v4l2")]
+pub(crate) fn v4l2_factory(cfg: &Config) -> Result<(CameraFactory, String), String> {
+    use v4l2::{DeviceSpec, V4l2Camera, V4l2Settings, sys::V4lDevice};
+    let c = &cfg.camera;
+    let settings = V4l2Settings {
+        device: DeviceSpec::parse(c.device.as_deref().unwrap_or("/dev/video0")),
+        format: c.format.unwrap_or_default(),
+        size: (c.width.unwrap_or(640), c.height.unwrap_or(480)),
+        fps: c.fps.unwrap_or(30.0).round() as u32,
+    };
+    let cam = V4l2Camera::new(V4lDevice::default(), settings);
+    let source = Camera::describe(&cam);
+    Ok((
+        Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),
+        source,
+    ))
+}
+
+#[cfg(not(feature = "v4l2"))]
+pub(crate) fn v4l2_factory(_: &Config) -> Result<(CameraFactory, String), String> {
+    Err("this volcapd was built without V4L2 support; rebuild with `--features v4l2` (needs libclang-dev)".into())
+}
+
+#[cfg(feature = "depthai")]
+pub(crate) fn depthai_factory(cfg: &Config) -> Result<(CameraFactory, String), String> {
+    let c = &cfg.camera;
+    let (size, fps) = (
+        (c.width.unwrap_or(640), c.height.unwrap_or(400)),
+        c.fps.unwrap_or(30.0),
+    );
+    let source = format!("depthai:CAM_A {}x{}@{fps}", size.0, size.1);
+    Ok((
+        Box::new(move || {
+            Ok(Box::new(self::depthai::DepthaiCamera::new(size, fps)) as Box<dyn Camera>)
+        }),
+        source,
+    ))
+}
+
+#[cfg(not(feature = "depthai"))]
+pub(crate) fn depthai_factory(_: &Config) -> Result<(CameraFactory, String), String> {
+    Err("this volcapd was built without DepthAI support; rebuild with `--features depthai`, or run an OAK camera in UVC mode with backend \"v4l2\"".into())
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;

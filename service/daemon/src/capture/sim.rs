@@ -80,6 +80,13 @@ impl Camera for SimCamera {
             Err(SimError::Unplugged { frame }) => Err(Fault::Unplugged(format!(
                 "the scene unplugs the camera at frame {frame}"
             ))),
+            Err(SimError::Hung { frame }) => {
+                // A hung driver: the read never returns (what the watchdog is for).
+                tracing::warn!("sim camera: the scene hangs the driver at frame {frame}");
+                loop {
+                    std::thread::sleep(Duration::from_secs(3600));
+                }
+            }
             Err(e) => Err(Fault::Failed(e.to_string())),
         }
     }

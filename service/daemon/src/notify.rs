@@ -1,0 +1,86 @@
+//! systemd integration (sd_notify): `READY=1` once the first frame is published, `STATUS=`
+//! lines that say what the daemon is doing, and watchdog pings fed by the pipeline's own
+//! progress. Every pipeline thread bumps a heartbeat each loop turn (idle turns included);
+//! a ping goes out only when every heartbeat moved since the last check, so a stalled
+//! thread (a hung camera driver, a render that never returns) stops the pings while the
+//! async runtime and HTTP server, alive or not, cannot keep the dog fed.
+//!
+//! Without `NOTIFY_SOCKET` (not under systemd) every call is a no-op.
+
+use crate::pipeline::{Shared, THREADS};
+use sd_notify::NotifyState;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// Pings go out at half the watchdog period; without a watchdog the status still updates.
+pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>> {
+    let watchdog = sd_notify::watchdog_enabled();
+    let tick = watchdog.map_or(Duration::from_secs(2), |w| {
+        (w / 2).max(Duration::from_millis(50))
+    });
+    std::thread::Builder::new()
+        .name("notify".into())
+        .spawn(move || {
+            let mut ready = false;
+            let mut last_beats = [0u64; 3];
+            let mut last_status = String::new();
+            let mut stalled_logged = false;
+            while !shared.stop.load(Ordering::Relaxed) {
+                std::thread::sleep(tick);
+                if !ready && shared.published.borrow().is_some() {
+                    ready = true;
+                    let _ = sd_notify::notify(&[NotifyState::Ready]);
+                    tracing::info!("first frame published: READY");
+                }
+                let beats = shared.beats.each_ref().map(|b| b.load(Ordering::Relaxed));
+                let stalled: Vec<&str> = THREADS
+                    .iter()
+                    .zip(beats.iter().zip(&last_beats))
+                    .filter(|(_, (now, before))| now == before)
+                    .map(|(name, _)| *name)
+                    .collect();
+                last_beats = beats;
+                let status = if stalled.is_empty() {
+                    stalled_logged = false;
+                    if watchdog.is_some() {
+                        let _ = sd_notify::notify(&[NotifyState::Watchdog]);
+                    }
+                    status_line(&shared)
+                } else {
+                    if !stalled_logged {
+                        tracing::error!(
+                            "pipeline stalled ({} thread); watchdog pings stop",
+                            stalled.join(", ")
+                        );
+                        stalled_logged = true;
+                    }
+                    format!("stalled: {} thread not progressing", stalled.join(", "))
+                };
+                if status != last_status {
+                    let _ = sd_notify::notify(&[NotifyState::Status(&status)]);
+                    last_status = status;
+                }
+            }
+            let _ = sd_notify::notify(&[NotifyState::Stopping]);
+        })
+}
+
+/// One line for `systemctl status`.
+pub fn status_line(shared: &Shared) -> String {
+    let (state, reason) = shared
+        .state
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .name_reason();
+    let (p50, _) = shared.e2e.percentiles();
+    let fps = shared.e2e.recent_fps();
+    if reason.is_empty() {
+        format!(
+            "{state}: {fps:.1} fps, latency p50 {p50:.0} ms ({})",
+            shared.mode
+        )
+    } else {
+        format!("{state}: {reason}")
+    }
+}

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# Install volcapd as an appliance service: binary, systemd unit, D-Bus policy and
+# interface XML, sysusers entry, the board config, scenes and models.
+#
+#   tools/install.sh [--root DIR] [--board NAME] [--binary PATH] [--features LIST] [--force]
+#
+#   --root DIR      install under DIR (a staging root, as for packaging and tests); default /
+#   --board NAME    board-config/NAME.toml becomes /etc/volcap/volcapd.toml (default: sim)
+#   --binary PATH   install this volcapd instead of building one
+#   --features L    cargo features for the build (default: appliance, i.e. v4l2)
+#   --force         overwrite an existing /etc/volcap/volcapd.toml
+#
+# Paths inside the installed config point at the final locations (/usr/share/volcap/...).
+# With --root / (as root) it also creates the service user and reloads systemd.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+root=/ board=sim binary= features=appliance force=0
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --root) root="$2"; shift 2 ;;
+    --board) board="$2"; shift 2 ;;
+    --binary) binary="$2"; shift 2 ;;
+    --features) features="$2"; shift 2 ;;
+    --force) force=1; shift ;;
+    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+    *) echo "install.sh: unknown argument $1 (see --help)" >&2; exit 2 ;;
+  esac
+done
+[ -f "board-config/$board.toml" ] || { echo "install.sh: no board-config/$board.toml" >&2; exit 2; }
+
+if [ -z "$binary" ]; then
+  cargo build --release -p volcapd --features "$features"
+  binary=target/release/volcapd
+fi
+[ -x "$binary" ] || { echo "install.sh: $binary is not an executable" >&2; exit 2; }
+
+share="$root/usr/share/volcap"
+install -D -m 0755 "$binary" "$root/usr/bin/volcapd"
+install -D -m 0644 systemd/volcapd.service "$root/usr/lib/systemd/system/volcapd.service"
+install -D -m 0644 systemd/org.volcap.Capture1.conf "$root/usr/share/dbus-1/system.d/org.volcap.Capture1.conf"
+install -D -m 0644 systemd/org.volcap.Capture1.xml "$root/usr/share/dbus-1/interfaces/org.volcap.Capture1.xml"
+install -D -m 0644 systemd/volcap.sysusers "$root/usr/lib/sysusers.d/volcap.conf"
+install -d -m 0755 "$share/board-config" "$share/scenes" "$share/models"
+install -m 0644 board-config/*.toml "$share/board-config/"
+install -m 0644 tests/scenes/*.toml "$share/scenes/"
+if compgen -G "models/*" >/dev/null; then cp -r models/. "$share/models/"; fi
+install -D -m 0644 README.md "$root/usr/share/doc/volcap/README.md"
+
+# The board config, with its relative paths pointed at the installed copies.
+etc="$root/etc/volcap/volcapd.toml"
+if [ -e "$etc" ] && [ "$force" = 0 ]; then
+  echo "install.sh: keeping the existing $etc (--force replaces it)"
+else
+  install -d -m 0755 "$root/etc/volcap"
+  sed -e 's#"\.\./tests/scenes/#"/usr/share/volcap/scenes/#' \
+      -e 's#"\.\./models"#"/usr/share/volcap/models"#' \
+      -e 's#"\.\./models/#"/usr/share/volcap/models/#' \
+      "board-config/$board.toml" > "$etc"
+  chmod 0644 "$etc"
+fi
+
+if [ "$root" = / ] && [ "$(id -u)" = 0 ]; then
+  command -v systemd-sysusers >/dev/null && systemd-sysusers
+  command -v systemctl >/dev/null && systemctl daemon-reload || true
+  echo "installed; start with: systemctl enable --now volcapd"
+else
+  echo "installed under $root"
+fi
