@@ -161,6 +161,13 @@ pub struct HttpConfig {
     pub client_limit: usize,
     /// Bearer token for state-changing endpoints; absent = those endpoints are off.
     pub token: Option<String>,
+    /// Seconds a client has to send its request head before it is dropped.
+    #[serde(default = "d_header_timeout")]
+    pub header_timeout_s: u64,
+}
+
+fn d_header_timeout() -> u64 {
+    10
 }
 
 impl Default for HttpConfig {
@@ -169,6 +176,7 @@ impl Default for HttpConfig {
             bind: d_bind(),
             client_limit: d_limit(),
             token: None,
+            header_timeout_s: d_header_timeout(),
         }
     }
 }
@@ -370,6 +378,12 @@ impl Config {
                 "render.pitch"
             };
             return bad(key, e);
+        }
+        if !(1..=120).contains(&self.http.header_timeout_s) {
+            return bad(
+                "http.header_timeout_s",
+                format!("{} must be in 1..=120", self.http.header_timeout_s),
+            );
         }
         if !["compact", "large"].contains(&self.model.name.as_str()) {
             return bad(

@@ -348,6 +348,8 @@ struct ViewQuery {
     pitch: f32,
     distance: Option<f32>,
     resolution: Option<usize>,
+    /// `r,g,b,a` in [0, 1]; alpha 0 = transparent PNG snapshots.
+    background: Option<String>,
 }
 
 async fn set_view(
@@ -369,11 +371,28 @@ async fn set_view(
     let Ok(Query(q)) = q else {
         return (
             StatusCode::BAD_REQUEST,
-            "need ?yaw=DEG&pitch=DEG[&distance=M][&resolution=N] (numbers)\n",
+            "need ?yaw=DEG&pitch=DEG[&distance=M][&resolution=N][&background=r,g,b,a] (numbers)\n",
         )
             .into_response();
     };
+    let background = match q.background.as_deref().map(|b| {
+        let v: Vec<f32> = b.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+        <[f32; 4]>::try_from(v)
+    }) {
+        None => None,
+        Some(Ok(bg)) => Some(bg),
+        Some(Err(_)) => {
+            return (
+                StatusCode::BAD_REQUEST,
+                "background: four numbers r,g,b,a in [0, 1]\n",
+            )
+                .into_response();
+        }
+    };
     match app.shared.update_live(|l| {
+        if let Some(bg) = background {
+            l.background = bg;
+        }
         l.yaw = q.yaw.rem_euclid(360.0);
         l.pitch = q.pitch;
         if let Some(d) = q.distance {
@@ -406,9 +425,9 @@ pub struct Limits {
 }
 
 impl Limits {
-    pub fn for_clients(client_limit: usize) -> Self {
+    pub fn new(client_limit: usize, header_timeout_s: u64) -> Self {
         Self {
-            header_timeout: std::time::Duration::from_secs(10),
+            header_timeout: std::time::Duration::from_secs(header_timeout_s),
             max_header_bytes: 16 * 1024,
             max_connections: client_limit + 64,
             max_body_bytes: 4096,

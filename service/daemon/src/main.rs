@@ -146,7 +146,7 @@ fn main() -> ExitCode {
         cfg.render.resolution.0,
     );
     let bus = cfg.dbus.bus;
-    let limits = http::Limits::for_clients(cfg.http.client_limit);
+    let limits = http::Limits::new(cfg.http.client_limit, cfg.http.header_timeout_s);
     let served = rt.block_on(async move {
         tokio::spawn(dbus::serve(ctl, bus));
         http::serve(listener, app, limits, shutdown_signal()).await

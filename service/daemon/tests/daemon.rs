@@ -264,6 +264,40 @@ fn token_enables_view_controls_and_client_limit_holds() {
         200
     );
     assert_eq!(state(&d.addr)["view"]["yaw"], 90.0);
+    // Resolution, distance and a transparent background at run time; bad values refused.
+    let auth = "Authorization: Bearer s3cret-token\r\n";
+    let (code, _, body) = request(&d.addr, "POST", "/view?yaw=0&pitch=0&resolution=100", auth);
+    assert_eq!(code, 400);
+    assert!(String::from_utf8_lossy(&body).contains("resolution 100"));
+    assert_eq!(
+        request(&d.addr, "POST", "/view?yaw=0&pitch=0&background=1,2", auth).0,
+        400
+    );
+    assert_eq!(
+        request(
+            &d.addr,
+            "POST",
+            "/view?yaw=0&pitch=0&distance=3&resolution=65&background=0,0,0,0",
+            auth
+        )
+        .0,
+        200
+    );
+    let s = wait_for(&d.addr, "65^3 frames", Duration::from_secs(20), |s| {
+        s["resolution"] == 65
+    });
+    assert_eq!(s["view"]["distance"], 3.0);
+    let t = Instant::now();
+    loop {
+        let (_, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
+        let img = image::load_from_memory(&png).unwrap().to_rgba8();
+        if img.width() == 65 {
+            assert_eq!(img.get_pixel(0, 0)[3], 0, "transparent background");
+            break;
+        }
+        assert!(t.elapsed() < Duration::from_secs(20), "no 65x65 frame");
+        std::thread::sleep(Duration::from_millis(200));
+    }
     // Two streams fill the limit; the third is refused; closing one frees a slot at once.
     let open = |addr: &str| {
         let mut s = TcpStream::connect(addr).unwrap();
@@ -642,5 +676,81 @@ fn camera_config_errors_are_clear() {
         assert_eq!(code, Some(2));
         assert!(e.contains("--features v4l2"), "{e}");
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The server's own limits: a client that does not finish its request head in time is
+/// dropped, an oversized head is refused, and connections beyond the cap are closed at
+/// accept, while normal requests go on being served.
+#[test]
+fn http_limits_hold() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-limits-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = root().join("tests/scenes/front-walk.toml");
+    std::fs::write(
+        dir.join("b.toml"),
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nresolution = 33\ncoarse_level = 2\n[http]\nclient_limit = 1\nheader_timeout_s = 1\n[dbus]\nbus = \"none\"\n",
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    // Slow head: dropped after the timeout.
+    let mut slow = TcpStream::connect(&d.addr).unwrap();
+    slow.write_all(b"GET /state HTTP/1.1\r\nHost: x\r\n")
+        .unwrap();
+    slow.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let t = Instant::now();
+    let mut buf = Vec::new();
+    let _ = slow.read_to_end(&mut buf);
+    let waited = t.elapsed();
+    assert!(
+        waited < Duration::from_secs(4),
+        "slow client kept for {waited:?}"
+    );
+    assert!(
+        !String::from_utf8_lossy(&buf).contains("\"state\""),
+        "no answer to a half request"
+    );
+    // Oversized head: refused.
+    let mut big = TcpStream::connect(&d.addr).unwrap();
+    big.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let filler = "a".repeat(64 * 1024);
+    let _ = write!(
+        big,
+        "GET /state HTTP/1.1\r\nHost: x\r\nX-Filler: {filler}\r\n\r\n"
+    );
+    let mut head = Vec::new();
+    let _ = big.read_to_end(&mut head);
+    let head = String::from_utf8_lossy(&head);
+    assert!(
+        head.is_empty() || head.starts_with("HTTP/1.1 431"),
+        "{head}"
+    );
+    // Connection cap: client_limit + 64 = 65 open at once; the rest are closed at accept.
+    let idle: Vec<TcpStream> = (0..80)
+        .map(|_| TcpStream::connect(&d.addr).unwrap())
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let closed = idle
+        .iter()
+        .filter(|s| {
+            // Non-blocking: a connection closed at accept reads EOF at once, an accepted
+            // one has nothing to read yet.
+            s.set_nonblocking(true).unwrap();
+            let mut b = [0u8; 1];
+            matches!((&**s).read(&mut b), Ok(0))
+        })
+        .count();
+    assert!(
+        (10..=20).contains(&closed),
+        "{closed} of 80 closed at accept"
+    );
+    drop(idle);
+    std::thread::sleep(Duration::from_millis(300));
+    // Still serving.
+    assert_eq!(request(&d.addr, "GET", "/state", "").0, 200);
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -1,6 +1,7 @@
 //! `volcap`: the command line for benchmarks, evaluation and simulation.
 
 mod bench;
+mod ctl;
 mod plot;
 mod simcmd;
 
@@ -12,7 +13,7 @@ use std::process::ExitCode;
 #[command(
     name = "volcap",
     version,
-    about = "volcap tools: benchmarks, evaluation, simulation"
+    about = "volcap tools: benchmarks, evaluation, simulation, daemon control"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -27,6 +28,10 @@ enum Cmd {
     /// The scene simulator: asset pack, rendering, benchmarks, datasets.
     #[command(subcommand)]
     Sim(simcmd::SimCmd),
+    /// Talk to a running volcapd over D-Bus (status, set-view, set-resolution, pause,
+    /// resume, reload, snapshot).
+    #[command(flatten)]
+    Ctl(ctl::CtlCmd),
 }
 
 #[derive(Subcommand)]
@@ -75,6 +80,7 @@ fn main() -> ExitCode {
     let res = match cli.cmd {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
         Cmd::Sim(c) => simcmd::run(c),
+        Cmd::Ctl(c) => ctl::run(c),
     };
     match res {
         Ok(()) => ExitCode::SUCCESS,

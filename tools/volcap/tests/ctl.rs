@@ -1,0 +1,139 @@
+//! `volcap status / set-view / ...` against a running volcapd on a private D-Bus bus.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Proc(Child);
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn volcap(addr: &str, args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_volcap"))
+        .args(args)
+        .args(["--address", addr])
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn cli_reads_status_and_controls_the_daemon() {
+    // The daemon binary is built by the same workspace build, next to ours.
+    let daemon_bin = Path::new(env!("CARGO_BIN_EXE_volcap")).with_file_name("volcapd");
+    let tools = Command::new("sh")
+        .args(["-c", "command -v dbus-daemon"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !daemon_bin.exists() || !tools {
+        assert!(
+            std::env::var("CI").is_err(),
+            "CI runs the workspace tests (volcapd built) with dbus-daemon installed"
+        );
+        eprintln!("skipping: needs {} and dbus-daemon", daemon_bin.display());
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("volcap-ctl-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let sock = dir.join("bus");
+    std::fs::write(
+        dir.join("bus.conf"),
+        format!(
+            "<busconfig><type>session</type><listen>unix:path={}</listen><auth>EXTERNAL</auth><policy context=\"default\"><allow send_destination=\"*\" eavesdrop=\"true\"/><allow eavesdrop=\"true\"/><allow own=\"*\"/><allow user=\"*\"/></policy></busconfig>",
+            sock.display()
+        ),
+    )
+    .unwrap();
+    let _bus = Proc(
+        Command::new("dbus-daemon")
+            .arg(format!("--config-file={}", dir.join("bus.conf").display()))
+            .arg("--nofork")
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let t = Instant::now();
+    while !sock.exists() {
+        assert!(t.elapsed() < Duration::from_secs(10));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let addr = format!("unix:path={}", sock.display());
+    let mut d = Command::new(&daemon_bin)
+        .current_dir(root())
+        .args([
+            "--config",
+            "board-config/sim.toml",
+            "--http",
+            "127.0.0.1:0",
+            "--bus",
+            "session",
+        ])
+        .env("DBUS_SESSION_BUS_ADDRESS", &addr)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(d.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let _d = Proc(d);
+    // Status, once the daemon runs.
+    let t = Instant::now();
+    let status = loop {
+        let o = volcap(&addr, &["status", "--json"]);
+        if o.status.success() {
+            let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            if v["State"] == "running" {
+                break v;
+            }
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(30),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert_eq!(status["Model"], "oracle");
+    assert_eq!(status["Resolution"], 129);
+    let table = volcap(&addr, &["status"]);
+    let table = String::from_utf8_lossy(&table.stdout);
+    assert!(
+        table
+            .lines()
+            .any(|l| l.starts_with("State") && l.ends_with("running")),
+        "{table}"
+    );
+    // Controls, and the daemon's own error words on bad input.
+    assert!(
+        volcap(&addr, &["set-view", "--yaw", "-30", "--pitch", "10"])
+            .status
+            .success()
+    );
+    let o = volcap(&addr, &["set-view", "--yaw", "0", "--pitch", "99"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("pitch 99"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(volcap(&addr, &["set-resolution", "6"]).status.success());
+    let v: serde_json::Value =
+        serde_json::from_slice(&volcap(&addr, &["status", "--json"]).stdout).unwrap();
+    assert_eq!(v["Resolution"], 65);
+    let png = dir.join("s.png");
+    let o = volcap(&addr, &["snapshot", "--out", png.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+    std::fs::remove_dir_all(&dir).ok();
+}
