@@ -5,12 +5,11 @@
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+mod common;
+use common::{Proc, root};
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_volcapd")
@@ -46,14 +45,6 @@ fn have(tool: &str) -> bool {
     ok
 }
 
-struct Proc(Child);
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// A private dbus-daemon with `config` (its `<listen>` is filled in); returns the address.
 fn bus(dir: &Path, kind: &str, policy: &str) -> (Proc, String) {
     let sock = dir.join(format!("{kind}_bus"));
@@ -81,31 +72,9 @@ fn bus(dir: &Path, kind: &str, policy: &str) -> (Proc, String) {
     (Proc(child), format!("unix:path={}", sock.display()))
 }
 
-/// Start volcapd; returns it and its HTTP address.
+/// Start volcapd (stderr kept); returns it and its HTTP address.
 fn daemon(config: &Path, args: &[&str], env: &[(&str, &str)]) -> (Proc, String) {
-    let mut cmd = Command::new(bin());
-    cmd.current_dir(root())
-        .arg("--config")
-        .arg(config)
-        .args(["--http", "127.0.0.1:0"])
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    for (k, v) in env {
-        cmd.env(k, v);
-    }
-    let mut child = cmd.spawn().unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .split("http://")
-        .nth(1)
-        .and_then(|s| s.split('/').next())
-        .unwrap_or_else(|| panic!("no URL in {line:?}"))
-        .to_string();
-    (Proc(child), addr)
+    common::launch(config, args, env, true)
 }
 
 fn http_state(addr: &str) -> serde_json::Value {
@@ -663,14 +632,17 @@ fn watchdog_pings_follow_pipeline_progress() {
 fn install_script_stages_a_complete_service() {
     let dir = tmp("install");
     let stage = dir.join("root");
-    let o = Command::new(root().join("tools/install.sh"))
-        .current_dir(root())
-        .arg("--root")
-        .arg(&stage)
-        .args(["--board", "sim", "--binary", bin()])
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let install = || {
+        let o = Command::new(root().join("tools/install.sh"))
+            .current_dir(root())
+            .arg("--root")
+            .arg(&stage)
+            .args(["--board", "sim", "--binary", bin()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    install();
     for f in [
         "usr/bin/volcapd",
         "usr/lib/systemd/system/volcapd.service",
@@ -710,14 +682,7 @@ fn install_script_stages_a_complete_service() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // A second install keeps the edited config.
     std::fs::write(stage.join("etc/volcap/volcapd.toml"), "# edited\n").unwrap();
-    let o = Command::new(root().join("tools/install.sh"))
-        .current_dir(root())
-        .arg("--root")
-        .arg(&stage)
-        .args(["--binary", bin()])
-        .output()
-        .unwrap();
-    assert!(o.status.success());
+    install();
     assert_eq!(
         std::fs::read_to_string(stage.join("etc/volcap/volcapd.toml")).unwrap(),
         "# edited\n"

@@ -1,25 +1,17 @@
 //! volcapd end to end on loopback: real clients, endpoints, faults, many slow clients.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+mod common;
+use common::{Proc, launch, root};
 
 struct Daemon {
-    child: Child,
+    child: Proc,
     addr: String,
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 /// Daemon tests run one at a time: they measure rates on a 2-core machine.
@@ -30,25 +22,7 @@ fn serial() -> std::sync::MutexGuard<'static, ()> {
 }
 
 fn start(config: &Path) -> Daemon {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_volcapd"))
-        .current_dir(root())
-        .args(["--config"])
-        .arg(config)
-        .args(["--http", "127.0.0.1:0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .split("http://")
-        .nth(1)
-        .and_then(|s| s.split('/').next())
-        .unwrap_or_else(|| panic!("no URL in {line:?}"))
-        .to_string();
+    let (child, addr) = launch(config, &[], &[], false);
     Daemon { child, addr }
 }
 
@@ -476,7 +450,7 @@ fn hundred_slow_clients_do_not_stall_the_pipeline() {
         s["clients"] == 0
     });
     // Memory bounded: resident set of the daemon stays modest.
-    if let Ok(status) = std::fs::read_to_string(format!("/proc/{}/status", d.child.id())) {
+    if let Ok(status) = std::fs::read_to_string(format!("/proc/{}/status", d.child.0.id())) {
         let rss_kb: u64 = status
             .lines()
             .find(|l| l.starts_with("VmRSS"))
