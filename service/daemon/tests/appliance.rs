@@ -9,7 +9,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{Proc, root};
+use common::{Proc, have, root};
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_volcapd")
@@ -26,23 +26,6 @@ fn tmp(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-/// A tool the test needs: present, or (outside CI) the test is skipped with a message.
-fn have(tool: &str) -> bool {
-    let ok = Command::new("sh")
-        .args(["-c", &format!("command -v {tool}")])
-        .stdout(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        assert!(
-            std::env::var("CI").is_err(),
-            "{tool} is required in CI (.ci/run installs it)"
-        );
-        eprintln!("skipping: {tool} not installed");
-    }
-    ok
 }
 
 /// A private dbus-daemon with `config` (its `<listen>` is filled in); returns the address.

@@ -3,11 +3,11 @@
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{Proc, launch, root};
+use common::{Proc, have, launch, root};
 
 struct Daemon {
     child: Proc,
@@ -83,23 +83,6 @@ fn wait_for(
 
 fn sim_config() -> PathBuf {
     root().join("board-config/sim.toml")
-}
-
-fn have(tool: &str) -> bool {
-    let ok = Command::new(tool)
-        .arg("-version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        assert!(
-            std::env::var("CI").is_err(),
-            "{tool} is required in CI (.ci/run installs it)"
-        );
-        eprintln!("skipping: {tool} not installed");
-    }
-    ok
 }
 
 #[test]

@@ -55,3 +55,20 @@ pub fn launch(
         .to_string();
     (Proc(child), addr)
 }
+
+/// A tool a test needs: on the PATH, or (outside CI) the test is skipped with a message.
+pub fn have(tool: &str) -> bool {
+    let ok = Command::new("sh")
+        .args(["-c", &format!("command -v {tool}")])
+        .stdout(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        assert!(
+            std::env::var("CI").is_err(),
+            "{tool} is required in CI (.ci/run installs it)"
+        );
+        eprintln!("skipping: {tool} not installed");
+    }
+    ok
+}
