@@ -185,10 +185,10 @@ fn render(a: &RenderArgs) -> anyhow::Result<()> {
                     write_meshes(&a.out, f.index, &sim)?;
                 }
             }
-            Err(SimError::Unplugged { frame } | SimError::Hung { frame }) => {
+            Err(e @ (SimError::Unplugged { frame } | SimError::Hung { frame })) => {
                 pb.finish_and_clear();
                 println!(
-                    "camera gone at frame {frame} (scene effect: unplug or hang); wrote {frame} frames to {}",
+                    "{e} (scene effect); wrote {frame} frames to {}",
                     a.out.display()
                 );
                 return Ok(());
