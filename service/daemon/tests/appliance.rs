@@ -364,22 +364,21 @@ fn dbus_policy_on_a_system_like_bus() {
             .env("DBUS_SYSTEM_BUS_ADDRESS", &addr);
         c
     };
+    let cfg = dir.join("b.toml");
+    let volcapd_as = |user: &str, group: &str, stderr: Stdio| {
+        run_as(
+            user,
+            group,
+            &dir.join("volcapd"),
+            &["--config", cfg.to_str().unwrap(), "--http", "127.0.0.1:0"],
+        )
+        .stdout(Stdio::null())
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+    };
     // nobody cannot own the name: the daemon logs it and keeps serving HTTP.
-    let mut intruder = run_as(
-        "nobody",
-        "nogroup",
-        &dir.join("volcapd"),
-        &[
-            "--config",
-            dir.join("b.toml").to_str().unwrap(),
-            "--http",
-            "127.0.0.1:0",
-        ],
-    )
-    .stdout(Stdio::null())
-    .stderr(Stdio::piped())
-    .spawn()
-    .unwrap();
+    let mut intruder = volcapd_as("nobody", "nogroup", Stdio::piped());
     let mut line = String::new();
     let mut err = BufReader::new(intruder.stderr.take().unwrap());
     let t = Instant::now();
@@ -396,23 +395,7 @@ fn dbus_policy_on_a_system_like_bus() {
         "{line}"
     );
     // The service user owns it.
-    let _owner = Proc(
-        run_as(
-            "volcap",
-            "volcap",
-            &dir.join("volcapd"),
-            &[
-                "--config",
-                dir.join("b.toml").to_str().unwrap(),
-                "--http",
-                "127.0.0.1:0",
-            ],
-        )
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap(),
-    );
+    let _owner = Proc(volcapd_as("volcap", "volcap", Stdio::null()));
     wait_until("name owned", Duration::from_secs(30), || {
         busctl(&addr, &[&["get-property"][..], &OBJ, &["State"]].concat())
             .status
