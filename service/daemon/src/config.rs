@@ -51,7 +51,7 @@ impl FieldMode {
 
 /// The camera section. Which keys apply depends on the backend; a key given for another
 /// backend is an error, so a typo cannot silently do nothing.
-#[derive(Debug, Clone, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraConfig {
     pub backend: Backend,
@@ -84,6 +84,9 @@ fn d_voxel() -> f32 {
     0.008
 }
 
+/// The grid resolutions volcapd renders at: 2^L + 1 for L in 5..=9.
+pub const GRID_RESOLUTIONS: [usize; 5] = [33, 65, 129, 257, 513];
+
 /// Grid points per axis, 2^L + 1 between 33 and 513.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(try_from = "i64")]
@@ -91,7 +94,7 @@ pub struct GridRes(pub usize);
 impl TryFrom<i64> for GridRes {
     type Error = String;
     fn try_from(v: i64) -> Result<Self, String> {
-        if [33, 65, 129, 257, 513].contains(&v) {
+        if v > 0 && GRID_RESOLUTIONS.contains(&(v as usize)) {
             Ok(Self(v as usize))
         } else {
             Err(format!("{v} must be one of 33, 65, 129, 257, 513"))
@@ -194,7 +197,7 @@ pub enum Bus {
     None,
 }
 
-#[derive(Debug, Clone, Default, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DbusConfig {
     #[serde(default)]
@@ -357,48 +360,8 @@ impl Config {
                 format!("{} must be in [0.002, 0.05]", r.oracle_voxel_m),
             );
         }
-        let l = (r.resolution.0 - 1).trailing_zeros();
-        if r.coarse_level < 1 || r.coarse_level >= l {
-            return bad(
-                "render.coarse_level",
-                format!(
-                    "{} must be in 1..{l} for resolution {}",
-                    r.coarse_level, r.resolution.0
-                ),
-            );
-        }
-        if r.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
-            return bad("render.background", "values must be in [0, 1]");
-        }
-        let live = crate::pipeline::Live::from_config(self);
-        if let Err(e) = live.check() {
-            let key = if e.starts_with("distance") {
-                "render.distance"
-            } else {
-                "render.pitch"
-            };
-            return bad(key, e);
-        }
-        if !(1..=120).contains(&self.http.header_timeout_s) {
-            return bad(
-                "http.header_timeout_s",
-                format!("{} must be in 1..=120", self.http.header_timeout_s),
-            );
-        }
-        if !["compact", "large"].contains(&self.model.name.as_str()) {
-            return bad(
-                "model.name",
-                format!("{:?}: one of \"compact\", \"large\"", self.model.name),
-            );
-        }
-        if self.compute.threads > 256 {
-            return bad(
-                "compute.threads",
-                format!(
-                    "{} must be in 0..=256 (0 = one per core)",
-                    self.compute.threads
-                ),
-            );
+        if let Err(e) = crate::pipeline::Live::from_config(self).check() {
+            return bad(format!("render.{}", e.field), e.msg);
         }
         if self.http.token.as_deref().is_some_and(|t| t.len() < 8) {
             return bad("http.token", "must be at least 8 characters");

@@ -48,7 +48,7 @@ impl Control {
         let old = lock(&self.config).clone();
         let mut applied = Vec::new();
         let mut restart = Vec::new();
-        if format!("{:?}", new.camera) != format!("{:?}", old.camera) {
+        if new.camera != old.camera {
             let (factory, source) = (self.make_camera)(&new)?;
             *lock(&self.shared.camera_swap) = Some(factory);
             *lock(&self.backend) = source.clone();
@@ -83,7 +83,7 @@ impl Control {
         if new.render.oracle_voxel_m != old.render.oracle_voxel_m {
             restart.push("render.oracle_voxel_m");
         }
-        if format!("{:?}", new.dbus) != format!("{:?}", old.dbus) {
+        if new.dbus != old.dbus {
             restart.push("dbus");
         }
         // Keep what is running, take the rest of the new file.
@@ -116,12 +116,7 @@ impl Control {
             .borrow()
             .clone()
             .ok_or("no frame published yet")?;
-        let img = image::RgbaImage::from_raw(f.size as u32, f.size as u32, f.rgba.clone())
-            .ok_or("frame buffer of the wrong size")?;
-        let mut out = Vec::new();
-        img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
-            .map_err(|e| e.to_string())?;
-        Ok(out)
+        f.to_png()
     }
 }
 
@@ -284,8 +279,7 @@ impl Capture1 {
         self.ctl
             .shared
             .update_live(|l| {
-                l.resolution = (1usize << level) + 1;
-                l.coarse_level = l.coarse_level.min(level - 1);
+                l.set_resolution((1usize << level) + 1);
             })
             .map(|_| ())
             .map_err(bad_arg)
@@ -310,13 +304,23 @@ impl Capture1 {
 
     /// Re-read the config file. A bad file keeps the running configuration and fails with
     /// the file, line and key; returns what was applied and what needs a restart.
-    fn reload(&self) -> fdo::Result<String> {
-        self.ctl.reload().map_err(fdo::Error::Failed)
+    async fn reload(&self) -> fdo::Result<String> {
+        // File I/O and maybe a new camera (a scene load): off the async runtime.
+        let ctl = self.ctl.clone();
+        tokio::task::spawn_blocking(move || ctl.reload())
+            .await
+            .map_err(|e| fdo::Error::Failed(format!("reload task: {e}")))?
+            .map_err(fdo::Error::Failed)
     }
 
     /// The current frame as PNG bytes.
-    fn snapshot(&self) -> fdo::Result<Vec<u8>> {
-        self.ctl.snapshot_png().map_err(fdo::Error::Failed)
+    async fn snapshot(&self) -> fdo::Result<Vec<u8>> {
+        // PNG encoding is CPU work: off the async runtime.
+        let ctl = self.ctl.clone();
+        tokio::task::spawn_blocking(move || ctl.snapshot_png())
+            .await
+            .map_err(|e| fdo::Error::Failed(format!("snapshot task: {e}")))?
+            .map_err(fdo::Error::Failed)
     }
 }
 

@@ -172,19 +172,10 @@ async fn snapshot_png(State(app): State<Arc<App>>) -> Response {
     let Some(f) = latest(&app) else {
         return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
     };
-    let png = tokio::task::spawn_blocking(move || {
-        let mut out = Vec::new();
-        image::RgbaImage::from_raw(f.size as u32, f.size as u32, f.rgba.clone())
-            .map(|img| {
-                img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
-                    .is_ok()
-            })
-            .filter(|ok| *ok)
-            .map(|_| out)
-    })
-    .await
-    .ok()
-    .flatten();
+    let png = tokio::task::spawn_blocking(move || f.to_png().ok())
+        .await
+        .ok()
+        .flatten();
     match png {
         Some(p) => ([(header::CONTENT_TYPE, "image/png")], p).into_response(),
         None => (StatusCode::INTERNAL_SERVER_ERROR, "png encoding failed\n").into_response(),
@@ -399,10 +390,7 @@ async fn set_view(
             l.distance = d;
         }
         if let Some(r) = q.resolution {
-            l.resolution = r;
-            l.coarse_level = l
-                .coarse_level
-                .min((r.max(2) - 1).trailing_zeros().saturating_sub(1));
+            l.set_resolution(r);
         }
     }) {
         Ok(_) => (StatusCode::OK, "ok\n").into_response(),

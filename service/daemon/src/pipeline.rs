@@ -49,11 +49,10 @@ impl<T> Slot<T> {
     }
 }
 
-/// Rolling per-stage timings.
+/// Rolling per-stage timings: the last 256 (when, ms) samples.
 #[derive(Default)]
 pub struct StageStats {
-    samples: Mutex<Vec<f64>>,
-    times: Mutex<std::collections::VecDeque<Instant>>,
+    samples: Mutex<std::collections::VecDeque<(Instant, f64)>>,
     pub frames: AtomicU64,
     pub dropped: AtomicU64,
 }
@@ -62,24 +61,20 @@ impl StageStats {
     pub fn record(&self, ms: f64) {
         let mut s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
         if s.len() >= 256 {
-            s.remove(0);
+            s.pop_front();
         }
-        s.push(ms);
-        drop(s);
-        let mut t = self.times.lock().unwrap_or_else(|p| p.into_inner());
-        if t.len() >= 256 {
-            t.pop_front();
-        }
-        t.push_back(Instant::now());
+        s.push_back((Instant::now(), ms));
         self.frames.fetch_add(1, Ordering::Relaxed);
     }
 
     /// Frames per second over the last 5 s (0 when none).
     pub fn recent_fps(&self) -> f64 {
-        let t = self.times.lock().unwrap_or_else(|p| p.into_inner());
+        let s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
         let window = Duration::from_secs(5);
-        let n = t.iter().filter(|x| x.elapsed() <= window).count();
-        match t.iter().find(|x| x.elapsed() <= window) {
+        // Samples are in time order: the recent ones are a suffix.
+        let recent = s.iter().skip_while(|(t, _)| t.elapsed() > window);
+        let (n, first) = recent.fold((0usize, None), |(n, f), (t, _)| (n + 1, f.or(Some(*t))));
+        match first {
             Some(first) if n > 1 => (n - 1) as f64 / first.elapsed().as_secs_f64().max(1e-3),
             _ => 0.0,
         }
@@ -87,11 +82,13 @@ impl StageStats {
 
     /// (p50, p99) in ms over the last 256 frames.
     pub fn percentiles(&self) -> (f64, f64) {
-        let mut v = self
+        let mut v: Vec<f64> = self
             .samples
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .clone();
+            .iter()
+            .map(|(_, ms)| *ms)
+            .collect();
         if v.is_empty() {
             return (0.0, 0.0);
         }
@@ -137,6 +134,19 @@ pub struct Published {
     pub latency_ms: f64,
     /// A placeholder that says why there is no render.
     pub placeholder: bool,
+}
+
+impl Published {
+    /// The frame as PNG (RGBA, transparent where the background's alpha is 0). CPU work:
+    /// call it off the async runtime.
+    pub fn to_png(&self) -> Result<Vec<u8>, String> {
+        let img = image::RgbaImage::from_raw(self.size as u32, self.size as u32, self.rgba.clone())
+            .ok_or("frame buffer of the wrong size")?;
+        let mut out = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+            .map_err(|e| e.to_string())?;
+        Ok(out)
+    }
 }
 
 /// The camera as `/state` and D-Bus report it.
@@ -185,37 +195,73 @@ impl Live {
         }
     }
 
-    /// The one validation of every live setting, whoever sets it.
-    pub fn check(&self) -> Result<(), String> {
-        if !self.yaw.is_finite() || !self.pitch.is_finite() || self.pitch.abs() > 80.0 {
-            return Err(format!(
-                "yaw {} / pitch {}: need finite values, |pitch| <= 80",
-                self.yaw, self.pitch
-            ));
+    /// The one validation of every live setting, whoever sets it (config, HTTP, D-Bus).
+    pub fn check(&self) -> Result<(), LiveError> {
+        let bad = |field, msg: String| Err(LiveError { field, msg });
+        if !self.yaw.is_finite() {
+            return bad("yaw", format!("yaw {}: need a finite value", self.yaw));
+        }
+        if !self.pitch.is_finite() || self.pitch.abs() > 80.0 {
+            return bad(
+                "pitch",
+                format!(
+                    "yaw {} / pitch {}: need finite values, |pitch| <= 80",
+                    self.yaw, self.pitch
+                ),
+            );
         }
         if !(self.distance == 0.0 || (0.5..=10.0).contains(&self.distance)) {
-            return Err(format!(
-                "distance {}: 0 (the camera's own) or 0.5..=10 metres",
-                self.distance
-            ));
+            return bad(
+                "distance",
+                format!(
+                    "distance {}: 0 (the camera's own) or 0.5..=10 metres",
+                    self.distance
+                ),
+            );
         }
-        if ![33, 65, 129, 257, 513].contains(&self.resolution) {
-            return Err(format!(
-                "resolution {}: one of 33, 65, 129, 257, 513 (levels 5..=9)",
-                self.resolution
-            ));
+        if !crate::config::GRID_RESOLUTIONS.contains(&self.resolution) {
+            return bad(
+                "resolution",
+                format!(
+                    "resolution {}: one of 33, 65, 129, 257, 513 (levels 5..=9)",
+                    self.resolution
+                ),
+            );
         }
         let l = (self.resolution - 1).trailing_zeros();
         if self.coarse_level < 1 || self.coarse_level >= l {
-            return Err(format!(
-                "coarse level {} must be in 1..{l} for resolution {}",
-                self.coarse_level, self.resolution
-            ));
+            return bad(
+                "coarse_level",
+                format!(
+                    "{} must be in 1..{l} for resolution {}",
+                    self.coarse_level, self.resolution
+                ),
+            );
         }
         if self.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
-            return Err("background values must be in [0, 1]".into());
+            return bad("background", "values must be in [0, 1]".into());
         }
         Ok(())
+    }
+
+    /// Change the grid resolution, bringing the coarse level into range for it.
+    pub fn set_resolution(&mut self, resolution: usize) {
+        self.resolution = resolution;
+        let levels = (resolution.max(2) - 1).trailing_zeros();
+        self.coarse_level = self.coarse_level.min(levels.saturating_sub(1));
+    }
+}
+
+/// A live setting out of range: which one (the `render.` key in the config) and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveError {
+    pub field: &'static str,
+    pub msg: String,
+}
+
+impl std::fmt::Display for LiveError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.msg)
     }
 }
 
@@ -281,7 +327,7 @@ impl Shared {
         let mut g = self.live.lock().unwrap_or_else(|p| p.into_inner());
         let mut next = *g;
         f(&mut next);
-        next.check()?;
+        next.check().map_err(|e| e.msg)?;
         *g = next;
         Ok(next)
     }
@@ -346,10 +392,14 @@ pub fn letterbox(rgb: &[u8], w: usize, h: usize, size: usize) -> Vec<u8> {
 }
 
 fn camera_status_from(sup: &Supervisor<dyn Camera>, st: &mut CameraStatus) {
-    st.source = sup.describe();
     st.frames = sup.frames;
     st.faults = sup.faults;
     st.opens = sup.opens;
+    if st.state == "running" && *sup.state() == CameraState::Running {
+        // Steady streaming: nothing textual changed; no per-frame formatting.
+        return;
+    }
+    st.source = sup.describe();
     let (state, fault, reason) = match sup.state() {
         CameraState::Opening => ("opening", "", String::new()),
         CameraState::Running => ("running", "", String::new()),
@@ -609,6 +659,8 @@ pub fn start(
             std::thread::Builder::new()
                 .name("encode".into())
                 .spawn(move || {
+                    // Reused across frames: the JPEG input (RGBA composited over the background).
+                    let mut rgb: Vec<u8> = Vec::new();
                     while !sh.stop.load(Ordering::Relaxed) {
                         sh.beat(2);
                         let Some(r) = input.take(Duration::from_millis(200)) else {
@@ -617,16 +669,13 @@ pub fn start(
                         let bg = sh.live().background;
                         let t = Instant::now();
                         // JPEG has no alpha: composite over the background colour.
-                        let rgb: Vec<u8> = r
-                            .rgba
-                            .chunks_exact(4)
-                            .flat_map(|p| {
-                                let a = p[3] as f32 / 255.0;
-                                [0, 1, 2].map(|c| {
-                                    (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8
-                                })
+                        rgb.clear();
+                        rgb.extend(r.rgba.chunks_exact(4).flat_map(|p| {
+                            let a = p[3] as f32 / 255.0;
+                            [0, 1, 2].map(|c| {
+                                (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8
                             })
-                            .collect();
+                        }));
                         let mut jpeg = Vec::new();
                         let ok = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 85)
                             .encode(
@@ -639,11 +688,10 @@ pub fn start(
                         if !ok {
                             continue;
                         }
+                        let latency_ms = r.at.elapsed().as_secs_f64() * 1e3;
+                        // Placeholders are not frames of the pipeline: not in its figures.
                         if !r.placeholder {
                             sh.stats[3].record(t.elapsed().as_secs_f64() * 1e3);
-                        }
-                        let latency_ms = r.at.elapsed().as_secs_f64() * 1e3;
-                        if !r.placeholder {
                             sh.e2e.record(latency_ms);
                         }
                         sh.published.send_replace(Some(Arc::new(Published {

@@ -389,6 +389,7 @@ fn dbus_policy_on_a_system_like_bus() {
     }
     let _ = intruder.kill();
     let _ = intruder.wait();
+    println!("volcapd as nobody: {}", line.trim());
     assert!(
         line.contains("unavailable")
             && (line.contains("AccessDenied") || line.contains("not allowed")),

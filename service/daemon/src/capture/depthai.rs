@@ -6,12 +6,12 @@
 //!
 //! The DepthAI handles are not `Send`, so this camera is built on the capture thread.
 
-use super::{Camera, Fault, Frame, Grab, Skip};
+use super::{Camera, DRIVER_TIMEOUT, Fault, Frame, Grab, Skip};
 use depthai::camera::{CameraNode, CameraOutputConfig, OutputQueue};
 use depthai::common::{CameraBoardSocket, ImageFrameType, ResizeMode};
 use depthai::device::Device;
 use depthai::pipeline::Pipeline;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 pub struct DepthaiCamera {
     size: (u32, u32),
@@ -71,9 +71,11 @@ impl Camera for DepthaiCamera {
         let Some((device, _, queue)) = &self.running else {
             return Err(Fault::Failed("read before open".into()));
         };
-        let frame = match queue.blocking_next(Some(Duration::from_secs(2))) {
+        let frame = match queue.blocking_next(Some(DRIVER_TIMEOUT)) {
             Ok(Some(f)) => f,
-            Ok(None) if device.is_connected() => return Err(Fault::NoSignal(2000)),
+            Ok(None) if device.is_connected() => {
+                return Err(Fault::NoSignal(DRIVER_TIMEOUT.as_millis() as u64));
+            }
             Ok(None) => return Err(Fault::Unplugged("DepthAI device disconnected".into())),
             Err(e) => return Err(Fault::Unplugged(format!("DepthAI: {e}"))),
         };

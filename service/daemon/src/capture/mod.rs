@@ -15,6 +15,9 @@ pub mod v4l2;
 
 use std::time::{Duration, Instant};
 
+/// How long a device read waits before the camera counts as giving no signal.
+pub const DRIVER_TIMEOUT: Duration = Duration::from_secs(2);
+
 /// Ground truth that only the simulator can attach to a frame (oracle mode).
 pub struct SimTruth {
     pub gt: volcap_sim::sim::GroundTruth,
@@ -119,8 +122,7 @@ pub enum CameraState {
 pub enum Step {
     Frame(Frame),
     Skipped(Skip),
-    /// The state changed or is unchanged while the camera is away; `waited` is how long the
-    /// step slept.
+    /// No frame: the camera is away (the state says why and when the next try is).
     State(CameraState),
 }
 

@@ -4,7 +4,7 @@
 //! `v4l` crate: ioctls and mmap streaming, needs libclang to build) is behind the `v4l2`
 //! cargo feature.
 
-use super::{Camera, Fault, Frame, Grab, decode};
+use super::{Camera, DRIVER_TIMEOUT, Fault, Frame, Grab, decode};
 use serde::Deserialize;
 use std::io;
 use std::path::PathBuf;
@@ -136,7 +136,7 @@ pub fn fault_of(e: &io::Error, what: &str, streaming: bool) -> Fault {
         }
         (Some(ENODEV | ENXIO), _) => Fault::NoDevice(format!("{what}: {e}")),
         (Some(EAGAIN), _) | (_, io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {
-            Fault::NoSignal(2000)
+            Fault::NoSignal(DRIVER_TIMEOUT.as_millis() as u64)
         }
         (Some(EINVAL), _) if !streaming => Fault::FormatRefused {
             wanted: what.to_string(),
@@ -418,7 +418,7 @@ pub mod sys {
             let dev = self.dev.as_ref().ok_or(io::ErrorKind::NotConnected)?;
             let mut s =
                 v4l::io::mmap::Stream::with_buffers(dev, v4l::buffer::Type::VideoCapture, 4)?;
-            s.set_timeout(std::time::Duration::from_secs(2));
+            s.set_timeout(super::DRIVER_TIMEOUT);
             self.stream = Some(s);
             Ok(())
         }
