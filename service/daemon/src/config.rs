@@ -35,9 +35,12 @@ pub enum FieldMode {
     /// Render the simulator's ground-truth field through the engine. A debugging mode, always
     /// labelled as such: it is not a reconstruction. Needs the `sim` backend.
     Oracle,
-    /// Publish the camera frame itself (letterboxed): a labelled debugging view for real
-    /// cameras until the trained models land; no reconstruction.
+    /// Publish the camera frame itself (letterboxed): a labelled debugging view; no
+    /// reconstruction.
     Camera,
+    /// The product: the trained networks (`[model]`) segment, encode and give the occupancy
+    /// and colour fields that the engine localizes and renders. The default for real cameras.
+    Model,
 }
 
 impl FieldMode {
@@ -45,6 +48,7 @@ impl FieldMode {
         match self {
             FieldMode::Oracle => "oracle",
             FieldMode::Camera => "camera",
+            FieldMode::Model => "model",
         }
     }
 }
@@ -212,13 +216,13 @@ pub enum Precision {
     Int8,
 }
 
-/// The networks (issue #6): which size and precision the board runs. Until the trained
-/// models land, the field is `oracle` (sim) or `camera`, and these are checked and reported
-/// only.
+/// The networks: which size and precision the board runs (`render.field = "model"`, the
+/// default for real cameras). Files: `DIR/seg[.int8].onnx`, `DIR/shape-NAME.{encoder,mlp}[.int8].onnx`,
+/// `DIR/color.*.onnx`; checked at start (and by `--check-config`) with errors naming the file.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
-    /// `compact` (the default, fast on a CPU) or `large`.
+    /// `compact` (the default, fast on a CPU), `large`, or another committed variant.
     #[serde(default = "d_model")]
     pub name: String,
     #[serde(default)]
@@ -463,7 +467,7 @@ impl Config {
     pub fn field(&self) -> FieldMode {
         self.render.field.unwrap_or(match self.camera.backend {
             Backend::Sim => FieldMode::Oracle,
-            _ => FieldMode::Camera,
+            _ => FieldMode::Model,
         })
     }
 

@@ -263,6 +263,7 @@ fn state_json(app: &App) -> serde_json::Value {
         "mode_note": match sh.mode {
             "oracle" => "ground-truth field rendered through the engine: not a reconstruction",
             "camera" => "the camera frame itself: no reconstruction",
+            "model" => "reconstruction by the trained networks (segmentation, shape, colour; see models/)",
             _ => "",
         },
         "resolution": live.resolution,

@@ -70,6 +70,22 @@ fn main() -> ExitCode {
         };
     }
     let mode = cfg.field().name();
+    let models = if cfg.field() == config::FieldMode::Model {
+        let dir = cfg.resolve(&cfg.model.dir);
+        let prec = match cfg.model.precision {
+            config::Precision::F32 => volcap_engine::model::Precision::F32,
+            config::Precision::Int8 => volcap_engine::model::Precision::Int8,
+        };
+        match volcap_engine::model::Models::load(&dir, &cfg.model.name, prec) {
+            Ok(m) => Some(Arc::new(m)),
+            Err(e) => {
+                eprintln!("volcapd: [model] in {}: {e}", cli.config.display());
+                return ExitCode::from(EXIT_CONFIG);
+            }
+        }
+    } else {
+        None
+    };
     let (factory, source) = match capture::factory(&cfg) {
         Ok(f) => f,
         Err(e) => {
@@ -136,7 +152,7 @@ fn main() -> ExitCode {
         }
     };
     let addr = listener.local_addr().unwrap_or(cfg.http.bind);
-    let threads = pipeline::start(&cfg, factory, shared.clone());
+    let threads = pipeline::start(&cfg, factory, shared.clone(), models);
     let notifier = notify::spawn(shared.clone());
     if let Err(e) = &notifier {
         tracing::warn!("no systemd notifier thread: {e}");

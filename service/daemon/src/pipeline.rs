@@ -420,6 +420,7 @@ pub fn start(
     cfg: &Config,
     factory: CameraFactory,
     shared: Arc<Shared>,
+    models: Option<Arc<volcap_engine::model::Models>>,
 ) -> Vec<std::thread::JoinHandle<()>> {
     let captured: Arc<Slot<Frame>> = Arc::default();
     let rendered: Arc<Slot<Rendered>> = Arc::default();
@@ -580,6 +581,57 @@ pub fn start(
                                 let rgba = letterbox(&f.rgb, f.width, f.height, size);
                                 sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
                                 rgba
+                            }
+                            FieldMode::Model => {
+                                let Some(models) = &models else {
+                                    degraded(
+                                        "model mode without loaded models".into(),
+                                        &f,
+                                        size,
+                                        bg,
+                                    );
+                                    continue;
+                                };
+                                let t = Instant::now();
+                                let view = volcap_engine::model::ModelView {
+                                    yaw_deg: live.yaw,
+                                    pitch_deg: live.pitch,
+                                    // 0 keeps the crop; otherwise relative to a 2.5 m nominal distance.
+                                    zoom: if live.distance > 0.0 {
+                                        2.5 / live.distance
+                                    } else {
+                                        1.0
+                                    },
+                                };
+                                let field = match models.frame(&f.rgb, f.width, f.height, view) {
+                                    Ok((field, _)) => field,
+                                    Err(volcap_engine::model::FrameError::NoPerson) => {
+                                        degraded("no person in view".into(), &f, size, bg);
+                                        continue;
+                                    }
+                                    Err(e) => {
+                                        degraded(format!("model: {e}"), &f, size, bg);
+                                        continue;
+                                    }
+                                };
+                                sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
+                                let t = Instant::now();
+                                let Ok(spec) = GridSpec::from_resolution(size) else {
+                                    continue;
+                                };
+                                let opts = RenderOptions {
+                                    coarse_level: live.coarse_level,
+                                    background: bg,
+                                    shade: false,
+                                };
+                                if let Err(e) = renderer.render(&field, &field, spec, &opts) {
+                                    sh.set_state(PipelineState::Degraded(format!(
+                                        "render failed: {e}"
+                                    )));
+                                    continue;
+                                }
+                                sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
+                                renderer.rgba().to_vec()
                             }
                             FieldMode::Oracle => {
                                 let Some(truth) = &f.truth else {

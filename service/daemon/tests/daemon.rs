@@ -529,6 +529,67 @@ fn two_people_is_a_reported_state_not_a_garbled_render() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The product path: the sim camera through the trained networks (segmentation, shape,
+/// colour), localized and rendered by the engine, published like any frame.
+#[test]
+fn model_mode_renders_network_output() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-model-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = root().join("tests/scenes/front-walk.toml");
+    std::fs::write(
+        dir.join("b.toml"),
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\n[model]\ndir = \"{}\"\n",
+            scene.display(),
+            root().join("models").display()
+        ),
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    let s = wait_for(&d.addr, "model frames", Duration::from_secs(60), |s| {
+        s["frames_published"].as_u64() > Some(1)
+    });
+    assert_eq!(s["mode"], "model", "{s}");
+    assert!(
+        s["mode_note"]
+            .as_str()
+            .unwrap()
+            .contains("trained networks")
+    );
+    let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
+    assert_eq!(st, 200);
+    let png = image::load_from_memory(&png).unwrap().to_rgba8();
+    assert_eq!(png.width(), 65);
+    let opaque = png.pixels().filter(|p| p[3] == 255).count();
+    assert!(
+        opaque > 50,
+        "the reconstructed person covers {opaque} pixels"
+    );
+    assert!(opaque < 65 * 65, "not everything is inside");
+    // A missing model folder is a clear start-up error naming the file.
+    std::fs::write(
+        dir.join("bad.toml"),
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\n[model]\ndir = \"nowhere\"\n",
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_volcapd"))
+        .args(["--check-config", "--config"])
+        .arg(dir.join("bad.toml"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("[model]") && err.contains("seg.onnx") && err.contains("not found"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 fn test_jpeg(w: u32, h: u32, shade: u8) -> Vec<u8> {
     let img = image::RgbImage::from_fn(w, h, |x, _| image::Rgb([shade, (x * 4) as u8, 60]));
     let mut out = Vec::new();

@@ -9,6 +9,7 @@
 //! * [`mesh`]: marching cubes, binary PLY and glTF (.glb) export.
 //! * [`metrics`]: IoU, connected components, band bound, Chamfer and point-to-surface.
 //! * [`softz`]: the SoftZ depth encoding.
+//! * [`model`]: the trained networks (ONNX via tract) as occupancy and colour fields.
 
 pub mod analytic;
 pub mod field;
@@ -17,6 +18,7 @@ pub mod localize;
 mod mc_tables;
 pub mod mesh;
 pub mod metrics;
+pub mod model;
 pub mod render;
 pub mod softz;
 

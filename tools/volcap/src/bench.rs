@@ -114,16 +114,67 @@ fn timed(
     Ok((median, n, stats))
 }
 
+/// Network fields: for every `--model NAME[@int8]` and simulator scene (default
+/// `front-walk`), frame 0 through segmentation and the encoders; the field is the trained
+/// MLP on the input view's crop cube. Scene label `SCENE/NAME-PRECISION`.
+type NamedFields = (Vec<String>, Vec<Box<dyn OccupancyField>>);
+
+fn model_fields(a: &LocalizeArgs) -> anyhow::Result<NamedFields> {
+    use volcap_engine::model::{ModelView, Models, Precision};
+    let scenes: Vec<String> = if a.scenes.is_empty() {
+        vec!["front-walk".into()]
+    } else {
+        a.scenes.clone()
+    };
+    let assets =
+        std::sync::Arc::new(volcap_sim::HumanAssets::embedded().map_err(anyhow::Error::msg)?);
+    let (mut names, mut fields): NamedFields = (vec![], vec![]);
+    for m in &a.models {
+        let (name, prec) = match m.split_once('@') {
+            Some((n, p)) => (
+                n,
+                Precision::parse(p)
+                    .map_err(anyhow::Error::msg)
+                    .context("--model")?,
+            ),
+            None => (m.as_str(), Precision::F32),
+        };
+        let models = Models::load(&a.models_dir, name, prec)?;
+        for sc in &scenes {
+            let path = if sc.ends_with(".toml") {
+                PathBuf::from(sc)
+            } else {
+                PathBuf::from(format!("tests/scenes/{sc}.toml"))
+            };
+            let mut sim = crate::simcmd::load_scene(&path, assets.clone())?;
+            let f = sim
+                .render(0)
+                .with_context(|| format!("{}: frame 0", path.display()))?;
+            let (field, _) = models
+                .frame(&f.rgb, f.width, f.height, ModelView::default())
+                .with_context(|| format!("{} on {}", m, path.display()))?;
+            names.push(format!("{sc}/{name}-{}", prec.name()));
+            fields.push(Box::new(field));
+        }
+    }
+    Ok((names, fields))
+}
+
 pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
     let scenes: Vec<String> = if a.scenes.is_empty() {
         SCENES.iter().map(|s| s.to_string()).collect()
     } else {
         a.scenes.clone()
     };
-    let fields = scenes
-        .iter()
-        .map(|s| scene_field(s))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let (scenes, fields) = if a.models.is_empty() {
+        let fields = scenes
+            .iter()
+            .map(|s| scene_field(s))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        (scenes, fields)
+    } else {
+        model_fields(a)?
+    };
     let specs = a
         .res
         .iter()

@@ -2,6 +2,7 @@
 
 mod bench;
 mod ctl;
+mod eval;
 mod plot;
 mod simcmd;
 
@@ -25,6 +26,9 @@ enum Cmd {
     /// Benchmarks that put accuracy next to time.
     #[command(subcommand)]
     Bench(BenchCmd),
+    /// The full pipeline (segmentation -> shape -> localization -> mesh) on held-out
+    /// simulator subjects against ground truth: Chamfer, P2S, IoU, mask IoU, worst 10, time.
+    Eval(eval::EvalArgs),
     /// The scene simulator: asset pack, rendering, benchmarks, datasets.
     #[command(subcommand)]
     Sim(simcmd::SimCmd),
@@ -70,6 +74,13 @@ pub struct LocalizeArgs {
     /// Folder for accuracy-vs-time.md and accuracy-vs-time.png (default docs/bench).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Trained models (NAME or NAME@int8, repeatable): measure on the network's field for
+    /// each simulator scene (default front-walk) instead of the analytic/oracle fields.
+    #[arg(long = "model", value_name = "NAME[@int8]")]
+    pub models: Vec<String>,
+    /// Folder of the ONNX models.
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
     /// Scene drawn in the plot (default capsule-human if measured, else the first scene).
     #[arg(long)]
     pub plot_scene: Option<String>,
@@ -79,6 +90,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let res = match cli.cmd {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
+        Cmd::Eval(a) => eval::eval(&a),
         Cmd::Sim(c) => simcmd::run(c),
         Cmd::Ctl(c) => ctl::run(c),
     };

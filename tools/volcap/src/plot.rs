@@ -10,7 +10,7 @@ use std::sync::Once;
 static FONT: &[u8] = include_bytes!("../assets/DejaVuSansMono.ttf");
 static REGISTER: Once = Once::new();
 
-fn register_font() {
+pub fn register_font() {
     REGISTER.call_once(|| {
         // The font is compiled in and known to parse; a failure would only lose labels.
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);

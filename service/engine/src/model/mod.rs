@@ -1,0 +1,727 @@
+//! The trained networks (ONNX, run by tract) as engine fields.
+//!
+//! Per frame: [`Models::frame`] letterboxes the camera frame to 256x256, segments it, crops
+//! around the person with the shared rule ([`preprocess::Crop`]), runs the shape and colour
+//! encoders once, and returns a [`ModelField`]: an [`OccupancyField`] + [`ColorField`] over
+//! the render view's NDC cube. Each query point is mapped into crop NDC (the view rotation
+//! about the crop centre, metric through the training camera's NDC extents), its feature is
+//! sampled bilinearly ([`sample::bilinear`], PyTorch's `align_corners=True`, border), its depth
+//! encoded (SoftZ or scalar, as the model's metadata says) and the point MLP runs on batches.
+//!
+//! Loading checks every file: it exists, parses as ONNX, has the `volcap.kind` expected, and
+//! its input/output shapes match the contract; any mismatch is an error naming the file and
+//! what differs. The ONNX files are the only source of the weights.
+
+pub mod preprocess;
+pub mod sample;
+
+use crate::field::{ColorField, FieldError, OccupancyField};
+use crate::softz::{SOFTZ_BINS, soft_z};
+use glam::{Mat3, Vec3};
+use preprocess::{Crop, INPUT_SIZE};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tract_onnx::prelude::*;
+
+/// Feature map side produced by the encoders.
+pub const FEATURE_SIZE: usize = 64;
+
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("{path}: {msg}")]
+    File { path: String, msg: String },
+    #[error("{path}: {what}: expected {expected}, found {found}")]
+    Mismatch {
+        path: String,
+        what: String,
+        expected: String,
+        found: String,
+    },
+    #[error("{path}: running the network failed: {msg}")]
+    Run { path: String, msg: String },
+}
+
+/// Which precision of the networks to load.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    F32,
+    Int8,
+}
+
+impl Precision {
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "f32" => Ok(Self::F32),
+            "int8" => Ok(Self::Int8),
+            _ => Err(format!("precision {s:?} is not one of f32, int8")),
+        }
+    }
+    fn suffix(self) -> &'static str {
+        match self {
+            Self::F32 => "",
+            Self::Int8 => ".int8",
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::F32 => "f32",
+            Self::Int8 => "int8",
+        }
+    }
+}
+
+type Plan = Arc<TypedRunnableModel>;
+
+/// One ONNX network, shape-checked at load.
+pub struct Net {
+    path: PathBuf,
+    plan: Plan,
+    meta: HashMap<String, String>,
+}
+
+/// An input of a network: name and shape, `None` for the dynamic batch dimension.
+pub struct InputSpec<'a> {
+    pub name: &'a str,
+    pub shape: &'a [Option<usize>],
+}
+
+impl Net {
+    /// Load `path`, check `volcap.kind == kind`, the inputs (names, shapes; `None` is the
+    /// dynamic batch dimension) and the output's shape.
+    pub fn load(
+        path: &Path,
+        kind: &str,
+        inputs: &[InputSpec],
+        output: &[Option<usize>],
+    ) -> Result<Net, ModelError> {
+        let p = path.display().to_string();
+        let file = |msg: String| ModelError::File {
+            path: p.clone(),
+            msg,
+        };
+        let mismatch = |what: &str, expected: String, found: String| ModelError::Mismatch {
+            path: p.clone(),
+            what: what.into(),
+            expected,
+            found,
+        };
+        if !path.is_file() {
+            return Err(file(
+                "model file not found (models are committed under models/; train with tools/train/train_all.sh)".into(),
+            ));
+        }
+        let onnx = tract_onnx::onnx();
+        let proto = onnx
+            .proto_model_for_path(path)
+            .map_err(|e| file(format!("not a readable ONNX model: {e}")))?;
+        let meta: HashMap<String, String> = proto
+            .metadata_props
+            .iter()
+            .map(|e| (e.key.clone(), e.value.clone()))
+            .collect();
+        let found_kind = meta.get("volcap.kind").cloned().unwrap_or_default();
+        if found_kind != kind {
+            return Err(mismatch(
+                "metadata volcap.kind",
+                kind.into(),
+                format!("{found_kind:?}"),
+            ));
+        }
+        let graph = proto
+            .graph
+            .as_ref()
+            .ok_or_else(|| file("no graph".into()))?;
+        let names: Vec<String> = graph.input.iter().map(|i| i.name.clone()).collect();
+        let want: Vec<String> = inputs.iter().map(|i| i.name.to_string()).collect();
+        if names != want {
+            return Err(mismatch(
+                "inputs",
+                format!("{want:?}"),
+                format!("{names:?}"),
+            ));
+        }
+        let mut model = onnx
+            .model_for_proto_model(&proto)
+            .map_err(|e| file(format!("cannot build the graph: {e}")))?;
+        let n = model.sym("n");
+        for (i, spec) in inputs.iter().enumerate() {
+            let dims: TVec<TDim> = spec
+                .shape
+                .iter()
+                .map(|d| d.map(|d| d.to_dim()).unwrap_or_else(|| n.clone().into()))
+                .collect();
+            model = model
+                .with_input_fact(i, f32::fact(dims).into())
+                .map_err(|e| {
+                    mismatch(
+                        &format!("input {}", spec.name),
+                        format!("{:?}", spec.shape),
+                        e.to_string(),
+                    )
+                })?;
+        }
+        let typed = model.into_typed().map_err(|e| {
+            let want: Vec<String> = inputs
+                .iter()
+                .map(|i| format!("{} {:?}", i.name, i.shape))
+                .collect();
+            file(format!(
+                "the graph does not accept the expected inputs ({}; None = batch): {e:#}",
+                want.join(", ")
+            ))
+        })?;
+        let fact = typed
+            .output_fact(0)
+            .map_err(|e| file(format!("no output: {e}")))?;
+        let shape: Vec<Option<usize>> = fact
+            .shape
+            .iter()
+            .map(|d| d.as_i64().and_then(|v| usize::try_from(v).ok()))
+            .collect();
+        if shape != output {
+            return Err(mismatch(
+                "output shape",
+                format!("{output:?}"),
+                format!("{shape:?}"),
+            ));
+        }
+        let plan = typed
+            .into_optimized()
+            .and_then(|m| m.into_runnable())
+            .map_err(|e| file(format!("cannot optimize: {e:#}")))?;
+        Ok(Net {
+            path: path.to_path_buf(),
+            plan,
+            meta,
+        })
+    }
+
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.meta.get(&format!("volcap.{key}")).map(|s| s.as_str())
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Run on f32 inputs (shape, data); the first output as a flat vector.
+    pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, ModelError> {
+        let err = |msg: String| ModelError::Run {
+            path: self.path.display().to_string(),
+            msg,
+        };
+        let mut tv: TVec<TValue> = tvec![];
+        for (shape, data) in inputs {
+            let t = Tensor::from_shape(shape, data).map_err(|e| err(e.to_string()))?;
+            tv.push(t.into_tvalue());
+        }
+        let out = self.plan.run(tv).map_err(|e| err(format!("{e:#}")))?;
+        let v = out[0]
+            .to_plain_array_view::<f32>()
+            .map_err(|e| err(e.to_string()))?;
+        Ok(v.iter().copied().collect())
+    }
+}
+
+/// Depth encoding of a shape MLP.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ZEncoding {
+    SoftZ,
+    Scalar,
+}
+
+impl ZEncoding {
+    pub fn dim(self) -> usize {
+        match self {
+            Self::SoftZ => SOFTZ_BINS,
+            Self::Scalar => 1,
+        }
+    }
+}
+
+/// The shape networks: encoder + point MLP.
+pub struct ShapeNets {
+    pub encoder: Net,
+    pub mlp: Net,
+    pub channels: usize,
+    pub z: ZEncoding,
+}
+
+/// The colour networks.
+pub struct ColorNets {
+    pub encoder: Net,
+    pub mlp: Net,
+    pub channels: usize,
+}
+
+/// Every network of the pipeline, loaded from a models folder.
+pub struct Models {
+    pub seg: Net,
+    pub shape: Arc<ShapeNets>,
+    pub color: Arc<ColorNets>,
+    pub name: String,
+    pub precision: Precision,
+}
+
+const IMG: [Option<usize>; 4] = [Some(1), Some(4), Some(INPUT_SIZE), Some(INPUT_SIZE)];
+
+/// The `volcap.*` metadata of an ONNX file (empty when it cannot be read: loading the
+/// network then reports why).
+fn meta_of(path: &Path) -> HashMap<String, String> {
+    tract_onnx::onnx()
+        .proto_model_for_path(path)
+        .map(|p| {
+            p.metadata_props
+                .iter()
+                .map(|e| (e.key.clone(), e.value.clone()))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// A positive integer metadata value, or an error naming the file and key.
+fn meta_usize(path: &Path, meta: &HashMap<String, String>, key: &str) -> Result<usize, ModelError> {
+    if !path.is_file() {
+        return Err(ModelError::File {
+            path: path.display().to_string(),
+            msg: "model file not found (models are committed under models/; train with tools/train/train_all.sh)".into(),
+        });
+    }
+    meta.get(&format!("volcap.{key}"))
+        .and_then(|v| v.parse::<usize>().ok())
+        .filter(|v| *v > 0)
+        .ok_or_else(|| ModelError::Mismatch {
+            path: path.display().to_string(),
+            what: format!("metadata volcap.{key}"),
+            expected: "a positive integer".into(),
+            found: format!("{:?}", meta.get(&format!("volcap.{key}"))),
+        })
+}
+
+fn encoder(path: &Path, kind: &str) -> Result<(Net, usize), ModelError> {
+    let channels = meta_usize(path, &meta_of(path), "feature_channels")?;
+    let net = Net::load(
+        path,
+        kind,
+        &[InputSpec {
+            name: "image",
+            shape: &IMG,
+        }],
+        &[
+            Some(1),
+            Some(channels),
+            Some(FEATURE_SIZE),
+            Some(FEATURE_SIZE),
+        ],
+    )?;
+    Ok((net, channels))
+}
+
+impl ShapeNets {
+    pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        let sfx = precision.suffix();
+        let (encoder, channels) = encoder(
+            &dir.join(format!("shape-{name}.encoder{sfx}.onnx")),
+            "shape-encoder",
+        )?;
+        let mpath = dir.join(format!("shape-{name}.mlp{sfx}.onnx"));
+        let meta = meta_of(&mpath);
+        let z = match meta.get("volcap.z_encoding").map(|s| s.as_str()) {
+            Some("softz") => ZEncoding::SoftZ,
+            Some("scalar") => ZEncoding::Scalar,
+            other if mpath.is_file() => {
+                return Err(ModelError::Mismatch {
+                    path: mpath.display().to_string(),
+                    what: "metadata volcap.z_encoding".into(),
+                    expected: "softz or scalar".into(),
+                    found: format!("{other:?}"),
+                });
+            }
+            _ => ZEncoding::SoftZ,
+        };
+        let mlp = Net::load(
+            &mpath,
+            "shape-mlp",
+            &[
+                InputSpec {
+                    name: "feat",
+                    shape: &[None, Some(channels)],
+                },
+                InputSpec {
+                    name: "z",
+                    shape: &[None, Some(z.dim())],
+                },
+            ],
+            &[None, Some(1)],
+        )?;
+        Ok(ShapeNets {
+            encoder,
+            mlp,
+            channels,
+            z,
+        })
+    }
+}
+
+impl ShapeNets {
+    /// The feature map `[C, 64, 64]` of an encoder input `[4, S, S]`.
+    pub fn features(&self, x: &[f32]) -> Result<Vec<f32>, ModelError> {
+        let s = INPUT_SIZE;
+        self.encoder.run(&[(&[1, 4, s, s], x)])
+    }
+
+    /// Occupancy at crop-NDC points given a feature map: sample, encode depth, run the MLP.
+    pub fn query(&self, feat: &[f32], points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        let n = points.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let (c, f, zd) = (self.channels, FEATURE_SIZE, self.z.dim());
+        let mut fv = vec![0.0f32; n * c];
+        let mut z = vec![0.0f32; n * zd];
+        for (i, u) in points.iter().enumerate() {
+            sample::bilinear(feat, c, f, f, u.x, u.y, &mut fv[i * c..(i + 1) * c]);
+            match self.z {
+                ZEncoding::SoftZ => {
+                    // Non-finite depth is refused by SoftZ: reported with the point.
+                    soft_z(u.z, &mut z[i * zd..(i + 1) * zd]).map_err(|_| {
+                        FieldError::NonFinite {
+                            index: None,
+                            point: u.to_array(),
+                            value: u.z,
+                        }
+                    })?;
+                }
+                ZEncoding::Scalar => {
+                    if !u.z.is_finite() {
+                        return Err(FieldError::NonFinite {
+                            index: None,
+                            point: u.to_array(),
+                            value: u.z,
+                        });
+                    }
+                    z[i] = u.z.clamp(-1.0, 1.0);
+                }
+            }
+        }
+        let occ = self
+            .mlp
+            .run(&[(&[n, c], &fv), (&[n, zd], &z)])
+            .map_err(|e| FieldError::Backend(e.to_string()))?;
+        if occ.len() != n {
+            return Err(FieldError::Backend(format!(
+                "{}: {} outputs for {n} points",
+                self.mlp.path().display(),
+                occ.len()
+            )));
+        }
+        out[..n].copy_from_slice(&occ);
+        Ok(())
+    }
+}
+
+impl ColorNets {
+    /// Colour stays f32 at every precision setting: it runs only on the visible surface
+    /// points, off the shape path's cost.
+    pub fn load(dir: &Path) -> Result<Self, ModelError> {
+        let (encoder, channels) = encoder(&dir.join("color.encoder.onnx"), "color-encoder")?;
+        let mlp = Net::load(
+            &dir.join("color.mlp.onnx"),
+            "color-mlp",
+            &[
+                InputSpec {
+                    name: "feat",
+                    shape: &[None, Some(channels)],
+                },
+                InputSpec {
+                    name: "rgb",
+                    shape: &[None, Some(3)],
+                },
+                InputSpec {
+                    name: "z",
+                    shape: &[None, Some(1)],
+                },
+            ],
+            &[None, Some(3)],
+        )?;
+        Ok(ColorNets {
+            encoder,
+            mlp,
+            channels,
+        })
+    }
+}
+
+/// Why a frame gives no field.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error("no person in view (segmentation found no person pixel)")]
+    NoPerson,
+    #[error(transparent)]
+    Model(#[from] ModelError),
+}
+
+/// Time per stage of [`Models::frame`], milliseconds.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FrameTimes {
+    pub segment_ms: f64,
+    pub encode_ms: f64,
+}
+
+/// The render view relative to the input camera: rotation about the crop centre (yaw about
+/// the vertical axis, then pitch), and a zoom (1 = the crop).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelView {
+    pub yaw_deg: f32,
+    pub pitch_deg: f32,
+    pub zoom: f32,
+}
+
+impl Default for ModelView {
+    fn default() -> Self {
+        Self {
+            yaw_deg: 0.0,
+            pitch_deg: 0.0,
+            zoom: 1.0,
+        }
+    }
+}
+
+/// Half extents in metres of the input view's NDC cube for the training camera (weak
+/// perspective 2.3 m image height, near/far 1.5 m from the subject): used only to make the
+/// view rotation metric.
+pub const NDC_HALF_EXTENT_M: Vec3 = Vec3::new(1.15, 1.15, 1.5);
+
+impl Models {
+    /// Load `seg.onnx`, `shape-NAME.*` and `color.*` from `dir`.
+    pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        let sfx = precision.suffix();
+        let seg = Net::load(
+            &dir.join(format!("seg{sfx}.onnx")),
+            "seg",
+            &[InputSpec {
+                name: "image",
+                shape: &[Some(1), Some(3), Some(INPUT_SIZE), Some(INPUT_SIZE)],
+            }],
+            &[Some(1), Some(1), Some(INPUT_SIZE), Some(INPUT_SIZE)],
+        )?;
+        Ok(Models {
+            seg,
+            shape: Arc::new(ShapeNets::load(dir, name, precision)?),
+            color: Arc::new(ColorNets::load(dir)?),
+            name: name.into(),
+            precision,
+        })
+    }
+
+    /// The soft person mask `[S, S]` of a letterboxed frame `[3, S, S]`.
+    pub fn segment(&self, rgb: &[f32]) -> Result<Vec<f32>, ModelError> {
+        let s = INPUT_SIZE;
+        let mut m = self.seg.run(&[(&[1, 3, s, s], rgb)])?;
+        for v in &mut m {
+            // A non-finite mask value is no evidence of a person.
+            if !v.is_finite() {
+                *v = 0.0;
+            }
+        }
+        Ok(m)
+    }
+
+    /// Segment, crop and encode one RGB8 frame; the field over `view`.
+    pub fn frame(
+        &self,
+        rgb: &[u8],
+        width: usize,
+        height: usize,
+        view: ModelView,
+    ) -> Result<(ModelField, FrameTimes), FrameError> {
+        let mut times = FrameTimes::default();
+        let t = std::time::Instant::now();
+        let img = preprocess::letterbox(rgb, width, height);
+        let mask = self.segment(&img)?;
+        times.segment_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = std::time::Instant::now();
+        let crop = Crop::from_mask(&mask, INPUT_SIZE).ok_or(FrameError::NoPerson)?;
+        let field = self.encode(&img, &mask, crop, view)?;
+        times.encode_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok((field, times))
+    }
+
+    /// Encode a letterboxed image `[3, S, S]` with its mask `[S, S]` through `crop`.
+    pub fn encode(
+        &self,
+        img: &[f32],
+        mask: &[f32],
+        crop: Crop,
+        view: ModelView,
+    ) -> Result<ModelField, ModelError> {
+        let s = INPUT_SIZE;
+        let rgb_c = crop.apply(img, 3, s);
+        let mask_c = crop.apply(mask, 1, s);
+        let x = preprocess::encoder_input(&rgb_c, &mask_c, s);
+        let shape_feat = self.shape.features(&x)?;
+        let color_feat = self.color.encoder.run(&[(&[1, 4, s, s], &x)])?;
+        // The colour MLP's pixel input, as in training: the masked RGB back in [0, 1].
+        let image: Vec<f32> = x[..3 * s * s].iter().map(|v| v * 0.5 + 0.5).collect();
+        Ok(ModelField::new(
+            mask_c,
+            self.shape.clone(),
+            self.color.clone(),
+            shape_feat,
+            color_feat,
+            image,
+            crop,
+            view,
+        ))
+    }
+}
+
+/// The networks' occupancy and colour over the render view's NDC cube for one frame.
+pub struct ModelField {
+    /// The cropped soft person mask `[S, S]`: points whose projection falls outside it
+    /// (< 0.5) are outside the person (the silhouette bounds the body under the input view)
+    /// and are not sent to the MLP.
+    mask: Vec<f32>,
+    shape: Arc<ShapeNets>,
+    color: Arc<ColorNets>,
+    shape_feat: Vec<f32>,
+    color_feat: Vec<f32>,
+    /// The cropped, masked input image `[3, S, S]`, RGB in [0, 1] (0.5 off the person).
+    image: Vec<f32>,
+    pub crop: Crop,
+    /// Render NDC -> crop NDC.
+    to_crop: Mat3,
+    identity_view: bool,
+}
+
+impl ModelField {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        mask: Vec<f32>,
+        shape: Arc<ShapeNets>,
+        color: Arc<ColorNets>,
+        shape_feat: Vec<f32>,
+        color_feat: Vec<f32>,
+        image: Vec<f32>,
+        crop: Crop,
+        view: ModelView,
+    ) -> Self {
+        let d = Mat3::from_diagonal(NDC_HALF_EXTENT_M);
+        let r = Mat3::from_rotation_y(view.yaw_deg.to_radians())
+            * Mat3::from_rotation_x(view.pitch_deg.to_radians());
+        let zoom = if view.zoom.is_finite() && view.zoom > 0.0 {
+            view.zoom
+        } else {
+            1.0
+        };
+        // Render NDC p -> metric (D p) -> rotate back into the input view -> crop NDC.
+        let to_crop = d.inverse() * r.transpose() * d * (1.0 / zoom);
+        let identity_view = view.yaw_deg == 0.0 && view.pitch_deg == 0.0;
+        Self {
+            mask,
+            shape,
+            color,
+            shape_feat,
+            color_feat,
+            image,
+            crop,
+            to_crop,
+            identity_view,
+        }
+    }
+
+    /// Crop NDC of a render-view NDC point.
+    pub fn to_crop(&self, p: Vec3) -> Vec3 {
+        self.to_crop * p
+    }
+
+    fn gather(&self, points: &[Vec3], feat: &[f32], c: usize, out: &mut Vec<f32>) -> Vec<Vec3> {
+        let f = FEATURE_SIZE;
+        out.clear();
+        out.resize(points.len() * c, 0.0);
+        let mut q = Vec::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            let u = self.to_crop(*p);
+            sample::bilinear(feat, c, f, f, u.x, u.y, &mut out[i * c..(i + 1) * c]);
+            q.push(u);
+        }
+        q
+    }
+
+    fn field_err(e: ModelError) -> FieldError {
+        FieldError::Backend(e.to_string())
+    }
+}
+
+impl OccupancyField for ModelField {
+    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        let s = INPUT_SIZE;
+        let mut idx = Vec::with_capacity(points.len());
+        let mut q = Vec::with_capacity(points.len());
+        let mut m = [0.0f32];
+        for (i, p) in points.iter().enumerate() {
+            let u = self.to_crop(*p);
+            sample::bilinear(&self.mask, 1, s, s, u.x, u.y, &mut m);
+            let outside_cube = u.x.abs() > 1.0 || u.y.abs() > 1.0;
+            if m[0] < 0.5 || outside_cube {
+                out[i] = 0.0;
+            } else {
+                idx.push(i);
+                q.push(u);
+            }
+        }
+        if q.is_empty() {
+            return Ok(());
+        }
+        let mut occ = vec![0.0f32; q.len()];
+        self.shape.query(&self.shape_feat, &q, &mut occ)?;
+        for (k, &i) in idx.iter().enumerate() {
+            out[i] = occ[k];
+        }
+        Ok(())
+    }
+}
+
+impl ColorField for ModelField {
+    fn color(&self, points: &[Vec3], out: &mut [[f32; 3]]) -> Result<(), FieldError> {
+        if points.is_empty() {
+            return Ok(());
+        }
+        let s = INPUT_SIZE;
+        let mut px = [0.0f32; 3];
+        if self.identity_view {
+            // The render view is the input view: the first hit is visible in the input, so it
+            // takes the input pixel's colour directly (the paper's rule).
+            for (o, p) in out.iter_mut().zip(points) {
+                let u = self.to_crop(*p);
+                sample::bilinear(&self.image, 3, s, s, u.x, u.y, &mut px);
+                *o = px;
+            }
+            return Ok(());
+        }
+        let c = self.color.channels;
+        let mut feat = Vec::new();
+        let q = self.gather(points, &self.color_feat, c, &mut feat);
+        let n = points.len();
+        let mut rgb = vec![0.0f32; n * 3];
+        let mut z = vec![0.0f32; n];
+        for (i, u) in q.iter().enumerate() {
+            sample::bilinear(&self.image, 3, s, s, u.x, u.y, &mut rgb[i * 3..i * 3 + 3]);
+            z[i] = if u.z.is_finite() {
+                u.z.clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
+        }
+        let col = self
+            .color
+            .mlp
+            .run(&[(&[n, c], &feat), (&[n, 3], &rgb), (&[n, 1], &z)])
+            .map_err(Self::field_err)?;
+        for (i, o) in out.iter_mut().take(n).enumerate() {
+            *o = [col[i * 3], col[i * 3 + 1], col[i * 3 + 2]];
+        }
+        Ok(())
+    }
+}

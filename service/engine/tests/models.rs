@@ -1,0 +1,439 @@
+//! The committed networks through the engine: golden vectors from PyTorch, load-time checks,
+//! int8 against f32, and hard frames that must stay finite.
+
+use glam::Vec3;
+use safetensors::SafeTensors;
+use std::path::{Path, PathBuf};
+use volcap_engine::grid::{Grid, GridSpec};
+use volcap_engine::localize::{Localizer, Method};
+use volcap_engine::model::preprocess::{Crop, INPUT_SIZE, encoder_input, letterbox};
+use volcap_engine::model::{
+    FEATURE_SIZE, FrameError, ModelError, ModelView, Models, Precision, ShapeNets,
+};
+use volcap_engine::render::{RenderOptions, Renderer};
+
+fn models_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models")
+}
+
+/// Shape models listed in models/models.json.
+fn shape_models() -> Vec<String> {
+    let text =
+        std::fs::read_to_string(models_dir().join("models.json")).expect("models/models.json");
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut names: Vec<String> = v
+        .as_object()
+        .unwrap()
+        .keys()
+        .filter_map(|k| k.strip_prefix("shape-").map(str::to_string))
+        .collect();
+    names.sort();
+    assert!(
+        names.contains(&"compact".to_string()),
+        "the compact default is committed"
+    );
+    names
+}
+
+struct Golden {
+    bytes: Vec<u8>,
+}
+
+impl Golden {
+    fn load(name: &str) -> Self {
+        let p = models_dir()
+            .join("golden")
+            .join(format!("{name}.safetensors"));
+        Golden {
+            bytes: std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+        }
+    }
+    fn f32(&self, key: &str) -> Vec<f32> {
+        let st = SafeTensors::deserialize(&self.bytes).unwrap();
+        let t = st.tensor(key).unwrap();
+        t.data()
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect()
+    }
+    fn i32(&self, key: &str) -> Vec<i32> {
+        let st = SafeTensors::deserialize(&self.bytes).unwrap();
+        let t = st.tensor(key).unwrap();
+        t.data()
+            .chunks_exact(4)
+            .map(|b| i32::from_le_bytes(b.try_into().unwrap()))
+            .collect()
+    }
+    fn u8(&self, key: &str) -> Vec<u8> {
+        let st = SafeTensors::deserialize(&self.bytes).unwrap();
+        st.tensor(key).unwrap().data().to_vec()
+    }
+}
+
+/// The encoder input and crop of the golden image, through the engine's preprocessing.
+fn golden_input(g: &Golden) -> (Vec<f32>, Crop) {
+    let s = INPUT_SIZE;
+    let img = letterbox(&g.u8("image_u8"), s, s);
+    let mask: Vec<f32> = g.u8("mask_u8").iter().map(|&m| m as f32 / 255.0).collect();
+    let crop = Crop::from_mask(&mask, s).expect("golden image has a person");
+    let want = g.f32("crop");
+    assert!(
+        (crop.s - want[0]).abs() < 1e-5
+            && (crop.tx - want[1]).abs() < 1e-5
+            && (crop.ty - want[2]).abs() < 1e-5,
+        "crop rule differs from training: engine {crop:?}, PyTorch {want:?}"
+    );
+    let rgb_c = crop.apply(&img, 3, s);
+    let mask_c = crop.apply(&mask, 1, s);
+    (encoder_input(&rgb_c, &mask_c, s), crop)
+}
+
+fn points(g: &Golden) -> Vec<Vec3> {
+    g.f32("points")
+        .chunks_exact(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect()
+}
+
+#[test]
+fn shape_models_match_pytorch_golden_vectors() {
+    for name in shape_models() {
+        let g = Golden::load(&format!("shape-{name}"));
+        let nets = ShapeNets::load(&models_dir(), &name, Precision::F32).unwrap();
+        let (x, _) = golden_input(&g);
+        let feat = nets.features(&x).unwrap();
+        assert_eq!(feat.len(), nets.channels * FEATURE_SIZE * FEATURE_SIZE);
+        // Features at the golden pixels.
+        let (iy, ix, want) = (g.i32("iy"), g.i32("ix"), g.f32("features"));
+        let plane = FEATURE_SIZE * FEATURE_SIZE;
+        let mut worst = 0.0f32;
+        for (k, (&y, &x)) in iy.iter().zip(&ix).enumerate() {
+            for c in 0..nets.channels {
+                let got = feat[c * plane + y as usize * FEATURE_SIZE + x as usize];
+                worst = worst.max((got - want[k * nets.channels + c]).abs());
+            }
+        }
+        assert!(
+            worst < 2e-3,
+            "{name}: features differ from PyTorch by {worst}"
+        );
+        // Occupancy through our sampling (grid_sample convention) and depth encoding.
+        let pts = points(&g);
+        let mut occ = vec![0.0; pts.len()];
+        nets.query(&feat, &pts, &mut occ).unwrap();
+        let want = g.f32("occ");
+        let worst = occ
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        println!(
+            "{name}: golden occupancy max |engine - PyTorch| = {worst:.2e} over {} points",
+            pts.len()
+        );
+        assert!(
+            worst < 2e-3,
+            "{name}: occupancy differs from PyTorch by {worst}"
+        );
+    }
+}
+
+/// int8 against f32 on the golden set: same inside/outside decision on at least 90 % of the
+/// golden points and mean |difference| of occupancy below 0.08.
+#[test]
+fn int8_agrees_with_f32_within_tolerance() {
+    for name in ["compact", "large"] {
+        let g = Golden::load(&format!("shape-{name}"));
+        let (x, _) = golden_input(&g);
+        let pts = points(&g);
+        let run = |p| {
+            let nets = ShapeNets::load(&models_dir(), name, p).unwrap();
+            let f = nets.features(&x).unwrap();
+            let mut o = vec![0.0; pts.len()];
+            nets.query(&f, &pts, &mut o).unwrap();
+            o
+        };
+        let (a, b) = (run(Precision::F32), run(Precision::Int8));
+        let agree = a
+            .iter()
+            .zip(&b)
+            .filter(|(x, y)| (**x > 0.5) == (**y > 0.5))
+            .count() as f64
+            / a.len() as f64;
+        let mad = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs() as f64)
+            .sum::<f64>()
+            / a.len() as f64;
+        println!(
+            "{name}: int8 vs f32 on golden points: decision agreement {agree:.3}, mean |diff| {mad:.4}"
+        );
+        assert!(b.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+        assert!(agree >= 0.9, "{name}: int8 decisions agree on only {agree}");
+        assert!(mad < 0.08, "{name}: int8 mean occupancy difference {mad}");
+    }
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("volcap-models-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn missing_corrupt_and_mismatched_models_name_the_file_and_the_mismatch() {
+    let dir = tmp("bad");
+    // Missing.
+    let e = ShapeNets::load(&dir, "compact", Precision::F32)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("shape-compact.encoder.onnx") && e.contains("not found"),
+        "{e}"
+    );
+    // Corrupt.
+    std::fs::write(
+        dir.join("shape-compact.encoder.onnx"),
+        b"not an onnx file at all",
+    )
+    .unwrap();
+    let e = ShapeNets::load(&dir, "compact", Precision::F32)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("shape-compact.encoder.onnx"), "{e}");
+    // Truncated real file.
+    let real = std::fs::read(models_dir().join("shape-compact.encoder.onnx")).unwrap();
+    std::fs::write(
+        dir.join("shape-compact.encoder.onnx"),
+        &real[..real.len() / 2],
+    )
+    .unwrap();
+    let e = ShapeNets::load(&dir, "compact", Precision::F32)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("shape-compact.encoder.onnx"), "{e}");
+    // Wrong kind: the MLP where the encoder belongs.
+    std::fs::copy(
+        models_dir().join("shape-compact.mlp.onnx"),
+        dir.join("shape-compact.encoder.onnx"),
+    )
+    .unwrap();
+    let e = ShapeNets::load(&dir, "compact", Precision::F32)
+        .err()
+        .unwrap();
+    assert!(matches!(e, ModelError::Mismatch { .. }), "{e}");
+    // Right encoder, an MLP expecting another feature width.
+    std::fs::copy(
+        models_dir().join("shape-compact.encoder.onnx"),
+        dir.join("shape-compact.encoder.onnx"),
+    )
+    .unwrap();
+    let other = shape_models().into_iter().find(|n| {
+        let t = std::fs::read_to_string(models_dir().join("models.json")).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&t).unwrap();
+        v[format!("shape-{n}")]["variant"] == "large"
+    });
+    if let Some(other) = other {
+        std::fs::copy(
+            models_dir().join(format!("shape-{other}.mlp.onnx")),
+            dir.join("shape-compact.mlp.onnx"),
+        )
+        .unwrap();
+        let e = ShapeNets::load(&dir, "compact", Precision::F32)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("shape-compact.mlp.onnx") && e.contains("feat"),
+            "{e}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn full() -> Models {
+    Models::load(&models_dir(), "compact", Precision::F32).expect("committed models load")
+}
+
+/// Frames that must not produce NaN/Inf or a hang: the result is a field whose occupancy is
+/// finite and in [0, 1] everywhere on a 33^3 grid (the engine's checked evaluation path
+/// refuses anything else) and that renders, or a clear "no person".
+#[test]
+fn hard_frames_give_finite_fields_or_no_person() {
+    let models = full();
+    let s = 256;
+    let g = Golden::load("shape-compact");
+    let person = g.u8("image_u8");
+    let mut frames: Vec<(&str, Vec<u8>, usize, usize)> = vec![
+        ("black", vec![0; s * s * 3], s, s),
+        ("white", vec![255; s * s * 3], s, s),
+        (
+            "saturated noise",
+            (0..s * s * 3)
+                .map(|i| {
+                    if (i * 2654435761usize) >> 7 & 1 == 1 {
+                        255
+                    } else {
+                        0
+                    }
+                })
+                .collect(),
+            s,
+            s,
+        ),
+        ("person", person.clone(), s, s),
+    ];
+    // Tiny subject: the person scaled to 1/8 in a corner of a black frame.
+    let mut tiny = vec![0u8; s * s * 3];
+    for y in 0..s / 8 {
+        for x in 0..s / 8 {
+            let (sy, sx) = (y * 8, x * 8);
+            tiny[(y * s + x) * 3..(y * s + x) * 3 + 3]
+                .copy_from_slice(&person[(sy * s + sx) * 3..(sy * s + sx) * 3 + 3]);
+        }
+    }
+    frames.push(("tiny subject", tiny, s, s));
+    // Cut by the edge: the right half of the frame shifted out.
+    let mut cut = vec![0u8; s * s * 3];
+    for y in 0..s {
+        for x in 0..s / 2 {
+            let src = (y * s + x + s / 2) * 3;
+            cut[(y * s + x) * 3..(y * s + x) * 3 + 3].copy_from_slice(&person[src..src + 3]);
+        }
+    }
+    frames.push(("cut by edge", cut, s, s));
+    // Odd sizes go through the letterbox.
+    frames.push((
+        "wide 320x90",
+        (0..320 * 90 * 3).map(|i| (i % 251) as u8).collect(),
+        320,
+        90,
+    ));
+    let spec = GridSpec::from_resolution(33).unwrap();
+    let mut loc = Localizer::new();
+    let mut grid = Grid::new(spec);
+    let mut renderer = Renderer::new();
+    for (what, rgb, w, h) in &frames {
+        match models.frame(
+            rgb,
+            *w,
+            *h,
+            ModelView {
+                yaw_deg: 30.0,
+                pitch_deg: 10.0,
+                zoom: 1.0,
+            },
+        ) {
+            Err(FrameError::NoPerson) => println!("{what}: no person"),
+            Err(e) => panic!("{what}: {e}"),
+            Ok((field, _)) => {
+                loc.run(Method::Dense, &field, spec, 3, &mut grid)
+                    .unwrap_or_else(|e| panic!("{what}: {e}"));
+                let v = &grid.values;
+                assert!(
+                    v.iter().all(|x| x.is_finite() && (0.0..=1.0).contains(x)),
+                    "{what}"
+                );
+                let inside = grid.binarized().count_ones();
+                let opts = RenderOptions {
+                    coarse_level: 3,
+                    background: [0.0; 4],
+                    shade: false,
+                };
+                renderer
+                    .render(
+                        &field,
+                        &field,
+                        GridSpec::from_resolution(65).unwrap(),
+                        &opts,
+                    )
+                    .unwrap_or_else(|e| panic!("{what}: render: {e}"));
+                println!(
+                    "{what}: field ok, {inside} of {} grid points inside",
+                    spec.len()
+                );
+            }
+        }
+    }
+    // The person frame must be found and give a surface.
+    let (field, _) = models
+        .frame(&person, s, s, ModelView::default())
+        .expect("the golden person is found");
+    loc.run(Method::Hierarchical, &field, spec, 3, &mut grid)
+        .unwrap();
+    assert!(
+        grid.binarized().count_ones() > 0,
+        "no inside point for a real person"
+    );
+}
+
+/// Points far outside the cube and non-finite points: finite occupancy or a clear error.
+#[test]
+fn adversarial_points_are_finite_or_refused() {
+    let models = full();
+    let g = Golden::load("shape-compact");
+    let (field, _) = models
+        .frame(&g.u8("image_u8"), 256, 256, ModelView::default())
+        .unwrap();
+    use volcap_engine::OccupancyField;
+    let pts = [
+        Vec3::splat(1e6),
+        Vec3::splat(-1e6),
+        Vec3::new(0.0, 0.0, 3.0),
+        Vec3::new(f32::MAX, 0.0, 0.0),
+    ];
+    let mut out = [0.0; 4];
+    field.occupancy(&pts, &mut out).unwrap();
+    assert!(
+        out.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)),
+        "{out:?}"
+    );
+    let e = field.occupancy(&[Vec3::new(0.0, 0.0, f32::NAN)], &mut out[..1]);
+    assert!(e.is_err(), "a NaN depth is refused, not encoded");
+}
+
+#[test]
+fn segmentation_and_colour_match_pytorch_golden_vectors() {
+    let models = full();
+    let s = INPUT_SIZE;
+    let g = Golden::load("seg");
+    let prob = models.segment(&letterbox(&g.u8("image_u8"), s, s)).unwrap();
+    let (iy, ix, want) = (g.i32("iy"), g.i32("ix"), g.f32("mask_prob"));
+    let worst = iy
+        .iter()
+        .zip(&ix)
+        .zip(&want)
+        .map(|((&y, &x), w)| (prob[y as usize * s + x as usize] - w).abs())
+        .fold(0.0f32, f32::max);
+    println!("seg: golden mask max |engine - PyTorch| = {worst:.2e}");
+    assert!(worst < 2e-3, "segmentation differs from PyTorch by {worst}");
+    let g = Golden::load("color");
+    let (x, _) = golden_input(&g);
+    let c = models.color.channels;
+    let feat = models.color.encoder.run(&[(&[1, 4, s, s], &x)]).unwrap();
+    let (iy, ix, want) = (g.i32("iy"), g.i32("ix"), g.f32("features"));
+    let plane = FEATURE_SIZE * FEATURE_SIZE;
+    let worst = iy
+        .iter()
+        .zip(&ix)
+        .enumerate()
+        .flat_map(|(k, (&y, &xx))| {
+            let feat = &feat;
+            let want = &want;
+            (0..c).map(move |ch| {
+                (feat[ch * plane + y as usize * FEATURE_SIZE + xx as usize] - want[k * c + ch])
+                    .abs()
+            })
+        })
+        .fold(0.0f32, f32::max);
+    println!("colour: golden features max |engine - PyTorch| = {worst:.2e}");
+    assert!(
+        worst < 2e-3,
+        "colour features differ from PyTorch by {worst}"
+    );
+}

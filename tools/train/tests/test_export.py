@@ -1,0 +1,105 @@
+"""Export round trip: PyTorch vs onnxruntime on the same inputs (fresh seeded nets), and the
+committed ONNX files vs their committed PyTorch golden vectors (the engine's tests check the
+same golden vectors through tract)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+import torch
+from safetensors.numpy import load_file
+
+from volcap_train import crop as C
+from volcap_train.export import Sig, export
+from volcap_train.nets import SegNet, encode_z, make_shape, sample_features
+
+MODELS = Path(__file__).resolve().parents[3] / "models"
+
+
+def run(path, feeds):
+    s = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    return s.run(None, feeds)[0]
+
+
+@pytest.mark.parametrize("variant", ["compact", "compact-plain-z"])
+def test_shape_round_trip(tmp_path, variant):
+    torch.manual_seed(0)
+    enc, mlp, zenc = make_shape(variant)
+    # Non-trivial batch-norm statistics.
+    enc.train(), mlp.train()
+    with torch.no_grad():
+        for _ in range(3):
+            f = enc(torch.randn(2, 4, 256, 256))
+            mlp(sample_features(f, torch.rand(2, 64, 2) * 2 - 1).reshape(128, -1), encode_z(torch.rand(128) * 2 - 1, zenc))
+    enc.eval(), mlp.eval()
+    x = torch.randn(1, 4, 256, 256)
+    export(enc, (x,), ["image"], ["features"], tmp_path / "e.onnx", {"kind": "shape-encoder"}, False)
+    fb = torch.randn(37, f.shape[1])
+    zb = encode_z(torch.rand(37) * 2 - 1, zenc)
+    export(Sig(mlp), (fb, zb), ["feat", "z"], ["occ"], tmp_path / "m.onnx", {"kind": "shape-mlp"}, True)
+    with torch.no_grad():
+        fe = enc(x).numpy()
+        oc = torch.sigmoid(mlp(fb, zb)).numpy()
+    np.testing.assert_allclose(run(tmp_path / "e.onnx", {"image": x.numpy()}), fe, rtol=1e-4, atol=1e-4)
+    # A different batch size than the one exported with: the batch axis is dynamic.
+    np.testing.assert_allclose(run(tmp_path / "m.onnx", {"feat": fb.numpy(), "z": zb.numpy()}), oc, rtol=1e-5, atol=1e-5)
+
+
+def test_seg_round_trip(tmp_path):
+    torch.manual_seed(1)
+    net = SegNet().eval()
+    x = torch.rand(1, 3, 256, 256)
+    export(Sig(net), (x,), ["image"], ["mask"], tmp_path / "s.onnx", {"kind": "seg"}, False)
+    with torch.no_grad():
+        ref = torch.sigmoid(net(x)).numpy()
+    np.testing.assert_allclose(run(tmp_path / "s.onnx", {"image": x.numpy()}), ref, rtol=1e-4, atol=1e-5)
+
+
+def test_grid_sample_convention_is_pixel_centres():
+    # align_corners=True: NDC -1 / +1 hit the first / last pixel centres exactly.
+    f = torch.arange(12.0).reshape(1, 1, 3, 4)
+    xy = torch.tensor([[[-1.0, -1.0], [1.0, 1.0], [-1.0 + 2.0 / 3.0, 0.0], [5.0, 5.0]]])
+    v = sample_features(f, xy)[0, :, 0]
+    assert v.tolist() == [0.0, 11.0, 5.0, 11.0]
+
+
+def test_crop_rule_round_trip():
+    m = torch.zeros(256, 256)
+    m[40:200, 100:140] = 1
+    p = C.crop_params(m)
+    s, tx, ty = p
+    assert s == pytest.approx((2 * 159 / 255) / 2 / C.FILL)
+    pts = torch.rand(10, 3) * 2 - 1
+    back = C.to_crop(pts, p)
+    assert torch.allclose(back[:, 0] * s + tx, pts[:, 0], atol=1e-6)
+    assert C.crop_params(torch.zeros(8, 8)) is None
+
+
+def committed():
+    idx = MODELS / "models.json"
+    if not idx.exists():
+        return []
+    return [k for k in json.loads(idx.read_text()) if k.startswith("shape-")]
+
+
+@pytest.mark.parametrize("name", committed())
+def test_committed_models_match_their_golden_vectors(name):
+    g = load_file(str(MODELS / "golden" / f"{name}.safetensors"))
+    img = torch.from_numpy(g["image_u8"]).permute(2, 0, 1).float() / 255
+    mask = torch.from_numpy(g["mask_u8"]).float()[None] / 255
+    crop = tuple(float(v) for v in g["crop"])
+    assert crop == pytest.approx(C.crop_params(mask[0]), abs=1e-6)
+    from volcap_train.nets import encoder_input
+
+    x = encoder_input(C.apply_crop(img, crop)[None], C.apply_crop(mask, crop)[None])
+    feat = run(MODELS / f"{name}.encoder.onnx", {"image": x.numpy()})
+    np.testing.assert_allclose(feat[0][:, g["iy"], g["ix"]].T, g["features"], rtol=1e-3, atol=1e-3)
+    pts = torch.from_numpy(g["points"])
+    f = sample_features(torch.from_numpy(feat), pts[None, :, :2])[0].numpy()
+    s = ort.InferenceSession(str(MODELS / f"{name}.mlp.onnx"), providers=["CPUExecutionProvider"])
+    zdim = s.get_inputs()[1].shape[1]
+    z = encode_z(pts[:, 2], "softz" if zdim == 64 else "scalar").numpy()
+    occ = s.run(None, {"feat": f, "z": z})[0][:, 0]
+    np.testing.assert_allclose(occ, g["occ"], rtol=1e-3, atol=1e-3)

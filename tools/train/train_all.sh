@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Trains every committed model from scratch, then exports them (ONNX f32 + int8, golden
+# vectors, model cards) into models/. Resumable: rerun after an interruption and each run
+# continues from its last checkpoint. Budget per run is fixed below (same steps, batch and
+# points for every shape variant of one size class), see models/*.md for the wall times.
+#   DATA: a `volcap sim dataset` folder, e.g.
+#   cargo run --release -p volcap -- sim dataset --subjects 20 --poses 4 --views 12 --val-fraction 0.2 --seed 6 --out /work/data/ds
+set -euo pipefail
+cd "$(dirname "$0")"
+DATA=${DATA:?set DATA to a volcap sim dataset folder}
+RUNS=${RUNS:-runs}
+PY=${PY:-python3}
+ABL=${ABL_STEPS:-250}
+FULL=${FULL_STEPS:-400}
+T="$PY -m volcap_train.train"
+# The compact default: trained to $ABL steps (the ablation reference), then resumed to $FULL.
+$T shape --data "$DATA" --out "$RUNS/compact-$ABL" --variant compact --steps "$ABL"
+[ -e "$RUNS/compact/ckpt.pt" ] || { mkdir -p "$RUNS/compact"; cp "$RUNS/compact-$ABL/ckpt.pt" "$RUNS/compact/"; }
+$T shape --data "$DATA" --out "$RUNS/compact" --variant compact --steps "$FULL"
+$T seg --data "$DATA" --out "$RUNS/seg" --steps "${SEG_STEPS:-600}"
+$T color --data "$DATA" --out "$RUNS/color" --steps "${COLOR_STEPS:-400}"
+# The larger model, same budget as the compact default.
+$T shape --data "$DATA" --out "$RUNS/large" --variant large --steps "$FULL"
+# Ablations on the compact size, same budget as compact-$ABL.
+$T shape --data "$DATA" --out "$RUNS/compact-plain-z" --variant compact-plain-z --steps "$ABL"
+$T shape --data "$DATA" --out "$RUNS/compact-cbn-z" --variant compact-cbn-z --steps "$ABL"
+$T shape --data "$DATA" --out "$RUNS/compact-ohem-none" --variant compact --ohem none --steps "$ABL"
+$T shape --data "$DATA" --out "$RUNS/compact-ohem-P" --variant compact --ohem P --steps "$ABL"
+$PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models

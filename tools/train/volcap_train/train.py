@@ -1,0 +1,285 @@
+"""Training: `python -m volcap_train.train {seg,shape,color} --data DIR --out RUN [...]`.
+
+Every run is seeded, resumable (a checkpoint every --ckpt-every steps and at the end; a run
+that is cut off continues from its last checkpoint with the same data order), shows a
+progress bar, logs losses to RUN/log.csv and records its budget (steps, wall time, hardware)
+in RUN/budget.json for the model card.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from tqdm import tqdm
+
+from . import crop as C
+from .data import Split, backgrounds, photometric, random_affine
+from .nets import ColorEncoder, ColorMlp, SegNet, encode_z, encoder_input, make_shape, sample_features
+from .ohem import OhemState
+
+
+def cropped(split: Split):
+    """Crop every image around its (ground-truth) person mask with the engine's rule and
+    move its points into crop NDC. Returns encoder inputs [B,4,256,256] and the moved tensors."""
+    xs, pts, surf, keep = [], [], [], []
+    for i in range(len(split)):
+        m = split.mask01(i)
+        p = C.crop_params(m[0])
+        if p is None:
+            continue
+        rgb = C.apply_crop(split.rgb01(i), p)
+        mm = C.apply_crop(m, p)
+        xs.append(encoder_input(rgb[None], mm[None])[0])
+        pts.append(C.to_crop(split.points[i], p))
+        surf.append(C.to_crop(split.surface[i], p))
+        keep.append(i)
+    keep = torch.tensor(keep)
+    return torch.stack(xs), torch.stack(pts), split.occ[keep], torch.stack(surf), split.surface_rgb[keep], keep
+
+
+def cropped_cached(root: Path, split: str):
+    """`cropped` of a split, cached beside the shards (it is deterministic)."""
+    cache = root / f"cropped-{split}.pt"
+    if cache.exists():
+        return torch.load(cache)
+    out = cropped(Split(root, split))
+    torch.save(out, cache)
+    return out
+
+
+def hardware():
+    return {"cpu": platform.processor() or platform.machine(), "threads": torch.get_num_threads(), "torch": torch.__version__, "cuda": torch.cuda.is_available()}
+
+
+class Run:
+    def __init__(self, out: Path, args):
+        self.out = out
+        out.mkdir(parents=True, exist_ok=True)
+        self.ckpt = out / "ckpt.pt"
+        self.log = out / "log.csv"
+        self.args = args
+
+    def save(self, state):
+        tmp = self.ckpt.with_suffix(".tmp")
+        torch.save(state, tmp)
+        os.replace(tmp, self.ckpt)  # atomic: a cut-off run never leaves half a checkpoint
+
+    def load(self):
+        return torch.load(self.ckpt, weights_only=False) if self.ckpt.exists() else None
+
+    def write_log(self, rows, header):
+        new = not self.log.exists()
+        with open(self.log, "a", newline="") as f:
+            w = csv.writer(f)
+            if new:
+                w.writerow(header)
+            w.writerows(rows)
+
+    def finish(self, step, wall, extra):
+        b = {"steps": step, "wall_s": round(wall, 1), "hardware": hardware(), "args": {k: str(v) for k, v in vars(self.args).items()}, **extra}
+        (self.out / "budget.json").write_text(json.dumps(b, indent=2))
+        return b
+
+
+def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt_every=100, header=("step", "loss")):
+    """The shared resumable loop. step_fn(step) -> loss (float); eval_fn() -> dict."""
+    gen = extra_state["gen"]
+    st = run.load()
+    step, wall = 0, 0.0
+    if st is not None:
+        for name, m in modules.items():
+            m.load_state_dict(st["modules"][name])
+        opt.load_state_dict(st["opt"])
+        gen.set_state(st["gen"])
+        torch.set_rng_state(st["torch_rng"])
+        if "ohem" in st and extra_state.get("ohem") is not None:
+            extra_state["ohem"].load_state_dict(st["ohem"])
+        step, wall = st["step"], st["wall"]
+        print(f"resuming {run.out} at step {step}/{steps}")
+    rows = []
+    bar = tqdm(total=steps, initial=step, desc=run.out.name, unit="step")
+    t0 = time.time() - wall
+    while step < steps:
+        for m in modules.values():
+            m.train()
+        loss = step_fn(step)
+        step += 1
+        rows.append((step, f"{loss:.6f}"))
+        bar.update(1)
+        bar.set_postfix(loss=f"{loss:.4f}")
+        if step % ckpt_every == 0 or step == steps:
+            state = {"modules": {n: m.state_dict() for n, m in modules.items()}, "opt": opt.state_dict(), "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step, "wall": time.time() - t0}
+            if extra_state.get("ohem") is not None:
+                state["ohem"] = extra_state["ohem"].state_dict()
+            run.save(state)
+            run.write_log(rows, header)
+            rows = []
+    bar.close()
+    wall = time.time() - t0
+    if st is not None and st["step"] >= steps:
+        wall = st["wall"]
+    for m in modules.values():
+        m.eval()
+    with torch.no_grad():
+        metrics = eval_fn()
+    b = run.finish(step, wall, {"val": metrics})
+    print(json.dumps(b["val"]))
+    return b
+
+
+def train_seg(args):
+    torch.manual_seed(args.seed)
+    gen = torch.Generator().manual_seed(args.seed)
+    tr, va = Split(args.data, "train"), Split(args.data, "val")
+    net = SegNet(args.width)
+    opt = torch.optim.Adam(net.parameters(), lr=args.lr)
+    run = Run(args.out, args)
+
+    def batch(split, idx, g):
+        rgb, m = split.rgb01(idx), split.mask01(idx)
+        rgb, m, _ = random_affine(rgb, m, g)
+        bg = backgrounds(len(idx), rgb.shape[-1], g)
+        x = rgb * m + bg * (1 - m)
+        return photometric(x, g), m
+
+    def step_fn(step):
+        idx = torch.randint(0, len(tr), (args.batch,), generator=gen)
+        x, m = batch(tr, idx, gen)
+        loss = F.binary_cross_entropy_with_logits(net(x), m)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        return loss.item()
+
+    def eval_fn():
+        g = torch.Generator().manual_seed(1234)
+        ious = []
+        for s in range(0, len(va), 16):
+            idx = torch.arange(s, min(s + 16, len(va)))
+            x, m = batch(va, idx, g)
+            p = torch.sigmoid(net(x)) > 0.5
+            t = m > 0.5
+            inter = (p & t).flatten(1).sum(1).float()
+            union = (p | t).flatten(1).sum(1).float()
+            ious.append(torch.where(union > 0, inter / union.clamp(min=1), torch.ones_like(union)))
+        iou = torch.cat(ious)
+        return {"mask_iou_mean": iou.mean().item(), "mask_iou_min": iou.min().item(), "images": len(iou)}
+
+    return loop(run, {"seg": net}, opt, args.steps, step_fn, eval_fn, {"gen": gen})
+
+
+def train_shape(args):
+    torch.manual_seed(args.seed)
+    gen = torch.Generator().manual_seed(args.seed)
+    xtr, ptr, otr, _, _, _ = cropped_cached(args.data, "train")
+    xva, pva, ova, _, _, _ = cropped_cached(args.data, "val")
+    enc, mlp, zenc = make_shape(args.variant)
+    ohem = OhemState(len(xtr), ptr.shape[1], args.ohem)
+    params = list(enc.parameters()) + list(mlp.parameters())
+    opt = torch.optim.Adam(params, lr=args.lr)
+    run = Run(args.out, args)
+
+    def forward(x, pts):
+        feat = enc(x)
+        f = sample_features(feat, pts[..., :2])  # [B, P, F]
+        b, p, c = f.shape
+        logit = mlp(f.reshape(b * p, c), encode_z(pts[..., 2].reshape(b * p), zenc))
+        return logit.reshape(b, p)
+
+    def step_fn(step):
+        items = ohem.sample_items(args.batch, gen)
+        pidx = ohem.sample_points(items, args.points, gen)
+        pts = torch.gather(ptr[items], 1, pidx.unsqueeze(-1).expand(-1, -1, 3))
+        lab = torch.gather(otr[items], 1, pidx)
+        logit = forward(xtr[items], pts)
+        bce = F.binary_cross_entropy_with_logits(logit, lab, reduction="none")
+        loss = bce.mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        ohem.update(items, pidx, bce, torch.sigmoid(logit), lab)
+        return loss.item()
+
+    def eval_fn():
+        ious, bces = [], []
+        for s in range(0, len(xva), 8):
+            sl = slice(s, s + 8)
+            logit = forward(xva[sl], pva[sl])
+            lab = ova[sl]
+            bces.append(F.binary_cross_entropy_with_logits(logit, lab, reduction="none").mean(1))
+            p, t = logit > 0, lab > 0.5
+            ious.append((p & t).sum(1).float() / (p | t).sum(1).clamp(min=1).float())
+        iou = torch.cat(ious)
+        return {"point_iou_mean": iou.mean().item(), "point_iou_worst10": iou.sort().values[:10].mean().item(), "bce": torch.cat(bces).mean().item(), "images": len(iou)}
+
+    return loop(run, {"enc": enc, "mlp": mlp}, opt, args.steps, step_fn, eval_fn, {"gen": gen, "ohem": ohem})
+
+
+def train_color(args):
+    torch.manual_seed(args.seed)
+    gen = torch.Generator().manual_seed(args.seed)
+    xtr, _, _, str_, ctr, _ = cropped_cached(args.data, "train")
+    xva, _, _, sva, cva, _ = cropped_cached(args.data, "val")
+    enc, mlp = ColorEncoder(), ColorMlp()
+    opt = torch.optim.Adam(list(enc.parameters()) + list(mlp.parameters()), lr=args.lr)
+    run = Run(args.out, args)
+
+    def forward(x, pts):
+        f = sample_features(enc(x), pts[..., :2])
+        rgb = sample_features(x[:, :3] * 0.5 + 0.5, pts[..., :2])
+        b, p, c = f.shape
+        out = mlp(f.reshape(b * p, c), rgb.reshape(b * p, 3), pts[..., 2].reshape(b * p, 1))
+        return out.reshape(b, p, 3)
+
+    def step_fn(step):
+        items = torch.randint(0, len(xtr), (args.batch,), generator=gen)
+        pidx = torch.randint(0, str_.shape[1], (args.batch, args.points), generator=gen)
+        pts = torch.gather(str_[items], 1, pidx.unsqueeze(-1).expand(-1, -1, 3))
+        col = torch.gather(ctr[items], 1, pidx.unsqueeze(-1).expand(-1, -1, 3))
+        loss = (forward(xtr[items], pts) - col).abs().mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        return loss.item()
+
+    def eval_fn():
+        l1 = []
+        for s in range(0, len(xva), 8):
+            sl = slice(s, s + 8)
+            l1.append((forward(xva[sl], sva[sl]) - cva[sl]).abs().mean((1, 2)))
+        l1 = torch.cat(l1)
+        return {"color_l1_mean": l1.mean().item(), "images": len(l1)}
+
+    return loop(run, {"enc": enc, "mlp": mlp}, opt, args.steps, step_fn, eval_fn, {"gen": gen})
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="volcap_train.train")
+    ap.add_argument("task", choices=["seg", "shape", "color"])
+    ap.add_argument("--data", type=Path, required=True)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--variant", default="compact")
+    ap.add_argument("--ohem", default="P+I", choices=["none", "P", "P+I"])
+    ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--batch", type=int, default=8)
+    ap.add_argument("--points", type=int, default=1024)
+    ap.add_argument("--lr", type=float, default=1e-3)
+    ap.add_argument("--width", type=int, default=12)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=int, default=0)
+    args = ap.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    return {"seg": train_seg, "shape": train_shape, "color": train_color}[args.task](args)
+
+
+if __name__ == "__main__":
+    main()
