@@ -626,7 +626,7 @@ fn file_backend_counts_and_skips_bad_frames() {
     std::fs::write(dir.join("rec.mjpg"), &rec).unwrap();
     std::fs::write(
         dir.join("b.toml"),
-        "[camera]\nbackend = \"file\"\npath = \"rec.mjpg\"\nfps = 30\n[render]\nresolution = 129\n",
+        "[camera]\nbackend = \"file\"\npath = \"rec.mjpg\"\nfps = 30\n[render]\nresolution = 129\nfield = \"camera\"\n",
     )
     .unwrap();
     let d = start(&dir.join("b.toml"));
@@ -664,7 +664,9 @@ fn camera_config_errors_are_clear() {
     let dir = std::env::temp_dir().join(format!("volcapd-camcfg-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let run = |text: &str| {
-        std::fs::write(dir.join("b.toml"), text).unwrap();
+        // Real-camera backends default to the model field: point it at the committed models.
+        let models = format!("\n[model]\ndir = \"{}\"\n", root().join("models").display());
+        std::fs::write(dir.join("b.toml"), format!("{text}{models}")).unwrap();
         let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
             .args(["--check-config", "--config"])
             .arg(dir.join("b.toml"))
