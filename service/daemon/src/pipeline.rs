@@ -415,6 +415,30 @@ fn camera_status_from(sup: &Supervisor<dyn Camera>, st: &mut CameraStatus) {
     st.reason = reason;
 }
 
+/// Render a field at the live resolution and view settings, timed as the render stage; a
+/// failure becomes the degraded state (and `None`).
+fn render_field(
+    renderer: &mut Renderer,
+    sh: &Shared,
+    field: &dyn volcap_engine::OccupancyField,
+    colors: &dyn volcap_engine::ColorField,
+    live: &Live,
+) -> Option<Vec<u8>> {
+    let t = Instant::now();
+    let spec = GridSpec::from_resolution(live.resolution).ok()?;
+    let opts = RenderOptions {
+        coarse_level: live.coarse_level,
+        background: live.background,
+        shade: false,
+    };
+    if let Err(e) = renderer.render(field, colors, spec, &opts) {
+        sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
+        return None;
+    }
+    sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
+    Some(renderer.rgba().to_vec())
+}
+
 /// Start the pipeline threads.
 pub fn start(
     cfg: &Config,
@@ -615,23 +639,12 @@ pub fn start(
                                     }
                                 };
                                 sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
-                                let t = Instant::now();
-                                let Ok(spec) = GridSpec::from_resolution(size) else {
+                                let Some(rgba) =
+                                    render_field(&mut renderer, &sh, &field, &field, &live)
+                                else {
                                     continue;
                                 };
-                                let opts = RenderOptions {
-                                    coarse_level: live.coarse_level,
-                                    background: bg,
-                                    shade: false,
-                                };
-                                if let Err(e) = renderer.render(&field, &field, spec, &opts) {
-                                    sh.set_state(PipelineState::Degraded(format!(
-                                        "render failed: {e}"
-                                    )));
-                                    continue;
-                                }
-                                sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
-                                renderer.rgba().to_vec()
+                                rgba
                             }
                             FieldMode::Oracle => {
                                 let Some(truth) = &f.truth else {
@@ -667,25 +680,16 @@ pub fn start(
                                 sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
                                 *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
                                     Some(field.clone());
-                                let t = Instant::now();
-                                let Ok(spec) = GridSpec::from_resolution(size) else {
+                                let Some(rgba) = render_field(
+                                    &mut renderer,
+                                    &sh,
+                                    field.as_ref(),
+                                    field.as_ref(),
+                                    &live,
+                                ) else {
                                     continue;
                                 };
-                                let opts = RenderOptions {
-                                    coarse_level: live.coarse_level,
-                                    background: bg,
-                                    shade: false,
-                                };
-                                if let Err(e) =
-                                    renderer.render(field.as_ref(), field.as_ref(), spec, &opts)
-                                {
-                                    sh.set_state(PipelineState::Degraded(format!(
-                                        "render failed: {e}"
-                                    )));
-                                    continue;
-                                }
-                                sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
-                                renderer.rgba().to_vec()
+                                rgba
                             }
                         };
                         if out.put(Rendered {

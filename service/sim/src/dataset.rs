@@ -120,6 +120,31 @@ fn random_subject(assets: &HumanAssets, r: &mut ChaCha8Rng, id: &str) -> String 
     t
 }
 
+/// The scene of one dataset (or evaluation) image: the training camera (weak perspective,
+/// 2.3 m image height, looking at 0.95 m), studio light, one subject in a procedural pose.
+pub fn scene_text(size: usize, subject_table: &str, style: Style, seed: u32) -> String {
+    format!(
+        "[camera]\nwidth = {size}\nheight = {size}\nheight_m = 2.3\nlook_at = [0.0, 0.95, 0.0]\n[lighting]\npreset = \"studio\"\n{subject_table}\
+         motion = {{ kind = \"procedural\", style = \"{}\", seed = {seed} }}\n",
+        style.name()
+    )
+}
+
+/// The clothed surface of the last rendered frame in world metres: each subject's body
+/// (without the eyes) and its garments, as one mesh.
+pub fn clothed_surface(sim: &Simulator) -> Mesh {
+    let mut surf = Mesh::default();
+    for (closed, open) in &sim.world_meshes() {
+        for m in closed.iter().take(1).chain(open.iter()) {
+            let base = surf.vertices.len() as u32;
+            surf.vertices.extend_from_slice(m.verts);
+            surf.triangles
+                .extend(m.tris.iter().map(|t| t.map(|i| i + base)));
+        }
+    }
+    surf
+}
+
 fn tensor<'a>(
     dtype: Dtype,
     shape: Vec<usize>,
@@ -190,29 +215,14 @@ pub fn generate(
         for pi in 0..cfg.poses {
             let style = Style::ALL[r.random_range(0..Style::ALL.len())];
             let frame: u64 = r.random_range(0..60);
-            let text = format!(
-                "[camera]\nwidth = {s}\nheight = {s}\nheight_m = 2.3\nlook_at = [0.0, 0.95, 0.0]\n[lighting]\npreset = \"studio\"\n{table}\
-                 motion = {{ kind = \"procedural\", style = \"{}\", seed = {seed} }}\n",
-                style.name(),
-                s = cfg.size,
-                seed = r.random::<u32>()
-            );
+            let text = scene_text(cfg.size, table, style, r.random::<u32>());
             let scene = Scene::parse(&text, Path::new("<dataset>"))
                 .map_err(|e| DatasetError::Config(e.to_string()))?;
             let mut sim = Simulator::new(scene, assets.clone())?;
             sim.render(frame)?;
             let field = sim.oracle(cfg.voxel_m);
             // World-space samples shared by the views of this pose.
-            let meshes = sim.world_meshes();
-            let mut surf = Mesh::default();
-            for (closed, open) in &meshes {
-                for m in closed.iter().take(1).chain(open.iter()) {
-                    let base = surf.vertices.len() as u32;
-                    surf.vertices.extend_from_slice(m.verts);
-                    surf.triangles
-                        .extend(m.tris.iter().map(|t| t.map(|i| i + base)));
-                }
-            }
+            let surf = clothed_surface(&sim);
             let (lo, hi) = surf
                 .vertices
                 .iter()

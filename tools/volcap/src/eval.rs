@@ -185,28 +185,14 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
         for pose in 0..a.poses {
             let style = Style::ALL[r.random_range(0..Style::ALL.len())];
             let frame: u64 = r.random_range(0..60);
-            let text = format!(
-                "[camera]\nwidth = {size}\nheight = {size}\nheight_m = 2.3\nlook_at = [0.0, 0.95, 0.0]\n[lighting]\npreset = \"studio\"\n{table}\
-                 motion = {{ kind = \"procedural\", style = \"{}\", seed = {} }}\n",
-                style.name(),
-                r.random::<u32>()
-            );
+            let text = volcap_sim::dataset::scene_text(size, table, style, r.random::<u32>());
             let scene = Scene::parse(&text, Path::new("<eval>")).map_err(|e| anyhow!("{e}"))?;
             let mut sim = Simulator::new(scene, assets.clone())?;
             for v in 0..a.views {
                 let yaw = 360.0 * v as f32 / a.views as f32;
                 sim.set_view_yaw(yaw);
                 let f = sim.render(frame)?;
-                let mut gt_mesh = Mesh::default();
-                for (closed, open) in sim.world_meshes() {
-                    for m in closed.iter().take(1).chain(open.iter()) {
-                        let base = gt_mesh.vertices.len() as u32;
-                        gt_mesh.vertices.extend_from_slice(m.verts);
-                        gt_mesh
-                            .triangles
-                            .extend(m.tris.iter().map(|t| t.map(|i| i + base)));
-                    }
-                }
+                let gt_mesh = volcap_sim::dataset::clothed_surface(&sim);
                 cases.push(Case {
                     subject: id.clone(),
                     pose,
