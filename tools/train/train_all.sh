@@ -26,4 +26,6 @@ $T shape --data "$DATA" --out "$RUNS/compact-plain-z" --variant compact-plain-z 
 $T shape --data "$DATA" --out "$RUNS/compact-cbn-z" --variant compact-cbn-z --steps "$ABL"
 $T shape --data "$DATA" --out "$RUNS/compact-ohem-none" --variant compact --ohem none --steps "$ABL"
 $T shape --data "$DATA" --out "$RUNS/compact-ohem-P" --variant compact --ohem P --steps "$ABL"
+# The Fourier head: dense ray supervision (needs shards with ray_offsets/ray_z).
+$T fourier --data "$DATA" --out "$RUNS/fourier" --variant fourier --steps "${FOURIER_STEPS:-4000}" --point-weight 0.3
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models

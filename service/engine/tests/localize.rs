@@ -263,3 +263,90 @@ fn baselines_are_close_but_cheaper_than_dense() {
         );
     }
 }
+
+/// The public demo's "faster" mode, checked by hand on a 9^3 grid from a 3^3 start: the
+/// coarse 27 points, then (first upsampled level, 9^3 dilation = the whole 5^3 lattice) the
+/// remaining 98 points of level 2, then the finest level is never evaluated; its values are
+/// the trilinear mean of their level-2 parents (continuous values, not binarized).
+#[test]
+fn demo_faster_matches_a_hand_checked_case() {
+    let sphere = FnField(|p: Vec3| (1.0 - p.length() / 0.7).clamp(0.0, 1.0));
+    let spec = GridSpec::from_resolution(9).unwrap();
+    let mut g = Grid::new(spec);
+    let st = Localizer::new()
+        .run(Method::DemoFaster, &sphere, spec, 1, &mut g)
+        .unwrap();
+    assert!(!st.empty);
+    assert_eq!(st.evaluations, 125);
+    assert_eq!(st.conflict_rounds, 0);
+    for i in g.evaluated.iter_ones() {
+        let [x, y, z] = spec.unlinear(i);
+        assert!(
+            x % 2 == 0 && y % 2 == 0 && z % 2 == 0,
+            "finest-level point {:?} was evaluated",
+            [x, y, z]
+        );
+    }
+    assert_eq!(g.evaluated_count(), 125);
+    // A finest point between 8 level-2 parents: their mean.
+    let mut mean = 0.0f32;
+    for a in [2usize, 4] {
+        for b in [2usize, 4] {
+            for c in [2usize, 4] {
+                mean += g.value([a, b, c]) / 8.0;
+            }
+        }
+    }
+    assert!((g.value([3, 3, 3]) - mean).abs() < 1e-6);
+    // Evaluated values are the field's.
+    let mut v = [0.0f32];
+    sphere.occupancy(&[spec.world([2, 4, 6])], &mut v).unwrap();
+    assert_eq!(g.value([2, 4, 6]), v[0]);
+}
+
+/// Larger grids: every level but the finest is evaluated near the surface, the finest never;
+/// fewer evaluations than the paper's method, close to dense but not exact.
+#[test]
+fn demo_faster_never_evaluates_the_finest_level_and_is_close_to_dense() {
+    let scene = AnalyticScene::by_name("capsule-human").unwrap();
+    for (res, coarse) in [(65usize, 3u32), (129, 4)] {
+        let (dense, _) = run(&scene, res, Method::Dense, None);
+        let (g, n) = run(&scene, res, Method::DemoFaster, Some(coarse));
+        let (_, paper) = run(&scene, res, Method::Hierarchical, Some(coarse));
+        assert!(n < paper, "demo {n} vs paper {paper} at {res}");
+        let spec = g.spec();
+        assert!(
+            g.evaluated
+                .iter_ones()
+                .all(|i| spec.unlinear(i).iter().all(|c| c % 2 == 0)),
+            "the finest level was evaluated at {res}"
+        );
+        let i = iou(&g, &dense);
+        assert!(i > 0.75 && i < 1.0, "IoU {i} at {res}");
+    }
+}
+
+/// No inside point on the coarsest grid: the demo returns nothing (all outside, reported).
+#[test]
+fn demo_faster_gives_an_empty_result_when_the_coarse_grid_sees_nothing() {
+    // A small ball between the 9^3 coarse points.
+    let ball = FnField(|p: Vec3| {
+        if (p - Vec3::splat(0.125)).length() < 0.08 {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let spec = GridSpec::from_resolution(65).unwrap();
+    let mut g = Grid::new(spec);
+    let st = Localizer::new()
+        .run(Method::DemoFaster, &ball, spec, 3, &mut g)
+        .unwrap();
+    assert!(st.empty);
+    assert_eq!(st.evaluations, 729);
+    assert!(g.values.iter().all(|v| *v == 0.0));
+    let st = Localizer::new()
+        .run(Method::Hierarchical, &ball, spec, 3, &mut g)
+        .unwrap();
+    assert!(!st.empty);
+}

@@ -8,7 +8,7 @@ use volcap_engine::grid::{Grid, GridSpec};
 use volcap_engine::localize::{Localizer, Method};
 use volcap_engine::model::preprocess::{Crop, INPUT_SIZE, encoder_input, letterbox};
 use volcap_engine::model::{
-    FEATURE_SIZE, FrameError, ModelError, ModelView, Models, Precision, ShapeNets,
+    FEATURE_SIZE, FourierNet, FrameError, ModelError, ModelView, Models, Precision, ShapeNets,
 };
 use volcap_engine::render::{RenderOptions, Renderer};
 
@@ -17,17 +17,24 @@ fn models_dir() -> PathBuf {
 }
 
 /// Shape models listed in models/models.json.
-fn shape_models() -> Vec<String> {
+/// Shape models of `models.json` of one family ("mlp" when the card names none).
+fn models_of(family: &str) -> Vec<String> {
     let text =
         std::fs::read_to_string(models_dir().join("models.json")).expect("models/models.json");
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     let mut names: Vec<String> = v
         .as_object()
         .unwrap()
-        .keys()
-        .filter_map(|k| k.strip_prefix("shape-").map(str::to_string))
+        .iter()
+        .filter(|(_, c)| c["family"].as_str().unwrap_or("mlp") == family)
+        .filter_map(|(k, _)| k.strip_prefix("shape-").map(str::to_string))
         .collect();
     names.sort();
+    names
+}
+
+fn shape_models() -> Vec<String> {
+    let names = models_of("mlp");
     assert!(
         names.contains(&"compact".to_string()),
         "the compact default is committed"
@@ -121,20 +128,54 @@ fn shape_models_match_pytorch_golden_vectors() {
         let pts = points(&g);
         let mut occ = vec![0.0; pts.len()];
         nets.query(&feat, &pts, &mut occ).unwrap();
-        let want = g.f32("occ");
-        let worst = occ
-            .iter()
-            .zip(&want)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
-        println!(
-            "{name}: golden occupancy max |engine - PyTorch| = {worst:.2e} over {} points",
-            pts.len()
-        );
+        assert_golden_occupancy(&name, &g, &occ);
+    }
+}
+
+/// Occupancy at the golden points within 2e-3 of PyTorch's.
+fn assert_golden_occupancy(name: &str, g: &Golden, occ: &[f32]) {
+    let worst = occ
+        .iter()
+        .zip(g.f32("occ"))
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    println!(
+        "{name}: golden occupancy max |engine - PyTorch| = {worst:.2e} over {} points",
+        occ.len()
+    );
+    assert!(
+        worst < 2e-3,
+        "{name}: occupancy differs from PyTorch by {worst}"
+    );
+}
+
+/// The Fourier heads: coefficient maps at the golden pixels and occupancy at the golden
+/// crop-NDC points (sampled and decoded by the engine) against PyTorch.
+#[test]
+fn fourier_models_match_pytorch_golden_vectors() {
+    let names = models_of("fourier");
+    for name in &names {
+        let g = Golden::load(&format!("shape-{name}"));
+        let net = FourierNet::load(&models_dir(), name, Precision::F32).unwrap();
+        let (x, _) = golden_input(&g);
+        let maps = net.maps(&x).unwrap();
+        let c = 2 * net.k + 1;
+        let (iy, ix, want) = (g.i32("iy"), g.i32("ix"), g.f32("features"));
+        let mut worst = 0.0f32;
+        for (k, (&y, &xx)) in iy.iter().zip(&ix).enumerate() {
+            let px = maps.pixel(xx as usize, y as usize);
+            for ch in 0..c {
+                worst = worst.max((px[ch] - want[k * c + ch]).abs());
+            }
+        }
         assert!(
             worst < 2e-3,
-            "{name}: occupancy differs from PyTorch by {worst}"
+            "{name}: coefficients differ from PyTorch by {worst}"
         );
+        let pts = points(&g);
+        let mut occ = vec![0.0; pts.len()];
+        maps.occupancy(&pts, &mut occ, &mut Vec::new());
+        assert_golden_occupancy(name, &g, &occ);
     }
 }
 
@@ -265,7 +306,17 @@ fn full() -> Models {
 /// refuses anything else) and that renders, or a clear "no person".
 #[test]
 fn hard_frames_give_finite_fields_or_no_person() {
-    let models = full();
+    let mut names = vec!["compact".to_string()];
+    names.extend(models_of("fourier"));
+    for name in names {
+        let models =
+            Models::load(&models_dir(), &name, Precision::F32).expect("committed models load");
+        println!("model {name} ({})", models.shape.family());
+        hard_frames(&models);
+    }
+}
+
+fn hard_frames(models: &Models) {
     let s = 256;
     let g = Golden::load("shape-compact");
     let person = g.u8("image_u8");

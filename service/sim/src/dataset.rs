@@ -5,13 +5,17 @@
 //! (the configuration, the subjects and their split). Each shard holds tensors
 //! `image` u8 [H, W, 3], `mask` u8 [H, W], `points` f32 [N, 3] (render-view NDC, the
 //! engine's convention), `occ` f32 [N] (1 inside, 0 outside), `surface` f32 [M, 3] (NDC),
-//! `surface_rgb` f32 [M, 3], and one metadata key `volcap` holding JSON (`camera`, `subject`,
-//! `subject_table`, `style`, `time_s`, `yaw_deg`, `split`). Points: half inside, half outside; near-surface samples with a
+//! `surface_rgb` f32 [M, 3], the per-pixel inside intervals along each pixel's ray
+//! (`ray_offsets` u32 [H * W + 1] into `ray_z` f32 [R, 2], render-view NDC z, see
+//! [`crate::rays`]: the dense supervision of the Fourier head), and one metadata key `volcap` holding JSON (`camera`, `subject`,
+//! `subject_table`, `style`, `time_s`, `yaw_deg`, `split`, and the `scene` text and `frame`
+//! that reproduce the image). Points: half inside, half outside; near-surface samples with a
 //! Gaussian offset (sigma, default 5 cm) plus uniform samples in the subject's box.
 //! Everything is deterministic from the seed; the split is by subject identity.
 
 use crate::assets::{GarmentKind, HumanAssets};
 use crate::pose::Style;
+use crate::rays::{DEFAULT_STEP_M, ray_intervals};
 use crate::scene::Scene;
 use crate::sim::{SimError, Simulator};
 use glam::{DVec3, Vec3};
@@ -269,8 +273,10 @@ pub fn generate(
                 .chain(std::iter::repeat_n(0.0, outs.len()))
                 .collect();
             let world_pts: Vec<Vec3> = ins.iter().chain(&outs).copied().collect();
+            // Views evenly around the subject from a random phase per pose.
+            let phase: f32 = r.random_range(0.0..360.0 / cfg.views as f32);
             for vi in 0..cfg.views {
-                let yaw = 360.0 * vi as f32 / cfg.views as f32;
+                let yaw = phase + 360.0 * vi as f32 / cfg.views as f32;
                 sim.set_view_yaw(yaw);
                 let f = sim.render(frame)?;
                 let view = f.camera.projector();
@@ -285,6 +291,9 @@ pub fn generate(
                 let sc = f32_bytes(&surface_rgb);
                 let mask = f.person_mask();
                 let (h, w) = (f.height, f.width);
+                let rays = ray_intervals(&field.oracle, &f.camera, DEFAULT_STEP_M);
+                let roff: Vec<u8> = rays.offsets.iter().flat_map(|x| x.to_le_bytes()).collect();
+                let rz = f32_bytes(rays.z.as_flattened());
                 // One metadata key holding sorted JSON: byte-identical files for a seed.
                 let info = serde_json::json!({
                     "camera": f.camera,
@@ -294,6 +303,8 @@ pub fn generate(
                     "time_s": f.time_s,
                     "yaw_deg": yaw,
                     "split": split,
+                    "scene": text,
+                    "frame": frame,
                 });
                 let meta: HashMap<String, String> = [("volcap".to_string(), info.to_string())]
                     .into_iter()
@@ -307,6 +318,8 @@ pub fn generate(
                         tensor(Dtype::F32, vec![world_pts.len(), 3], &pts)?,
                     ),
                     ("surface", tensor(Dtype::F32, vec![surface.len(), 3], &sp)?),
+                    ("ray_offsets", tensor(Dtype::U32, vec![w * h + 1], &roff)?),
+                    ("ray_z", tensor(Dtype::F32, vec![rays.z.len(), 2], &rz)?),
                     (
                         "surface_rgb",
                         tensor(Dtype::F32, vec![surface.len(), 3], &sc)?,

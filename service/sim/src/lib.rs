@@ -9,7 +9,7 @@
 //! * [`scene`]: declarative scene files; [`effects`]: the stages built from their `effect`
 //!   list (only declared effects run).
 //! * [`oracle`]: occupancy and colour ground truth for arbitrary points, usable as engine
-//!   fields.
+//!   fields; [`rays`]: per-pixel inside intervals along camera rays (Fourier supervision).
 //! * [`sim`]: the [`Simulator`] tying them together; [`dataset`]: training shards.
 
 pub mod assets;
@@ -20,6 +20,7 @@ pub mod makehuman;
 pub mod oracle;
 pub mod pose;
 pub mod raster;
+pub mod rays;
 pub mod scene;
 pub mod sim;
 pub mod subject;

@@ -302,6 +302,16 @@ impl Oracle {
     pub fn voxel_m(&self) -> f32 {
         self.voxel
     }
+
+    /// The world box of the voxel grid (outside it occupancy is 0).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let d = Vec3::new(
+            self.dims[0] as f32,
+            self.dims[1] as f32,
+            self.dims[2] as f32,
+        );
+        (self.origin, self.origin + d * self.voxel)
+    }
 }
 
 /// Generalized winding number of a triangle soup at `p` (f64; Van Oosterom & Strackee).

@@ -47,6 +47,25 @@ def test_shape_round_trip(tmp_path, variant):
     np.testing.assert_allclose(run(tmp_path / "m.onnx", {"feat": fb.numpy(), "z": zb.numpy()}), oc, rtol=1e-5, atol=1e-5)
 
 
+def test_fourier_round_trip(tmp_path):
+    from volcap_train.nets import FourierNet
+
+    torch.manual_seed(2)
+    net = FourierNet(k=7, c=6)
+    net.train()
+    with torch.no_grad():
+        for _ in range(3):
+            net(torch.randn(2, 4, 256, 256))
+    net.eval()
+    x = torch.randn(1, 4, 256, 256)
+    export(net, (x,), ["image"], ["coeff"], tmp_path / "f.onnx", {"kind": "shape-fourier"}, False)
+    with torch.no_grad():
+        ref = net(x).numpy()
+    out = run(tmp_path / "f.onnx", {"image": x.numpy()})
+    assert out.shape == (1, 15, 128, 128)
+    np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-4)
+
+
 def test_seg_round_trip(tmp_path):
     torch.manual_seed(1)
     net = SegNet().eval()
@@ -94,6 +113,18 @@ def test_committed_models_match_their_golden_vectors(name):
     from volcap_train.nets import encoder_input
 
     x = encoder_input(C.apply_crop(img, crop)[None], C.apply_crop(mask, crop)[None])
+    fourier = MODELS / f"{name}.fourier.onnx"
+    if fourier.exists():
+        from volcap_train import fourier as FO
+
+        coeff = run(fourier, {"image": x.numpy()})
+        np.testing.assert_allclose(coeff[0][:, g["iy"], g["ix"]].T, g["features"], rtol=1e-3, atol=1e-3)
+        pts = torch.from_numpy(g["points"])
+        c = sample_features(torch.from_numpy(coeff), pts[None, :, :2])[0]
+        k = (coeff.shape[1] - 1) // 2
+        occ = FO.decode(c, pts[:, 2] * FO.ZETA_SCALE, k).clamp(0, 1).numpy()
+        np.testing.assert_allclose(occ, g["occ"], rtol=1e-3, atol=1e-3)
+        return
     feat = run(MODELS / f"{name}.encoder.onnx", {"image": x.numpy()})
     np.testing.assert_allclose(feat[0][:, g["iy"], g["ix"]].T, g["features"], rtol=1e-3, atol=1e-3)
     pts = torch.from_numpy(g["points"])

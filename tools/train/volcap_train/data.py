@@ -29,6 +29,8 @@ class Split:
         if not files:
             raise FileNotFoundError(f"{root / split}: no *.safetensors shards (run `volcap sim dataset --out {root}`)")
         imgs, masks, pts, occ, surf, srgb = [], [], [], [], [], []
+        # Per-pixel ray intervals (CSR, input NDC z), when the shards have them.
+        self.ray_offsets, self.ray_z = [], []
         for f in files:
             t = load_file(str(f))
             img = t["image"]
@@ -40,6 +42,9 @@ class Split:
             occ.append(t["occ"])
             surf.append(t["surface"])
             srgb.append(t["surface_rgb"])
+            if "ray_offsets" in t:
+                self.ray_offsets.append(torch.from_numpy(t["ray_offsets"].astype(np.int64)))
+                self.ray_z.append(torch.from_numpy(t["ray_z"]))
         n = min(len(p) for p in pts)
         m = min(len(s) for s in surf)
         self.files = [str(f) for f in files]

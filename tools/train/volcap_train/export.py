@@ -27,7 +27,8 @@ from safetensors.numpy import save_file
 
 from . import crop as C
 from .data import Split
-from .nets import SOFTZ_BINS, ColorEncoder, ColorMlp, SegNet, SHAPE_VARIANTS, encode_z, encoder_input, make_shape, sample_features
+from . import fourier as FO
+from .nets import FOURIER_VARIANTS, SOFTZ_BINS, ColorEncoder, ColorMlp, FourierNet, SegNet, SHAPE_VARIANTS, encode_z, encoder_input, make_shape, sample_features
 
 OPSET = 17
 SAMPLE_RULE = "bilinear align_corners=1 padding=border"
@@ -114,8 +115,11 @@ def main(argv=None):
     ap.add_argument("--runs", type=Path, required=True)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--only", nargs="*", default=None, help="run names to export (default: all present)")
+    ap.add_argument("--overfit", default=None, help="export only this Fourier run as the overfit test model (f32 ONNX + overfit.json: scene, frame, yaws of its training images)")
     args = ap.parse_args(argv)
     out = args.out
+    if args.overfit:
+        return export_overfit(args.runs / args.overfit, args.data, out)
     (out / "golden").mkdir(parents=True, exist_ok=True)
     va = Split(args.data, "val")
     gi = 0
@@ -184,6 +188,9 @@ def main(argv=None):
             cards["color"] = {"files": ["color.encoder.onnx", "color.mlp.onnx"], "params": params(enc) + params(mlp), "gmacs_frame": count_macs(enc, x) / 1e9, "macs_point": count_macs(mlp, fb[:1], rb[:1], zb[:1]), "budget": budget}
             continue
         variant = budget.get("args", {}).get("variant", "compact")
+        if variant in FOURIER_VARIANTS:
+            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, calib, common, gen, va)
+            continue
         if variant not in SHAPE_VARIANTS:
             continue
         st, (se, sm) = load_modules(run, ["enc", "mlp"])
@@ -227,6 +234,128 @@ def main(argv=None):
     print(json.dumps({k: v["files"] for k, v in cards.items()}, indent=1))
 
 
+def load_fourier(run: Path, variant: str) -> FourierNet:
+    k, width = FOURIER_VARIANTS[variant]
+    _, (sd,) = load_modules(run, ["net"])
+    net = FourierNet(k, width)
+    net.load_state_dict(sd)
+    net.eval()
+    return net
+
+
+def world_to_ndc(cam: dict, p: torch.Tensor) -> torch.Tensor:
+    """The simulator camera's world -> render-view NDC (service/sim/src/camera.rs), written
+    again here so that the geometry golden test checks the point mapping, not only the nets."""
+    eye, target = torch.tensor(cam["eye"], dtype=torch.float64), torch.tensor(cam["target"], dtype=torch.float64)
+    f = target - eye
+    f = f / f.norm()
+    up = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)
+    r = torch.linalg.cross(f, up)
+    r = r / r.norm()
+    u = torch.linalg.cross(r, f)
+    w, h = cam["width"], cam["height"]
+    proj = cam["projection"]
+    d = p.double() - eye
+    xr, yu, depth = d @ r, d @ u, d @ f
+    if proj["model"] != "weak-perspective":
+        raise ValueError(f"camera model {proj['model']} not supported by the golden writer")
+    sc = (h - 1.0) / proj["height_m"]
+    px, py = 0.5 * (w - 1.0) + sc * xr, 0.5 * (h - 1.0) - sc * yu
+    return torch.stack([2 * px / (w - 1) - 1, 2 * py / (h - 1) - 1, 1 - 2 * (depth - cam["near"]) / (cam["far"] - cam["near"])], -1)
+
+
+def ndc_to_world(cam: dict, n: torch.Tensor) -> torch.Tensor:
+    """Inverse of world_to_ndc (weak perspective), by solving the affine map."""
+    base = world_to_ndc(cam, torch.zeros(1, 3, dtype=torch.float64))[0]
+    cols = [world_to_ndc(cam, torch.eye(3, dtype=torch.float64)[i : i + 1])[0] - base for i in range(3)]
+    a = torch.stack(cols, 1)  # ndc = a @ world + base
+    return torch.linalg.solve(a, (n.double() - base).T).T
+
+
+def geometry_golden(net: FourierNet, va: Split, gi: int, gen: torch.Generator) -> dict:
+    """PyTorch's whole query at world points: world -> NDC (camera) -> crop (GT mask rule) ->
+    coefficient maps -> sampled -> zeta -> basis. Points: surface +- 1, 2, 5 cm along random
+    directions and uniform in the subject's box."""
+    meta = json.loads(__import__("safetensors").safe_open(va.files[gi], "np").metadata()["volcap"])
+    cam = meta["camera"]
+    rgb, mask = va.rgb01(gi), va.mask01(gi)
+    crop = C.crop_params(mask[0])
+    x = encoder_input(C.apply_crop(rgb, crop)[None], C.apply_crop(mask, crop)[None])
+    surf = ndc_to_world(cam, va.surface[gi][:200].double())
+    dirs = torch.randn(200, 3, generator=gen, dtype=torch.float64)
+    dirs = dirs / dirs.norm(dim=1, keepdim=True)
+    pts = [surf + dirs * d for d in (-0.05, -0.02, -0.01, 0.01, 0.02, 0.05)]
+    lo, hi = surf.min(0).values - 0.1, surf.max(0).values + 0.1
+    pts.append(lo + (hi - lo) * torch.rand(400, 3, generator=gen, dtype=torch.float64))
+    world = torch.cat(pts)
+    ndc = world_to_ndc(cam, world)
+    u = C.to_crop(ndc.float(), crop)
+    with torch.no_grad():
+        coeff = net(x)
+        occ = FO.decode(sample_features(coeff, u[None, :, :2])[0], u[:, 2] * FO.ZETA_SCALE, net.k)
+    # The engine's field is 0 outside the mask and the crop square; so is this reference.
+    mask_c = C.apply_crop(mask, crop)
+    m = sample_features(mask_c[None], u[None, :, :2])[0, :, 0]
+    inside = (m >= 0.5) & (u[:, 0].abs() <= 1) & (u[:, 1].abs() <= 1)
+    occ = torch.where(inside, occ.clamp(0.0, 1.0), torch.zeros_like(occ))
+    return {
+        "image_u8": va.image[gi].permute(1, 2, 0).contiguous().numpy(),
+        "mask_u8": va.mask[gi][0].numpy(),
+        "world": world.float().numpy(),
+        "occ": occ.float().numpy(),
+        "camera_json": np.frombuffer(json.dumps(cam).encode(), dtype=np.uint8).copy(),
+    }
+
+
+def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, calib, common, gen, va: Split) -> dict:
+    net = load_fourier(run, variant)
+    k = net.k
+    base = f"shape-{name}"
+    size = 128
+    meta = {"kind": "shape-fourier", "variant": variant, "input_size": 256, "fourier_k": k, "coeff_size": size, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": name}
+    path = out / f"{base}.fourier.onnx"
+    export(net, (x,), ["image"], ["coeff"], path, meta, False)
+    files = [path.name]
+    quantize(path, out / f"{base}.fourier.int8.onnx", [{"image": c.numpy()} for c in calib])
+    files.append(f"{base}.fourier.int8.onnx")
+    with torch.no_grad():
+        coeff = net(x)
+        occ = FO.decode(sample_features(coeff, pts[None, :, :2])[0], pts[:, 2] * FO.ZETA_SCALE, k).clamp(0.0, 1.0)
+    iy, ix, fv = golden_sample(coeff[0], 256, gen)
+    save_file({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "occ": occ.numpy()}, str(out / "golden" / f"{base}.safetensors"))
+    save_file(geometry_golden(net, va, 0, gen), str(out / "golden" / f"geometry-{base}.safetensors"))
+    # A light checkpoint (weights and step, no optimizer state) for resuming training in a
+    # later session: `train fourier --init models/checkpoints/shape-NAME.pt`.
+    st = torch.load(run / "ckpt.pt", weights_only=False)
+    (out / "checkpoints").mkdir(exist_ok=True)
+    torch.save({"net": net.state_dict(), "step": st["step"], "variant": variant}, out / "checkpoints" / f"{base}.pt")
+    macs = count_macs(net, x)
+    history = (run / "history.md").read_text() if (run / "history.md").exists() else ""
+    return {"history": history, "files": files, "variant": variant, "family": "fourier", "fourier_k": k, "params": params(net), "gmacs_frame": macs / 1e9, "macs_point": 4 * (2 * k + 1) + 4 * k, "budget": budget}
+
+
+def export_overfit(run: Path, data: Path, out: Path):
+    """The overfit check's model: the run's net as `shape-overfit.fourier.onnx`, and
+    `overfit.json` with what reproduces its training images (scene text, frame, yaws)."""
+    budget = json.loads((run / "budget.json").read_text())
+    net = load_fourier(run, budget["args"]["variant"])
+    tr = Split(data, "train")
+    out.mkdir(parents=True, exist_ok=True)
+    infos = [json.loads(__import__("safetensors").safe_open(f, "np").metadata()["volcap"]) for f in tr.files]
+    scenes = {i["scene"] for i in infos}
+    if len(scenes) != 1:
+        raise ValueError(f"{data}: the overfit run must see one subject and pose, found {len(scenes)} scenes")
+    m = tr.mask01(0)
+    p = C.crop_params(m[0])
+    x = encoder_input(C.apply_crop(tr.rgb01(0), p)[None], C.apply_crop(m, p)[None])
+    meta = {"kind": "shape-fourier", "variant": budget["args"]["variant"], "input_size": 256, "fourier_k": net.k, "coeff_size": 128, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": "overfit"}
+    export(net, (x,), ["image"], ["coeff"], out / "shape-overfit.fourier.onnx", meta, False)
+    save_file(geometry_golden(net, tr, 0, torch.Generator().manual_seed(7)), str(out / "geometry-shape-overfit.safetensors"))
+    info = {"scene": infos[0]["scene"], "frame": infos[0]["frame"], "yaws": [i["yaw_deg"] for i in infos], "budget": {k: budget[k] for k in ("steps", "wall_s", "val")}, "params": params(net)}
+    (out / "overfit.json").write_text(json.dumps(info, indent=1))
+    print(json.dumps(info, indent=1))
+
+
 def write_card(out: Path, name: str, c: dict, data: Path):
     b = c.get("budget", {})
     a = b.get("args", {})
@@ -241,6 +370,8 @@ def write_card(out: Path, name: str, c: dict, data: Path):
         "|---|---|",
         f"| task | {a.get('task', name)} |",
         f"| variant | {c.get('variant', '-')} |",
+        f"| family | {c.get('family', 'mlp')}{' (K = ' + str(c['fourier_k']) + ', coefficient maps 128x128, zeta = 2 * crop-NDC z)' if c.get('fourier_k') else ''} |",
+        f"| loss | {'dense: Parseval L2 of each pixel ray (every crop pixel), + ' + a.get('point_weight', '0.1') + ' x BCE of tau (occ - 0.5) on labelled points' if c.get('fourier_k') else 'BCE on labelled points'} |",
         f"| parameters | {c['params']:,} |",
         f"| GMACs per frame (encoder) | {c['gmacs_frame']:.3f} |",
         f"| MACs per point (MLP) | {c.get('macs_point', '-')} |",
@@ -251,6 +382,7 @@ def write_card(out: Path, name: str, c: dict, data: Path):
         f"| seed | {a.get('seed', '?')} |",
         f"| validation (held-out subjects) | {json.dumps(b.get('val', {}))} |",
         "",
+        *([f"**Run history.** {c['history'].strip()}", ""] if c.get("history") else []),
         "**Data.** Rendered by `volcap sim dataset` from the CC0 MakeHuman assets (synthetic people, procedural poses,",
         "studio lighting; segmentation composited over procedural backgrounds with photometric extremes). Validation",
         "subjects are held out by identity. Not trained on real photographs: expect a domain gap on real cameras.",

@@ -198,6 +198,52 @@ class ColorMlp(nn.Module):
         return 0.5 * (torch.tanh(self.out(h)) + 1.0)
 
 
+class FourierNet(nn.Module):
+    """The Fourier occupancy head (FOF): a U-Net from the encoder input [B, 4, 256, 256] to the
+    2K+1 coefficient maps [B, 2K+1, 128, 128] of the occupancy along each pixel's ray
+    (fourier.py). Five scales down to 8x8 so that every pixel sees the whole person (depth
+    needs global context), skips at every scale, a per-pixel MLP head (1x1 convs)."""
+
+    def __init__(self, k=15, c=12):
+        super().__init__()
+        self.k = k
+        self.e0 = conv_bn(4, c, 2)  # 128
+        self.e1 = nn.Sequential(conv_bn(c, 2 * c, 2), Block(2 * c))  # 64
+        self.e2 = nn.Sequential(conv_bn(2 * c, 4 * c, 2), Block(4 * c))  # 32
+        self.e3 = nn.Sequential(conv_bn(4 * c, 8 * c, 2), Block(8 * c), Block(8 * c))  # 16
+        self.e4 = nn.Sequential(conv_bn(8 * c, 8 * c, 2), Block(8 * c))  # 8
+        self.d3 = conv_bn(16 * c, 8 * c)
+        self.d2 = conv_bn(8 * c + 4 * c, 4 * c)
+        self.d1 = conv_bn(4 * c + 2 * c, 2 * c)
+        self.d0 = conv_bn(2 * c + c, 2 * c)
+        # A per-pixel MLP head: a 1x1 conv straight from 2c channels would confine the 2K+1
+        # coefficients of every pixel to a (2c)-dimensional affine subspace.
+        self.out = nn.Sequential(nn.Conv2d(2 * c, 64, 1), nn.ReLU(inplace=True), nn.Conv2d(64, 2 * k + 1, 1))
+
+    def forward(self, x):
+        e0 = self.e0(x)
+        e1 = self.e1(e0)
+        e2 = self.e2(e1)
+        e3 = self.e3(e2)
+        e4 = self.e4(e3)
+        up = lambda t: F.interpolate(t, scale_factor=2.0, mode="bilinear", align_corners=False)
+        d3 = self.d3(torch.cat([up(e4), e3], 1))
+        d2 = self.d2(torch.cat([up(d3), e2], 1))
+        d1 = self.d1(torch.cat([up(d2), e1], 1))
+        d0 = self.d0(torch.cat([up(d1), e0], 1))
+        return self.out(d0)
+
+
+FOURIER_VARIANTS = {
+    # name: (K, encoder width c)
+    "fourier": (15, 12),
+    "fourier-k7": (7, 12),
+    "fourier-k31": (31, 12),
+    "fourier-small": (15, 8),
+    "fourier-tiny": (15, 6),
+}
+
+
 def encoder_input(rgb01: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """[B, 3, H, W] RGB in [0, 1] and [B, 1, H, W] mask in [0, 1] -> the encoders' 4-channel input."""
     return torch.cat([(rgb01 * 2.0 - 1.0) * mask, mask], 1)

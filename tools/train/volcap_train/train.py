@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import os
 import platform
 import time
@@ -22,7 +23,8 @@ from tqdm import tqdm
 
 from . import crop as C
 from .data import Split, backgrounds, photometric, random_affine
-from .nets import ColorEncoder, ColorMlp, SegNet, encode_z, encoder_input, make_shape, sample_features
+from . import fourier as FO
+from .nets import FOURIER_VARIANTS, ColorEncoder, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
 
 
@@ -53,6 +55,75 @@ def cropped_cached(root: Path, split: str):
     out = cropped(Split(root, split))
     torch.save(out, cache)
     return out
+
+
+COEFF_SIZE = 128
+
+
+def fourier_items(split: Split, k: int, points: int = 4096):
+    """Per image: the GT-mask crop (engine rule), the cropped RGB and mask (u8), the ground-truth
+    coefficient maps [2K+1, 128, 128] (f16) on the crop's map grid, and labelled points in crop
+    NDC. The coefficient maps are computed on the input pixel grid (intervals scaled by the
+    crop, fourier.py) and resampled through the crop (bilinear, zeros outside): linear in the
+    coefficients, so a map pixel holds the mean occupancy function of its neighbourhood."""
+    if not split.ray_offsets:
+        raise ValueError(f"{split.files[0]}: shards have no ray_offsets/ray_z (regenerate with `volcap sim dataset`)")
+    rgb, mask, coeff, pts, occ, keep = [], [], [], [], [], []
+    size = split.image.shape[-1]
+    for i in tqdm(range(len(split)), desc=f"fourier targets K={k}", unit="img"):
+        m = split.mask01(i)
+        p = C.crop_params(m[0])
+        if p is None:
+            continue
+        s, tx, ty = p
+        rgb.append((C.apply_crop(split.rgb01(i), p) * 255).round().to(torch.uint8))
+        mask.append((C.apply_crop(m, p) * 255).round().to(torch.uint8))
+        full = FO.ray_coeff_maps(split.ray_offsets[i], split.ray_z[i], size, s, k)
+        theta = torch.tensor([[[s, 0.0, tx], [0.0, s, ty]]], dtype=torch.float32)
+        grid = F.affine_grid(theta, (1, 1, COEFF_SIZE, COEFF_SIZE), align_corners=True)
+        coeff.append(F.grid_sample(full[None], grid, mode="bilinear", padding_mode="zeros", align_corners=True)[0].half())
+        # Shards store the inside points first, then the outside ones: take both halves so
+        # that the point term is balanced (the first `points` alone would be all inside,
+        # which pushes the series outward).
+        n_all, half = split.points.shape[1], points // 2
+        sel = torch.cat([torch.arange(half), torch.arange(n_all - (points - half), n_all)])
+        q = C.to_crop(split.points[i][sel], p)
+        pts.append(q)
+        occ.append(split.occ[i][sel])
+        keep.append(i)
+    return {"rgb": torch.stack(rgb), "mask": torch.stack(mask), "coeff": torch.stack(coeff), "points": torch.stack(pts), "occ": torch.stack(occ), "keep": torch.tensor(keep), "k": k}
+
+
+def fourier_cached(root: Path, split: str, k: int):
+    cache = root / f"fourier-{split}-k{k}-v2.pt"
+    if cache.exists():
+        return torch.load(cache)
+    out = fourier_items(Split(root, split), k)
+    torch.save(out, cache)
+    return out
+
+
+def perturb_mask(m: torch.Tensor, gen: torch.Generator, p: float = 0.5) -> torch.Tensor:
+    """Segmentation-like mask errors for a fraction p of the images: the mask dilated or
+    eroded by 1-3 pixels (the encoder sees predicted masks at run time)."""
+    out = m.clone()
+    for i in range(m.shape[0]):
+        if float(torch.rand(1, generator=gen)) >= p:
+            continue
+        r = int(torch.randint(1, 4, (1,), generator=gen))
+        k = 2 * r + 1
+        if float(torch.rand(1, generator=gen)) < 0.5:
+            out[i] = F.max_pool2d(m[i : i + 1], k, 1, r)[0]
+        else:
+            out[i] = -F.max_pool2d(-m[i : i + 1], k, 1, r)[0]
+    return out
+
+
+def fourier_query(coeff: torch.Tensor, pts: torch.Tensor, k: int) -> torch.Tensor:
+    """The whole point query of the Fourier head: coefficient maps [B, 2K+1, H, W], crop-NDC
+    points [B, N, 3] -> occupancy [B, N] (grid_sample rule of the engine, zeta from crop z)."""
+    c = sample_features(coeff, pts[..., :2])  # [B, N, 2K+1]
+    return FO.decode(c, pts[..., 2] * FO.ZETA_SCALE, k)
 
 
 def hardware():
@@ -261,9 +332,77 @@ def train_color(args):
     return loop(run, {"enc": enc, "mlp": mlp}, opt, args.steps, step_fn, eval_fn, {"gen": gen})
 
 
+def train_fourier(args):
+    """The Fourier head, densely supervised: every pixel's whole ray (Parseval L2 on the
+    coefficients) plus BCE on labelled 3D points through the basis (OHEM on points and images).
+    The BCE uses the series' occupancy as a logit around the 0.5 level, tau (occ - 0.5), which
+    is what the surface needs and stays finite for any series value."""
+    torch.manual_seed(args.seed)
+    gen = torch.Generator().manual_seed(args.seed)
+    k, width = FOURIER_VARIANTS[args.variant]
+    tr = fourier_cached(args.data, "train", k)
+    va = fourier_cached(args.data, "val", k)
+    net = FourierNet(k, width)
+    ohem = OhemState(len(tr["rgb"]), tr["points"].shape[1], args.ohem)
+    opt = torch.optim.Adam(net.parameters(), lr=args.lr)
+    sched_total = max(args.steps, 1)
+    run = Run(args.out, args)
+    if args.init and not run.ckpt.exists():
+        light = torch.load(args.init, weights_only=False)
+        net.load_state_dict({k: v.float() for k, v in light["net"].items()})
+        print(f"initialized from {args.init} (trained {light.get('step', '?')} steps before; optimizer state restarts)")
+    tau = 10.0
+
+    def inputs(d, idx, g):
+        rgb = d["rgb"][idx].float() / 255.0
+        m = d["mask"][idx].float() / 255.0
+        if g is not None:
+            rgb = photometric(rgb, g)
+            m = perturb_mask(m, g)
+        return encoder_input(rgb, m)
+
+    def losses(pred, d, idx, pidx):
+        target = d["coeff"][idx].float()
+        dense = FO.parseval_l2(pred, target, dim=1).mean()
+        pts = torch.gather(d["points"][idx], 1, pidx.unsqueeze(-1).expand(-1, -1, 3))
+        lab = torch.gather(d["occ"][idx], 1, pidx)
+        occ = fourier_query(pred, pts, k)
+        bce = F.binary_cross_entropy_with_logits(tau * (occ - 0.5), lab, reduction="none")
+        return dense, bce, occ, lab
+
+    def step_fn(step):
+        for gparam in opt.param_groups:
+            gparam["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * min(step / sched_total, 1.0)))
+        items = ohem.sample_items(args.batch, gen)
+        pidx = ohem.sample_points(items, args.points, gen)
+        pred = net(inputs(tr, items, None if args.no_aug else gen))
+        dense, bce, occ, lab = losses(pred, tr, items, pidx)
+        loss = dense + args.point_weight * bce.mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        ohem.update(items, pidx, bce.detach(), occ.detach(), lab)
+        return loss.item()
+
+    def eval_fn():
+        ious, l2s = [], []
+        for s in range(0, len(va["rgb"]), 8):
+            idx = torch.arange(s, min(s + 8, len(va["rgb"])))
+            pred = net(inputs(va, idx, None))
+            pidx = torch.arange(va["points"].shape[1]).expand(len(idx), -1)
+            dense, _, occ, lab = losses(pred, va, idx, pidx)
+            l2s.append(FO.parseval_l2(pred, va["coeff"][idx].float(), dim=1).mean((1, 2)))
+            p, t = occ > 0.5, lab > 0.5
+            ious.append((p & t).sum(1).float() / (p | t).sum(1).clamp(min=1).float())
+        iou = torch.cat(ious)
+        return {"point_iou_mean": iou.mean().item(), "point_iou_worst10": iou.sort().values[:10].mean().item(), "ray_l2": torch.cat(l2s).mean().item(), "images": len(iou), "k": k}
+
+    return loop(run, {"net": net}, opt, args.steps, step_fn, eval_fn, {"gen": gen, "ohem": ohem}, ckpt_every=args.ckpt_every)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="volcap_train.train")
-    ap.add_argument("task", choices=["seg", "shape", "color"])
+    ap.add_argument("task", choices=["seg", "shape", "color", "fourier"])
     ap.add_argument("--data", type=Path, required=True)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--variant", default="compact")
@@ -275,10 +414,14 @@ def main(argv=None):
     ap.add_argument("--width", type=int, default=12)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--point-weight", type=float, default=0.1)
+    ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
+    ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) when --out has none")
+    ap.add_argument("--ckpt-every", type=int, default=100)
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
-    return {"seg": train_seg, "shape": train_shape, "color": train_color}[args.task](args)
+    return {"seg": train_seg, "shape": train_shape, "color": train_color, "fourier": train_fourier}[args.task](args)
 
 
 if __name__ == "__main__":

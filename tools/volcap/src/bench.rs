@@ -34,6 +34,9 @@ pub struct Row {
     pub dense_ms: f64,
     pub runs: usize,
     pub conflict_rounds: u32,
+    /// The method returned nothing (the demo's mode with no inside point at the coarsest
+    /// level); the grid counts as all outside.
+    pub empty: bool,
 }
 
 impl Row {
@@ -260,6 +263,7 @@ pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
                     dense_ms,
                     runs,
                     conflict_rounds: stats.conflict_rounds,
+                    empty: stats.empty,
                 };
                 if a.json {
                     let mut out = stdout.lock();
@@ -316,10 +320,11 @@ fn summary_table(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.1} | {:.2} | {:.5} | {} | {:.1} | {:.1} |",
+            "| {} | {} | {}{} | {} | {:.1} | {:.2} | {:.5} | {} | {:.1} | {:.1} |",
             r.scene,
             r.resolution,
             r.label(),
+            if r.empty { " (empty result)" } else { "" },
             r.evaluations,
             r.eval_speedup(),
             r.evals_over_band(),
@@ -384,6 +389,20 @@ fn markdown(rows: &[Row], a: &LocalizeArgs, plot_scene: &str) -> String {
          point in the method's; `x faster` = dense ms / ms.\n"
     );
     let _ = writeln!(s, "![accuracy vs time](accuracy-vs-time.png)\n");
+    let _ = writeln!(
+        s,
+        "Methods: `hierarchical` is the paper's (binarize, upsample, boundary + 1-ring, conflict loop; exact); \
+         `hierarchical-no-conflict` the same without the conflict loop; `hierarchical-tight` ours (no dilation, \
+         conflict loop with sign-change closure; exact on these scenes); `demo-faster` the public demo's \
+         \"faster\" mode as its code runs it (`Seg3dLossless._forward_faster`: continuous trilinear upsampling, \
+         9^3 then 7^3 then 3^3 dilation, no conflict loop, the finest level never evaluated, and no result at all \
+         when the coarsest grid has no inside point: marked `(empty result)`). The demo samples cell centres \
+         (`align_corners=False`), we sample grid corners; the lossless methods are exact either way. Our default \
+         coarsest grid is {}^3; the demo's own is {}^3 (`RTL/main.py`: 17, 33, 65, 129, 257), reported in \
+         [coarse-17/](coarse-17/accuracy-vs-time.md).\n",
+        (1usize << volcap_engine::localize::DEFAULT_COARSE_LEVEL) + 1,
+        (1usize << volcap_engine::localize::DEMO_COARSE_LEVEL) + 1,
+    );
     let _ = writeln!(
         s,
         "The plot shows `{plot_scene}`: one panel per resolution, IoU against dense vs acceleration (dense evaluations / evaluations).\n"

@@ -54,12 +54,12 @@ pub struct LocalizeArgs {
     #[arg(long, value_delimiter = ',', default_value = "65,129,257,513")]
     pub res: Vec<usize>,
     /// Methods (comma-separated): dense, mise, octree-threshold (every threshold) or
-    /// octree-threshold@T, hierarchical, hierarchical-no-conflict, hierarchical-tight.
-    /// Default: all. Dense always runs (it is the reference).
+    /// octree-threshold@T, hierarchical, hierarchical-no-conflict, hierarchical-tight,
+    /// demo-faster (the public demo's "faster" mode). Default: all. Dense always runs (it is
+    /// the reference).
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
-    /// Coarsest level of the coarse-to-fine methods (default 5, i.e. 33^3).
-    #[arg(long)]
+    #[arg(long, help = coarse_level_help())]
     pub coarse_level: Option<u32>,
     /// Timed runs per row (median reported); fewer when a row exceeds --time-budget.
     #[arg(long, default_value_t = 5)]
@@ -84,6 +84,18 @@ pub struct LocalizeArgs {
     /// Scene drawn in the plot (default capsule-human if measured, else the first scene).
     #[arg(long)]
     pub plot_scene: Option<String>,
+}
+
+/// The `--coarse-level` help, from the engine's constants (so it cannot drift from them).
+fn coarse_level_help() -> String {
+    use volcap_engine::localize::{DEFAULT_COARSE_LEVEL, DEMO_COARSE_LEVEL};
+    let n = |l: u32| (1usize << l) + 1;
+    format!(
+        "Coarsest level of the coarse-to-fine methods (default {DEFAULT_COARSE_LEVEL}, i.e. {}^3; \
+         the public demo starts at {DEMO_COARSE_LEVEL}, i.e. {}^3)",
+        n(DEFAULT_COARSE_LEVEL),
+        n(DEMO_COARSE_LEVEL)
+    )
 }
 
 fn main() -> ExitCode {

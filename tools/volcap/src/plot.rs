@@ -25,6 +25,7 @@ fn method_color(method: &str) -> RGBColor {
         "hierarchical" => RGBColor(200, 30, 40),
         "hierarchical-no-conflict" => RGBColor(150, 80, 170),
         "hierarchical-tight" => RGBColor(20, 150, 60),
+        "demo-faster" => RGBColor(0, 170, 190),
         _ => RGBColor(100, 100, 100),
     }
 }

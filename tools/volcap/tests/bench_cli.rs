@@ -6,6 +6,20 @@ fn volcap() -> Command {
     Command::new(env!("CARGO_BIN_EXE_volcap"))
 }
 
+/// The help states the coarse level the code uses (it is generated from the constants).
+#[test]
+fn coarse_level_help_comes_from_the_engine_constants() {
+    let out = volcap()
+        .args(["bench", "localize", "--help"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8(out.stdout).unwrap();
+    let l = volcap_engine::localize::DEFAULT_COARSE_LEVEL;
+    let want = format!("default {l}, i.e. {}^3", (1usize << l) + 1);
+    assert!(text.contains(&want), "help lacks {want:?}:\n{text}");
+    assert!(text.contains("demo-faster"), "help lists demo-faster");
+}
+
 #[test]
 fn json_rows_cover_every_method_and_nothing_else_is_on_stdout() {
     let out = volcap()
@@ -34,8 +48,9 @@ fn json_rows_cover_every_method_and_nothing_else_is_on_stdout() {
         .lines()
         .map(|l| serde_json::from_str(l).expect("each line is JSON"))
         .collect();
-    // 2 scenes x 2 resolutions x (dense + mise + 7 thresholds + 3 hierarchical).
-    assert_eq!(rows.len(), 2 * 2 * 12);
+    // 2 scenes x 2 resolutions x (dense + mise + 7 thresholds + 3 hierarchical + demo-faster).
+    assert_eq!(rows.len(), 2 * 2 * 13);
+    assert!(rows.iter().any(|r| r["method"] == "demo-faster"));
     for r in &rows {
         for key in [
             "scene",

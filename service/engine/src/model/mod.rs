@@ -12,11 +12,13 @@
 //! its input/output shapes match the contract; any mismatch is an error naming the file and
 //! what differs. The ONNX files are the only source of the weights.
 
+pub mod fourier;
 pub mod preprocess;
 pub mod sample;
 
 use crate::field::{ColorField, FieldError, OccupancyField};
 use crate::softz::{SOFTZ_BINS, soft_z};
+use fourier::FourierMaps;
 use glam::{Mat3, Vec3};
 use preprocess::{Crop, INPUT_SIZE};
 use std::collections::HashMap;
@@ -258,7 +260,7 @@ pub struct ColorNets {
 /// Every network of the pipeline, loaded from a models folder.
 pub struct Models {
     pub seg: Net,
-    pub shape: Arc<ShapeNets>,
+    pub shape: ShapeModel,
     pub color: Arc<ColorNets>,
     pub name: String,
     pub precision: Precision,
@@ -421,6 +423,95 @@ impl ShapeNets {
     }
 }
 
+/// The Fourier occupancy head: one image-to-image network giving the 2K+1 coefficient maps
+/// of the occupancy along every crop pixel's ray ([`fourier`]).
+pub struct FourierNet {
+    pub net: Net,
+    /// Series order K.
+    pub k: usize,
+    /// Side of the coefficient maps.
+    pub size: usize,
+    /// `zeta = zeta_scale * crop-NDC z`.
+    pub zeta_scale: f32,
+}
+
+impl FourierNet {
+    pub fn path(dir: &Path, name: &str, precision: Precision) -> PathBuf {
+        dir.join(format!("shape-{name}.fourier{}.onnx", precision.suffix()))
+    }
+
+    pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        let path = Self::path(dir, name, precision);
+        let meta = meta_of(&path);
+        let k = meta_usize(&path, &meta, "fourier_k")?;
+        let size = meta_usize(&path, &meta, "coeff_size")?;
+        let zeta_scale = meta
+            .get("volcap.zeta_scale")
+            .and_then(|v| v.parse::<f32>().ok())
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| ModelError::Mismatch {
+                path: path.display().to_string(),
+                what: "metadata volcap.zeta_scale".into(),
+                expected: "a positive number".into(),
+                found: format!("{:?}", meta.get("volcap.zeta_scale")),
+            })?;
+        let net = Net::load(
+            &path,
+            "shape-fourier",
+            &[InputSpec {
+                name: "image",
+                shape: &IMG,
+            }],
+            &[Some(1), Some(2 * k + 1), Some(size), Some(size)],
+        )?;
+        Ok(Self {
+            net,
+            k,
+            size,
+            zeta_scale,
+        })
+    }
+
+    /// The coefficient maps of an encoder input `[4, S, S]`; non-finite output is refused.
+    pub fn maps(&self, x: &[f32]) -> Result<FourierMaps, ModelError> {
+        let s = INPUT_SIZE;
+        let planar = self.net.run(&[(&[1, 4, s, s], x)])?;
+        FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale).ok_or_else(|| {
+            ModelError::Run {
+                path: self.net.path().display().to_string(),
+                msg: "non-finite Fourier coefficients".into(),
+            }
+        })
+    }
+}
+
+/// A shape model family: the paper's encoder + point MLP, or the Fourier head.
+pub enum ShapeModel {
+    Mlp(Arc<ShapeNets>),
+    Fourier(Arc<FourierNet>),
+}
+
+impl ShapeModel {
+    /// `shape-NAME.fourier.onnx` if it exists, else `shape-NAME.encoder.onnx` + `.mlp.onnx`.
+    pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        if FourierNet::path(dir, name, precision).is_file() {
+            Ok(Self::Fourier(Arc::new(FourierNet::load(
+                dir, name, precision,
+            )?)))
+        } else {
+            Ok(Self::Mlp(Arc::new(ShapeNets::load(dir, name, precision)?)))
+        }
+    }
+
+    /// "mlp" or "fourier".
+    pub fn family(&self) -> &'static str {
+        match self {
+            Self::Mlp(_) => "mlp",
+            Self::Fourier(_) => "fourier",
+        }
+    }
+}
+
 impl ColorNets {
     /// Colour stays f32 at every precision setting: it runs only on the visible surface
     /// points, off the shape path's cost.
@@ -508,7 +599,7 @@ impl Models {
         )?;
         Ok(Models {
             seg,
-            shape: Arc::new(ShapeNets::load(dir, name, precision)?),
+            shape: ShapeModel::load(dir, name, precision)?,
             color: Arc::new(ColorNets::load(dir)?),
             name: name.into(),
             precision,
@@ -560,21 +651,35 @@ impl Models {
         let rgb_c = crop.apply(img, 3, s);
         let mask_c = crop.apply(mask, 1, s);
         let x = preprocess::encoder_input(&rgb_c, &mask_c, s);
-        let shape_feat = self.shape.features(&x)?;
+        let shape = match &self.shape {
+            ShapeModel::Mlp(nets) => ShapeState::Mlp {
+                feat: nets.features(&x)?,
+                nets: nets.clone(),
+            },
+            ShapeModel::Fourier(net) => ShapeState::Fourier(net.maps(&x)?),
+        };
         let color_feat = self.color.encoder.run(&[(&[1, 4, s, s], &x)])?;
         // The colour MLP's pixel input, as in training: the masked RGB back in [0, 1].
         let image: Vec<f32> = x[..3 * s * s].iter().map(|v| v * 0.5 + 0.5).collect();
         Ok(ModelField::new(
             mask_c,
-            self.shape.clone(),
-            self.color.clone(),
-            shape_feat,
-            color_feat,
+            shape,
+            Some((self.color.clone(), color_feat)),
             image,
             crop,
             view,
         ))
     }
+}
+
+/// The per-frame state of the shape model: the feature map for the point MLP, or the
+/// Fourier coefficient maps.
+pub enum ShapeState {
+    Mlp {
+        nets: Arc<ShapeNets>,
+        feat: Vec<f32>,
+    },
+    Fourier(FourierMaps),
 }
 
 /// The networks' occupancy and colour over the render view's NDC cube for one frame.
@@ -583,10 +688,10 @@ pub struct ModelField {
     /// (< 0.5) are outside the person (the silhouette bounds the body under the input view)
     /// and are not sent to the MLP.
     mask: Vec<f32>,
-    shape: Arc<ShapeNets>,
-    color: Arc<ColorNets>,
-    shape_feat: Vec<f32>,
-    color_feat: Vec<f32>,
+    shape: ShapeState,
+    /// The colour networks and this frame's colour features; without them (geometry-only
+    /// fields in tests) every point takes the input pixel it projects to.
+    color: Option<(Arc<ColorNets>, Vec<f32>)>,
     /// The cropped, masked input image `[3, S, S]`, RGB in [0, 1] (0.5 off the person).
     image: Vec<f32>,
     pub crop: Crop,
@@ -596,13 +701,10 @@ pub struct ModelField {
 }
 
 impl ModelField {
-    #[allow(clippy::too_many_arguments)]
-    fn new(
+    pub fn new(
         mask: Vec<f32>,
-        shape: Arc<ShapeNets>,
-        color: Arc<ColorNets>,
-        shape_feat: Vec<f32>,
-        color_feat: Vec<f32>,
+        shape: ShapeState,
+        color: Option<(Arc<ColorNets>, Vec<f32>)>,
         image: Vec<f32>,
         crop: Crop,
         view: ModelView,
@@ -622,8 +724,6 @@ impl ModelField {
             mask,
             shape,
             color,
-            shape_feat,
-            color_feat,
             image,
             crop,
             to_crop,
@@ -675,7 +775,10 @@ impl OccupancyField for ModelField {
             return Ok(());
         }
         let mut occ = vec![0.0f32; q.len()];
-        self.shape.query(&self.shape_feat, &q, &mut occ)?;
+        match &self.shape {
+            ShapeState::Mlp { nets, feat } => nets.query(feat, &q, &mut occ)?,
+            ShapeState::Fourier(maps) => maps.occupancy(&q, &mut occ, &mut Vec::new()),
+        }
         for (k, &i) in idx.iter().enumerate() {
             out[i] = occ[k];
         }
@@ -690,19 +793,20 @@ impl ColorField for ModelField {
         }
         let s = INPUT_SIZE;
         let mut px = [0.0f32; 3];
-        if self.identity_view {
+        let Some((color, color_feat)) = self.color.as_ref().filter(|_| !self.identity_view) else {
             // The render view is the input view: the first hit is visible in the input, so it
-            // takes the input pixel's colour directly (the paper's rule).
+            // takes the input pixel's colour directly (the paper's rule). Without colour
+            // networks every view does so (a geometry-only field).
             for (o, p) in out.iter_mut().zip(points) {
                 let u = self.to_crop(*p);
                 sample::bilinear(&self.image, 3, s, s, u.x, u.y, &mut px);
                 *o = px;
             }
             return Ok(());
-        }
-        let c = self.color.channels;
+        };
+        let c = color.channels;
         let mut feat = Vec::new();
-        let q = self.gather(points, &self.color_feat, c, &mut feat);
+        let q = self.gather(points, color_feat, c, &mut feat);
         let n = points.len();
         let mut rgb = vec![0.0f32; n * 3];
         let mut z = vec![0.0f32; n];
@@ -714,8 +818,7 @@ impl ColorField for ModelField {
                 0.0
             };
         }
-        let col = self
-            .color
+        let col = color
             .mlp
             .run(&[(&[n, c], &feat), (&[n, 3], &rgb), (&[n, 1], &z)])
             .map_err(Self::field_err)?;

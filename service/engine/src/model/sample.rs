@@ -3,9 +3,10 @@
 //! NDC -1 / +1 are the centres of the first / last feature pixels (the engine's grid
 //! convention, no half-pixel offset) and points outside are clamped to the border.
 
-/// Sample planar features `[C, H, W]` at NDC `(x, y)` (x right, y down) into `out[..C]`.
-/// Non-finite coordinates are treated as the border's centre-most clamp (never NaN out).
-pub fn bilinear(feat: &[f32], c: usize, h: usize, w: usize, x: f32, y: f32, out: &mut [f32]) {
+/// The four taps of the bilinear rule at NDC `(x, y)` on an `h x w` grid: pixel indices
+/// (row-major) and weights summing to 1. Non-finite coordinates sample the centre.
+#[inline]
+pub fn taps(h: usize, w: usize, x: f32, y: f32) -> ([usize; 4], [f32; 4]) {
     let to_px = |n: f32, size: usize| -> f32 {
         let n = if n.is_finite() {
             n.clamp(-1.0, 1.0)
@@ -21,14 +22,22 @@ pub fn bilinear(feat: &[f32], c: usize, h: usize, w: usize, x: f32, y: f32, out:
     let x1 = (x0 + 1).min(w - 1);
     let y1 = (y0 + 1).min(h - 1);
     let (fx, fy) = (px - x0 as f32, py - y0 as f32);
-    let (w00, w10, w01, w11) = (
-        (1.0 - fx) * (1.0 - fy),
-        fx * (1.0 - fy),
-        (1.0 - fx) * fy,
-        fx * fy,
-    );
+    (
+        [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1],
+        [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ],
+    )
+}
+
+/// Sample planar features `[C, H, W]` at NDC `(x, y)` (x right, y down) into `out[..C]`.
+/// Non-finite coordinates are treated as the border's centre-most clamp (never NaN out).
+pub fn bilinear(feat: &[f32], c: usize, h: usize, w: usize, x: f32, y: f32, out: &mut [f32]) {
+    let ([i00, i10, i01, i11], [w00, w10, w01, w11]) = taps(h, w, x, y);
     let plane = h * w;
-    let (i00, i10, i01, i11) = (y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1);
     for (ch, o) in out.iter_mut().enumerate().take(c) {
         let f = &feat[ch * plane..(ch + 1) * plane];
         *o = f[i00] * w00 + f[i10] * w10 + f[i01] * w01 + f[i11] * w11;

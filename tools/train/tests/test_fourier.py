@@ -1,0 +1,96 @@
+"""The Fourier occupancy field: closed-form coefficients against numerical projection, the
+series against the indicator, Parseval, the crop scaling of ray intervals, and the network's
+output on hard inputs."""
+
+import math
+
+import torch
+
+from volcap_train import fourier as FO
+from volcap_train.nets import FourierNet
+
+
+def indicator(z, intervals):
+    out = torch.zeros_like(z)
+    for lo, hi in intervals:
+        out = torch.where((z >= lo) & (z <= hi), torch.ones_like(z), out)
+    return out
+
+
+def test_closed_form_equals_numerical_projection():
+    iv = [(-0.7, -0.35), (-0.1, 0.42)]
+    k = 15
+    c = FO.interval_coeffs(torch.tensor([a for a, _ in iv], dtype=torch.float64), torch.tensor([b for _, b in iv], dtype=torch.float64), k).sum(0)
+    z = torch.linspace(-1, 1, 400001, dtype=torch.float64)
+    f = indicator(z, iv)
+    dz = z[1] - z[0]
+    num = [0.5 * torch.trapz(f, dx=dz)]
+    for n in range(1, k + 1):
+        num.append(torch.trapz(f * torch.cos(n * math.pi * z), dx=dz))
+        num.append(torch.trapz(f * torch.sin(n * math.pi * z), dx=dz))
+    assert torch.allclose(c, torch.stack(num), atol=2e-5)
+
+
+def test_series_converges_to_the_indicator_and_parseval_holds():
+    iv = [(-0.5, 0.3)]
+    lo, hi = torch.tensor([-0.5], dtype=torch.float64), torch.tensor([0.3], dtype=torch.float64)
+    z = torch.linspace(-1, 1, 20001, dtype=torch.float64)
+    f = indicator(z, iv)
+    errs = []
+    for k in (7, 15, 31, 63):
+        c = FO.interval_coeffs(lo, hi, k).sum(0)
+        g = FO.decode(c.expand(len(z), -1), z, k)
+        errs.append(torch.trapz((f - g) ** 2, z).item())
+        # Parseval: the L2 error of a truncation equals the energy of the dropped terms.
+        c_hi = FO.interval_coeffs(lo, hi, 400).sum(0)
+        tail = (c_hi[FO.channels(k) :] ** 2).sum().item()
+        assert abs(errs[-1] - tail) < 2e-3, (k, errs[-1], tail)
+        # Crossing 0.5 at the edges of a wide interval.
+        at = FO.decode(c[None].expand(2, -1), torch.tensor([-0.5, 0.3], dtype=torch.float64), k)
+        assert (at - 0.5).abs().max() < 0.05
+    assert errs == sorted(errs, reverse=True), errs
+    # zeta outside [-1, 1]: zero occupancy.
+    c = FO.interval_coeffs(torch.tensor([-1.0]), torch.tensor([1.0]), 7)
+    assert FO.decode(c.expand(3, -1), torch.tensor([1.5, -3.0, 1.0]), 7).tolist()[:2] == [0.0, 0.0]
+
+
+def test_parseval_l2_is_the_ray_integral():
+    torch.manual_seed(0)
+    a, b = torch.randn(1, 31, 1, 1, dtype=torch.float64), torch.randn(1, 31, 1, 1, dtype=torch.float64)
+    z = torch.linspace(-1, 1, 200001, dtype=torch.float64)
+    fa = FO.decode(a[0, :, 0, 0].expand(len(z), -1), z, 15)
+    fb = FO.decode(b[0, :, 0, 0].expand(len(z), -1), z, 15)
+    integral = torch.trapz((fa - fb) ** 2, z)
+    assert torch.allclose(FO.parseval_l2(a, b, dim=1)[0, 0, 0], integral, rtol=1e-4)
+
+
+def test_ray_maps_scale_depth_by_the_crop():
+    # One pixel of a 2x2 image with the interval [-0.1, 0.2] in input NDC.
+    offsets = torch.tensor([0, 1, 1, 1, 1])
+    z = torch.tensor([[-0.1, 0.2]])
+    for s in (0.5, 1.0):
+        m = FO.ray_coeff_maps(offsets, z, 2, s, 7)
+        assert m.shape == (15, 2, 2)
+        assert torch.allclose(m[0, 0, 0], torch.tensor(0.5 * 0.3 / s * FO.ZETA_SCALE))
+        assert m[:, 0, 1].abs().max() == 0
+    # Intervals beyond the depth range are clipped, never NaN.
+    m = FO.ray_coeff_maps(offsets, torch.tensor([[-5.0, 5.0]]), 2, 0.125, 7)
+    assert torch.isfinite(m).all() and abs(m[0, 0, 0].item() - 1.0) < 1e-6
+
+
+def test_network_output_is_finite_on_hard_inputs():
+    torch.manual_seed(0)
+    net = FourierNet(k=7, c=4).eval()
+    s = 256
+    black = torch.zeros(1, 4, s, s)
+    white = torch.cat([torch.ones(1, 3, s, s), torch.ones(1, 1, s, s)], 1)
+    noise = torch.cat([torch.rand(1, 3, s, s) * 2 - 1, (torch.rand(1, 1, s, s) > 0.5).float()], 1)
+    tiny = black.clone()
+    tiny[:, :, 120:124, 126:128] = 1.0
+    with torch.no_grad():
+        for x in (black, white, noise, tiny):
+            out = net(x)
+            assert out.shape == (1, 15, 128, 128)
+            assert torch.isfinite(out).all()
+            occ = FO.decode(out[0, :, 64, 64].expand(5, -1), torch.tensor([-1.0, -0.5, 0.0, 0.5, 1.0]), 7)
+            assert torch.isfinite(occ).all()

@@ -1,0 +1,79 @@
+"""The Fourier occupancy field (FOF, NeurIPS 2022), one definition shared with the engine
+(service/engine/src/model/fourier.rs).
+
+Every pixel of the crop stores the occupancy along its ray as a truncated Fourier series in
+the depth coordinate ``zeta`` in [-1, 1] (period 2):
+
+    occ(zeta) = c0 + sum_{k=1..K} a_k cos(k pi zeta) + b_k sin(k pi zeta)
+
+Channel layout of a coefficient map: ``[c0, a_1, b_1, a_2, b_2, ..., a_K, b_K]`` (2K + 1).
+``zeta = ZETA_SCALE * u_z`` where ``u_z`` is crop-NDC depth (crop.py: input NDC z / s), so
+``zeta = +-1`` is +-1 / ZETA_SCALE of the crop's depth half-extent; outside [-1, 1] the
+occupancy is 0 (the series is periodic there, the field is not).
+
+Ground truth in closed form from the intervals ``[lo, hi]`` (in zeta) where the ray is inside:
+``c0 = sum (hi - lo) / 2``, ``a_k = sum (sin(k pi hi) - sin(k pi lo)) / (k pi)``,
+``b_k = sum (cos(k pi lo) - cos(k pi hi)) / (k pi)``: the L2 projection of the indicator on
+the basis (orthonormal up to the factor 2 of the constant term), so by Parseval
+``int (f - g)^2 dzeta = 2 dc0^2 + sum (da_k^2 + db_k^2)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+ZETA_SCALE = 2.0
+
+
+def channels(k: int) -> int:
+    return 2 * k + 1
+
+
+def interval_coeffs(lo: torch.Tensor, hi: torch.Tensor, k: int) -> torch.Tensor:
+    """Coefficients [..., 2K+1] of the indicator of each interval [lo, hi] (zeta, clipped to
+    [-1, 1] by the caller); sum them over the intervals of one ray."""
+    kk = torch.arange(1, k + 1, dtype=lo.dtype, device=lo.device) * math.pi  # [K]
+    a = (torch.sin(hi[..., None] * kk) - torch.sin(lo[..., None] * kk)) / kk
+    b = (torch.cos(lo[..., None] * kk) - torch.cos(hi[..., None] * kk)) / kk
+    c0 = 0.5 * (hi - lo)
+    ab = torch.stack([a, b], -1).flatten(-2)  # a1 b1 a2 b2 ...
+    return torch.cat([c0[..., None], ab], -1)
+
+
+def basis(zeta: torch.Tensor, k: int) -> torch.Tensor:
+    """[...] -> [..., 2K+1]: 1, cos(pi z), sin(pi z), ..., cos(K pi z), sin(K pi z)."""
+    kk = torch.arange(1, k + 1, dtype=zeta.dtype, device=zeta.device) * math.pi
+    ang = zeta[..., None] * kk
+    cs = torch.stack([torch.cos(ang), torch.sin(ang)], -1).flatten(-2)
+    return torch.cat([torch.ones_like(zeta)[..., None], cs], -1)
+
+
+def decode(coeff: torch.Tensor, zeta: torch.Tensor, k: int) -> torch.Tensor:
+    """coeff [..., 2K+1] (at least K), zeta [...] -> occupancy [...]; 0 where |zeta| > 1."""
+    occ = (coeff[..., : channels(k)] * basis(zeta, k)).sum(-1)
+    return torch.where(zeta.abs() <= 1.0, occ, torch.zeros_like(occ))
+
+
+def parseval_l2(pred: torch.Tensor, target: torch.Tensor, dim: int = 1) -> torch.Tensor:
+    """Integral over the ray of the squared occupancy error, from coefficients along `dim`."""
+    d = (pred - target) ** 2
+    w = torch.ones(d.shape[dim], dtype=d.dtype, device=d.device)
+    w[0] = 2.0
+    shape = [1] * d.dim()
+    shape[dim] = -1
+    return (d * w.view(shape)).sum(dim)
+
+
+def ray_coeff_maps(offsets: torch.Tensor, z: torch.Tensor, size: int, s: float, k: int) -> torch.Tensor:
+    """Coefficient maps [2K+1, size, size] on the input pixel grid of one image, from its ray
+    intervals (CSR ``offsets`` [size*size+1], ``z`` [R, 2] input NDC) for a crop of scale s."""
+    n = size * size
+    counts = (offsets[1:] - offsets[:-1]).long()
+    pix = torch.repeat_interleave(torch.arange(n), counts)
+    zeta = (z.double() / s * ZETA_SCALE).clamp(-1.0, 1.0)
+    c = interval_coeffs(zeta[:, 0], zeta[:, 1], k)
+    out = torch.zeros(n, channels(k), dtype=torch.float64)
+    out.index_add_(0, pix, c)
+    return out.T.reshape(channels(k), size, size).float()
