@@ -17,7 +17,7 @@
 //! border)`) and the basis is evaluated once per point by the angle-addition recurrence
 //! ([`basis`]: one `sin_cos`, then two multiply-adds per term; exact at zeta = +-1). The maps are
 //! stored pixel-interleaved so a tap reads 2K + 1 contiguous floats: about 4 (2K + 1) + 4K
-//! multiply-adds per point (155 for K = 15) instead of an MLP's tens of thousands.
+//! multiply-adds per point (184 for K = 15) instead of an MLP's tens of thousands.
 
 use super::sample::taps;
 use glam::Vec3;
