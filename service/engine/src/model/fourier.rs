@@ -19,8 +19,11 @@
 //! stored pixel-interleaved so a tap reads 2K + 1 contiguous floats: about 4 (2K + 1) + 4K
 //! multiply-adds per point (184 for K = 15) instead of an MLP's tens of thousands.
 
+use super::preprocess::INPUT_SIZE;
 use super::sample::taps;
+use super::{IMG, InputSpec, ModelError, Net, Precision, meta_of, meta_usize};
 use glam::Vec3;
+use std::path::{Path, PathBuf};
 
 /// `[1, cos(pi z), sin(pi z), ..., cos(K pi z), sin(K pi z)]` into `out[..2K+1]`.
 ///
@@ -151,6 +154,68 @@ impl FourierMaps {
             // leaves the 0.5 level set unchanged.
             *o = acc.clamp(0.0, 1.0);
         }
+    }
+}
+
+/// The Fourier occupancy head: one image-to-image network giving the 2K+1 coefficient maps
+/// of the occupancy along every crop pixel's ray ([`fourier`]).
+pub struct FourierNet {
+    pub net: Net,
+    /// Series order K.
+    pub k: usize,
+    /// Side of the coefficient maps.
+    pub size: usize,
+    /// `zeta = zeta_scale * crop-NDC z`.
+    pub zeta_scale: f32,
+}
+
+impl FourierNet {
+    pub fn path(dir: &Path, name: &str, precision: Precision) -> PathBuf {
+        dir.join(format!("shape-{name}.fourier{}.onnx", precision.suffix()))
+    }
+
+    pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        let path = Self::path(dir, name, precision);
+        let meta = meta_of(&path);
+        let k = meta_usize(&path, &meta, "fourier_k")?;
+        let size = meta_usize(&path, &meta, "coeff_size")?;
+        let zeta_scale = meta
+            .get("volcap.zeta_scale")
+            .and_then(|v| v.parse::<f32>().ok())
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .ok_or_else(|| ModelError::Mismatch {
+                path: path.display().to_string(),
+                what: "metadata volcap.zeta_scale".into(),
+                expected: "a positive number".into(),
+                found: format!("{:?}", meta.get("volcap.zeta_scale")),
+            })?;
+        let net = Net::load(
+            &path,
+            "shape-fourier",
+            &[InputSpec {
+                name: "image",
+                shape: &IMG,
+            }],
+            &[Some(1), Some(2 * k + 1), Some(size), Some(size)],
+        )?;
+        Ok(Self {
+            net,
+            k,
+            size,
+            zeta_scale,
+        })
+    }
+
+    /// The coefficient maps of an encoder input `[4, S, S]`; non-finite output is refused.
+    pub fn maps(&self, x: &[f32]) -> Result<FourierMaps, ModelError> {
+        let s = INPUT_SIZE;
+        let planar = self.net.run(&[(&[1, 4, s, s], x)])?;
+        FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale).ok_or_else(|| {
+            ModelError::Run {
+                path: self.net.path().display().to_string(),
+                msg: "non-finite Fourier coefficients".into(),
+            }
+        })
     }
 }
 

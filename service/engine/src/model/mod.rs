@@ -12,14 +12,17 @@
 //! its input/output shapes match the contract; any mismatch is an error naming the file and
 //! what differs. The ONNX files are the only source of the weights.
 
+mod field;
 pub mod fourier;
 pub mod preprocess;
 pub mod sample;
 
-use crate::field::{ColorField, FieldError, OccupancyField};
+use crate::field::FieldError;
 use crate::softz::{SOFTZ_BINS, soft_z};
-use fourier::FourierMaps;
-use glam::{Mat3, Vec3};
+pub use field::{ModelField, ShapeState};
+pub use fourier::FourierNet;
+
+use glam::Vec3;
 use preprocess::{Crop, INPUT_SIZE};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -59,7 +62,7 @@ impl Precision {
             _ => Err(format!("precision {s:?} is not one of f32, int8")),
         }
     }
-    fn suffix(self) -> &'static str {
+    pub(crate) fn suffix(self) -> &'static str {
         match self {
             Self::F32 => "",
             Self::Int8 => ".int8",
@@ -266,11 +269,11 @@ pub struct Models {
     pub precision: Precision,
 }
 
-const IMG: [Option<usize>; 4] = [Some(1), Some(4), Some(INPUT_SIZE), Some(INPUT_SIZE)];
+pub(crate) const IMG: [Option<usize>; 4] = [Some(1), Some(4), Some(INPUT_SIZE), Some(INPUT_SIZE)];
 
 /// The `volcap.*` metadata of an ONNX file (empty when it cannot be read: loading the
 /// network then reports why).
-fn meta_of(path: &Path) -> HashMap<String, String> {
+pub(crate) fn meta_of(path: &Path) -> HashMap<String, String> {
     tract_onnx::onnx()
         .proto_model_for_path(path)
         .map(|p| {
@@ -283,7 +286,11 @@ fn meta_of(path: &Path) -> HashMap<String, String> {
 }
 
 /// A positive integer metadata value, or an error naming the file and key.
-fn meta_usize(path: &Path, meta: &HashMap<String, String>, key: &str) -> Result<usize, ModelError> {
+pub(crate) fn meta_usize(
+    path: &Path,
+    meta: &HashMap<String, String>,
+    key: &str,
+) -> Result<usize, ModelError> {
     if !path.is_file() {
         return Err(ModelError::File {
             path: path.display().to_string(),
@@ -420,68 +427,6 @@ impl ShapeNets {
         }
         out[..n].copy_from_slice(&occ);
         Ok(())
-    }
-}
-
-/// The Fourier occupancy head: one image-to-image network giving the 2K+1 coefficient maps
-/// of the occupancy along every crop pixel's ray ([`fourier`]).
-pub struct FourierNet {
-    pub net: Net,
-    /// Series order K.
-    pub k: usize,
-    /// Side of the coefficient maps.
-    pub size: usize,
-    /// `zeta = zeta_scale * crop-NDC z`.
-    pub zeta_scale: f32,
-}
-
-impl FourierNet {
-    pub fn path(dir: &Path, name: &str, precision: Precision) -> PathBuf {
-        dir.join(format!("shape-{name}.fourier{}.onnx", precision.suffix()))
-    }
-
-    pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
-        let path = Self::path(dir, name, precision);
-        let meta = meta_of(&path);
-        let k = meta_usize(&path, &meta, "fourier_k")?;
-        let size = meta_usize(&path, &meta, "coeff_size")?;
-        let zeta_scale = meta
-            .get("volcap.zeta_scale")
-            .and_then(|v| v.parse::<f32>().ok())
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .ok_or_else(|| ModelError::Mismatch {
-                path: path.display().to_string(),
-                what: "metadata volcap.zeta_scale".into(),
-                expected: "a positive number".into(),
-                found: format!("{:?}", meta.get("volcap.zeta_scale")),
-            })?;
-        let net = Net::load(
-            &path,
-            "shape-fourier",
-            &[InputSpec {
-                name: "image",
-                shape: &IMG,
-            }],
-            &[Some(1), Some(2 * k + 1), Some(size), Some(size)],
-        )?;
-        Ok(Self {
-            net,
-            k,
-            size,
-            zeta_scale,
-        })
-    }
-
-    /// The coefficient maps of an encoder input `[4, S, S]`; non-finite output is refused.
-    pub fn maps(&self, x: &[f32]) -> Result<FourierMaps, ModelError> {
-        let s = INPUT_SIZE;
-        let planar = self.net.run(&[(&[1, 4, s, s], x)])?;
-        FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale).ok_or_else(|| {
-            ModelError::Run {
-                path: self.net.path().display().to_string(),
-                msg: "non-finite Fourier coefficients".into(),
-            }
-        })
     }
 }
 
@@ -669,162 +614,5 @@ impl Models {
             crop,
             view,
         ))
-    }
-}
-
-/// The per-frame state of the shape model: the feature map for the point MLP, or the
-/// Fourier coefficient maps.
-pub enum ShapeState {
-    Mlp {
-        nets: Arc<ShapeNets>,
-        feat: Vec<f32>,
-    },
-    Fourier(FourierMaps),
-}
-
-/// The networks' occupancy and colour over the render view's NDC cube for one frame.
-pub struct ModelField {
-    /// The cropped soft person mask `[S, S]`: points whose projection falls outside it
-    /// (< 0.5) are outside the person (the silhouette bounds the body under the input view)
-    /// and are not sent to the MLP.
-    mask: Vec<f32>,
-    shape: ShapeState,
-    /// The colour networks and this frame's colour features; without them (geometry-only
-    /// fields in tests) every point takes the input pixel it projects to.
-    color: Option<(Arc<ColorNets>, Vec<f32>)>,
-    /// The cropped, masked input image `[3, S, S]`, RGB in [0, 1] (0.5 off the person).
-    image: Vec<f32>,
-    pub crop: Crop,
-    /// Render NDC -> crop NDC.
-    to_crop: Mat3,
-    identity_view: bool,
-}
-
-impl ModelField {
-    pub fn new(
-        mask: Vec<f32>,
-        shape: ShapeState,
-        color: Option<(Arc<ColorNets>, Vec<f32>)>,
-        image: Vec<f32>,
-        crop: Crop,
-        view: ModelView,
-    ) -> Self {
-        let d = Mat3::from_diagonal(NDC_HALF_EXTENT_M);
-        let r = Mat3::from_rotation_y(view.yaw_deg.to_radians())
-            * Mat3::from_rotation_x(view.pitch_deg.to_radians());
-        let zoom = if view.zoom.is_finite() && view.zoom > 0.0 {
-            view.zoom
-        } else {
-            1.0
-        };
-        // Render NDC p -> metric (D p) -> rotate back into the input view -> crop NDC.
-        let to_crop = d.inverse() * r.transpose() * d * (1.0 / zoom);
-        let identity_view = view.yaw_deg == 0.0 && view.pitch_deg == 0.0;
-        Self {
-            mask,
-            shape,
-            color,
-            image,
-            crop,
-            to_crop,
-            identity_view,
-        }
-    }
-
-    /// Crop NDC of a render-view NDC point.
-    pub fn to_crop(&self, p: Vec3) -> Vec3 {
-        self.to_crop * p
-    }
-
-    fn gather(&self, points: &[Vec3], feat: &[f32], c: usize, out: &mut Vec<f32>) -> Vec<Vec3> {
-        let f = FEATURE_SIZE;
-        out.clear();
-        out.resize(points.len() * c, 0.0);
-        let mut q = Vec::with_capacity(points.len());
-        for (i, p) in points.iter().enumerate() {
-            let u = self.to_crop(*p);
-            sample::bilinear(feat, c, f, f, u.x, u.y, &mut out[i * c..(i + 1) * c]);
-            q.push(u);
-        }
-        q
-    }
-
-    fn field_err(e: ModelError) -> FieldError {
-        FieldError::Backend(e.to_string())
-    }
-}
-
-impl OccupancyField for ModelField {
-    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
-        let s = INPUT_SIZE;
-        let mut idx = Vec::with_capacity(points.len());
-        let mut q = Vec::with_capacity(points.len());
-        let mut m = [0.0f32];
-        for (i, p) in points.iter().enumerate() {
-            let u = self.to_crop(*p);
-            sample::bilinear(&self.mask, 1, s, s, u.x, u.y, &mut m);
-            let outside_cube = u.x.abs() > 1.0 || u.y.abs() > 1.0;
-            if m[0] < 0.5 || outside_cube {
-                out[i] = 0.0;
-            } else {
-                idx.push(i);
-                q.push(u);
-            }
-        }
-        if q.is_empty() {
-            return Ok(());
-        }
-        let mut occ = vec![0.0f32; q.len()];
-        match &self.shape {
-            ShapeState::Mlp { nets, feat } => nets.query(feat, &q, &mut occ)?,
-            ShapeState::Fourier(maps) => maps.occupancy(&q, &mut occ, &mut Vec::new()),
-        }
-        for (k, &i) in idx.iter().enumerate() {
-            out[i] = occ[k];
-        }
-        Ok(())
-    }
-}
-
-impl ColorField for ModelField {
-    fn color(&self, points: &[Vec3], out: &mut [[f32; 3]]) -> Result<(), FieldError> {
-        if points.is_empty() {
-            return Ok(());
-        }
-        let s = INPUT_SIZE;
-        let mut px = [0.0f32; 3];
-        let Some((color, color_feat)) = self.color.as_ref().filter(|_| !self.identity_view) else {
-            // The render view is the input view: the first hit is visible in the input, so it
-            // takes the input pixel's colour directly (the paper's rule). Without colour
-            // networks every view does so (a geometry-only field).
-            for (o, p) in out.iter_mut().zip(points) {
-                let u = self.to_crop(*p);
-                sample::bilinear(&self.image, 3, s, s, u.x, u.y, &mut px);
-                *o = px;
-            }
-            return Ok(());
-        };
-        let c = color.channels;
-        let mut feat = Vec::new();
-        let q = self.gather(points, color_feat, c, &mut feat);
-        let n = points.len();
-        let mut rgb = vec![0.0f32; n * 3];
-        let mut z = vec![0.0f32; n];
-        for (i, u) in q.iter().enumerate() {
-            sample::bilinear(&self.image, 3, s, s, u.x, u.y, &mut rgb[i * 3..i * 3 + 3]);
-            z[i] = if u.z.is_finite() {
-                u.z.clamp(-1.0, 1.0)
-            } else {
-                0.0
-            };
-        }
-        let col = color
-            .mlp
-            .run(&[(&[n, c], &feat), (&[n, 3], &rgb), (&[n, 1], &z)])
-            .map_err(Self::field_err)?;
-        for (i, o) in out.iter_mut().take(n).enumerate() {
-            *o = [col[i * 3], col[i * 3 + 1], col[i * 3 + 2]];
-        }
-        Ok(())
     }
 }

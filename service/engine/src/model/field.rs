@@ -1,0 +1,166 @@
+//! [`ModelField`]: the networks' occupancy and colour over the render view's NDC cube for one
+//! frame (either shape family), made by [`super::Models::encode`].
+
+use super::fourier::FourierMaps;
+use super::preprocess::{Crop, INPUT_SIZE};
+use super::{ColorNets, FEATURE_SIZE, ModelError, ModelView, NDC_HALF_EXTENT_M, ShapeNets, sample};
+use crate::field::{ColorField, FieldError, OccupancyField};
+use glam::{Mat3, Vec3};
+use std::sync::Arc;
+
+/// The per-frame state of the shape model: the feature map for the point MLP, or the
+/// Fourier coefficient maps.
+pub enum ShapeState {
+    Mlp {
+        nets: Arc<ShapeNets>,
+        feat: Vec<f32>,
+    },
+    Fourier(FourierMaps),
+}
+
+/// The networks' occupancy and colour over the render view's NDC cube for one frame.
+pub struct ModelField {
+    /// The cropped soft person mask `[S, S]`: points whose projection falls outside it
+    /// (< 0.5) are outside the person (the silhouette bounds the body under the input view)
+    /// and are not sent to the MLP.
+    mask: Vec<f32>,
+    shape: ShapeState,
+    /// The colour networks and this frame's colour features; without them (geometry-only
+    /// fields in tests) every point takes the input pixel it projects to.
+    color: Option<(Arc<ColorNets>, Vec<f32>)>,
+    /// The cropped, masked input image `[3, S, S]`, RGB in [0, 1] (0.5 off the person).
+    image: Vec<f32>,
+    pub crop: Crop,
+    /// Render NDC -> crop NDC.
+    to_crop: Mat3,
+    identity_view: bool,
+}
+
+impl ModelField {
+    pub fn new(
+        mask: Vec<f32>,
+        shape: ShapeState,
+        color: Option<(Arc<ColorNets>, Vec<f32>)>,
+        image: Vec<f32>,
+        crop: Crop,
+        view: ModelView,
+    ) -> Self {
+        let d = Mat3::from_diagonal(NDC_HALF_EXTENT_M);
+        let r = Mat3::from_rotation_y(view.yaw_deg.to_radians())
+            * Mat3::from_rotation_x(view.pitch_deg.to_radians());
+        let zoom = if view.zoom.is_finite() && view.zoom > 0.0 {
+            view.zoom
+        } else {
+            1.0
+        };
+        // Render NDC p -> metric (D p) -> rotate back into the input view -> crop NDC.
+        let to_crop = d.inverse() * r.transpose() * d * (1.0 / zoom);
+        let identity_view = view.yaw_deg == 0.0 && view.pitch_deg == 0.0;
+        Self {
+            mask,
+            shape,
+            color,
+            image,
+            crop,
+            to_crop,
+            identity_view,
+        }
+    }
+
+    /// Crop NDC of a render-view NDC point.
+    pub fn to_crop(&self, p: Vec3) -> Vec3 {
+        self.to_crop * p
+    }
+
+    fn gather(&self, points: &[Vec3], feat: &[f32], c: usize, out: &mut Vec<f32>) -> Vec<Vec3> {
+        let f = FEATURE_SIZE;
+        out.clear();
+        out.resize(points.len() * c, 0.0);
+        let mut q = Vec::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            let u = self.to_crop(*p);
+            sample::bilinear(feat, c, f, f, u.x, u.y, &mut out[i * c..(i + 1) * c]);
+            q.push(u);
+        }
+        q
+    }
+
+    fn field_err(e: ModelError) -> FieldError {
+        FieldError::Backend(e.to_string())
+    }
+}
+
+impl OccupancyField for ModelField {
+    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        let s = INPUT_SIZE;
+        let mut idx = Vec::with_capacity(points.len());
+        let mut q = Vec::with_capacity(points.len());
+        let mut m = [0.0f32];
+        for (i, p) in points.iter().enumerate() {
+            let u = self.to_crop(*p);
+            sample::bilinear(&self.mask, 1, s, s, u.x, u.y, &mut m);
+            let outside_cube = u.x.abs() > 1.0 || u.y.abs() > 1.0;
+            if m[0] < 0.5 || outside_cube {
+                out[i] = 0.0;
+            } else {
+                idx.push(i);
+                q.push(u);
+            }
+        }
+        if q.is_empty() {
+            return Ok(());
+        }
+        let mut occ = vec![0.0f32; q.len()];
+        match &self.shape {
+            ShapeState::Mlp { nets, feat } => nets.query(feat, &q, &mut occ)?,
+            ShapeState::Fourier(maps) => maps.occupancy(&q, &mut occ, &mut Vec::new()),
+        }
+        for (k, &i) in idx.iter().enumerate() {
+            out[i] = occ[k];
+        }
+        Ok(())
+    }
+}
+
+impl ColorField for ModelField {
+    fn color(&self, points: &[Vec3], out: &mut [[f32; 3]]) -> Result<(), FieldError> {
+        if points.is_empty() {
+            return Ok(());
+        }
+        let s = INPUT_SIZE;
+        let mut px = [0.0f32; 3];
+        let Some((color, color_feat)) = self.color.as_ref().filter(|_| !self.identity_view) else {
+            // The render view is the input view: the first hit is visible in the input, so it
+            // takes the input pixel's colour directly (the paper's rule). Without colour
+            // networks every view does so (a geometry-only field).
+            for (o, p) in out.iter_mut().zip(points) {
+                let u = self.to_crop(*p);
+                sample::bilinear(&self.image, 3, s, s, u.x, u.y, &mut px);
+                *o = px;
+            }
+            return Ok(());
+        };
+        let c = color.channels;
+        let mut feat = Vec::new();
+        let q = self.gather(points, color_feat, c, &mut feat);
+        let n = points.len();
+        let mut rgb = vec![0.0f32; n * 3];
+        let mut z = vec![0.0f32; n];
+        for (i, u) in q.iter().enumerate() {
+            sample::bilinear(&self.image, 3, s, s, u.x, u.y, &mut rgb[i * 3..i * 3 + 3]);
+            z[i] = if u.z.is_finite() {
+                u.z.clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
+        }
+        let col = color
+            .mlp
+            .run(&[(&[n, c], &feat), (&[n, 3], &rgb), (&[n, 1], &z)])
+            .map_err(Self::field_err)?;
+        for (i, o) in out.iter_mut().take(n).enumerate() {
+            *o = [col[i * 3], col[i * 3 + 1], col[i * 3 + 2]];
+        }
+        Ok(())
+    }
+}
