@@ -29,3 +29,5 @@ $T shape --data "$DATA" --out "$RUNS/compact-ohem-P" --variant compact --ohem P 
 # The Fourier head: dense ray supervision (needs shards with ray_offsets/ray_z).
 $T fourier --data "$DATA" --out "$RUNS/fourier" --variant fourier --steps "${FOURIER_STEPS:-4000}" --point-weight 0.3
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
+# The product's segmentation is MediaPipe's (pinned PyPI wheel, converted to ONNX); ours is seg-sim.onnx.
+$PY -m volcap_train.mediapipe_seg --out ../../models

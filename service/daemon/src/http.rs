@@ -266,6 +266,10 @@ fn state_json(app: &App) -> serde_json::Value {
             "model" => "reconstruction by the trained networks (segmentation, shape, colour; see models/)",
             _ => "",
         },
+        "people": match sh.people.load(Ordering::Relaxed) {
+            usize::MAX => serde_json::Value::Null,
+            n => n.into(),
+        },
         "resolution": live.resolution,
         "paused": live.paused,
         "frames_published": published,

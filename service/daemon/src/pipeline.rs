@@ -7,7 +7,7 @@
 use crate::capture::{Backoff, Camera, CameraState, Frame, Skip, Step, Supervisor};
 use crate::config::{Config, FieldMode};
 use glam::{Quat, Vec3};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 use volcap_engine::grid::GridSpec;
@@ -283,6 +283,10 @@ pub struct Shared {
     /// One counter per pipeline thread, bumped every loop turn (idle turns included): a
     /// counter that stops moving is a stalled thread, and the watchdog stops its pings.
     pub beats: [AtomicU64; 3],
+    /// People in view in the latest rendered frame (model mode: regions of the
+    /// segmentation, the largest one rendered; oracle mode: the simulator's count);
+    /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
+    pub people: AtomicUsize,
 }
 
 pub const THREADS: [&str; 3] = ["capture", "render", "encode"];
@@ -310,6 +314,7 @@ impl Shared {
             latest_field: Mutex::new(None),
             camera_swap: Mutex::new(None),
             beats: Default::default(),
+            people: AtomicUsize::new(usize::MAX),
         }
     }
 
@@ -628,8 +633,12 @@ pub fn start(
                                     },
                                 };
                                 let field = match models.frame(&f.rgb, f.width, f.height, view) {
-                                    Ok((field, _)) => field,
+                                    Ok((field, info)) => {
+                                        sh.people.store(info.people, Ordering::Relaxed);
+                                        field
+                                    }
                                     Err(volcap_engine::model::FrameError::NoPerson) => {
+                                        sh.people.store(0, Ordering::Relaxed);
                                         degraded("no person in view".into(), &f, size, bg);
                                         continue;
                                     }
@@ -656,6 +665,7 @@ pub fn start(
                                     );
                                     continue;
                                 };
+                                sh.people.store(truth.people, Ordering::Relaxed);
                                 if truth.people != 1 {
                                     degraded(
                                         if truth.people == 0 {

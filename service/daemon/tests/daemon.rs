@@ -551,6 +551,8 @@ fn model_mode_renders_network_output() {
         s["frames_published"].as_u64() > Some(1)
     });
     assert_eq!(s["mode"], "model", "{s}");
+    // The segmentation's count of people in the walking scene: exactly one.
+    assert_eq!(s["people"], 1, "{s}");
     assert!(
         s["mode_note"]
             .as_str()

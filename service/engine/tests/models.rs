@@ -415,8 +415,9 @@ fn hard_frames(models: &Models) {
     let (field, _) = models
         .frame(&person, s, s, ModelView::default())
         .expect("the golden person is found");
-    loc.run(Method::Hierarchical, &field, spec, 3, &mut grid)
-        .unwrap();
+    // Dense: the hierarchical search from 9^3 may step over a thin figure at 33^3; what is
+    // asserted here is that the network sees the person, not the search.
+    loc.run(Method::Dense, &field, spec, 3, &mut grid).unwrap();
     assert!(
         grid.binarized().count_ones() > 0,
         "no inside point for a real person"

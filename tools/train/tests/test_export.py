@@ -47,11 +47,12 @@ def test_shape_round_trip(tmp_path, variant):
     np.testing.assert_allclose(run(tmp_path / "m.onnx", {"feat": fb.numpy(), "z": zb.numpy()}), oc, rtol=1e-5, atol=1e-5)
 
 
-def test_fourier_round_trip(tmp_path):
+@pytest.mark.parametrize("shift", [False, True])
+def test_fourier_round_trip(tmp_path, shift):
     from volcap_train.nets import FourierNet
 
     torch.manual_seed(2)
-    net = FourierNet(k=7, c=6)
+    net = FourierNet(k=7, c=6, shift=shift)
     net.train()
     with torch.no_grad():
         for _ in range(3):

@@ -94,3 +94,34 @@ def test_network_output_is_finite_on_hard_inputs():
             assert torch.isfinite(out).all()
             occ = FO.decode(out[0, :, 64, 64].expand(5, -1), torch.tensor([-1.0, -0.5, 0.0, 0.5, 1.0]), 7)
             assert torch.isfinite(occ).all()
+
+
+def test_a_shifted_series_is_the_profile_moved_in_depth():
+    from volcap_train.nets import shift_series
+
+    torch.manual_seed(3)
+    k = 7
+    rel = torch.randn(1, 2 * k + 1, 2, 3)
+    d = torch.rand(1, 1, 2, 3) * 1.6 - 0.8
+    out = shift_series(rel, d, k)
+    z = torch.linspace(-1.0, 1.0, 41)
+    for i in range(2):
+        for j in range(3):
+            zz = z - d[0, 0, i, j]
+            # g is periodic (period 2): evaluate the profile at the wrapped depth.
+            wrapped = torch.remainder(zz + 1.0, 2.0) - 1.0
+            want = FO.decode(rel[0, :, i, j].expand(len(z), -1), wrapped, k)
+            got = FO.decode(out[0, :, i, j].expand(len(z), -1), z, k)
+            assert torch.allclose(got, want, atol=1e-5)
+
+
+def test_centroid_of_a_box_is_its_centre():
+    k = 15
+    lo, hi = torch.tensor([-0.3, 0.1, -0.9]), torch.tensor([0.1, 0.5, -0.5])
+    c = FO.interval_coeffs(lo.double(), hi.double(), k)
+    d, ok = FO.centroid(c, k, dim=-1)
+    assert ok.all()
+    # Truncation at K = 15 moves the centre by well under a tenth of the box.
+    assert torch.allclose(d, (lo + hi).double() / 2, atol=0.02), d
+    empty, ok = FO.centroid(torch.zeros(1, 2 * k + 1), k, dim=-1)
+    assert not ok.any() and empty.item() == 0.0

@@ -77,3 +77,16 @@ def ray_coeff_maps(offsets: torch.Tensor, z: torch.Tensor, size: int, s: float, 
     out = torch.zeros(n, channels(k), dtype=torch.float64)
     out.index_add_(0, pix, c)
     return out.T.reshape(channels(k), size, size).float()
+
+
+def centroid(coeff: torch.Tensor, k: int, dim: int = 1, eps: float = 1e-3):
+    """Depth centre of the occupancy along each ray, int z f / int f over [-1, 1], from its
+    series along `dim` (int z cos = 0, int z sin(k pi z) = 2 (-1)^(k+1) / (k pi), int f =
+    2 c0); and a mask of the rays with at least `eps` of occupancy (c0 > eps)."""
+    c = coeff.movedim(dim, -1)
+    kk = torch.arange(1, k + 1, dtype=c.dtype, device=c.device)
+    w = ((-1.0) ** (kk + 1)) / (kk * math.pi)
+    num = (c[..., 2 : 2 * k + 1 : 2] * w).sum(-1)
+    c0 = c[..., 0]
+    ok = c0 > eps
+    return torch.where(ok, num / c0.clamp(min=eps), torch.zeros_like(c0)).clamp(-1.0, 1.0), ok

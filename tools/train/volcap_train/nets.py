@@ -9,6 +9,8 @@ implements the same rule (service/engine/src/model/sample.rs) and a golden test 
 
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
@@ -204,9 +206,10 @@ class FourierNet(nn.Module):
     (fourier.py). Five scales down to 8x8 so that every pixel sees the whole person (depth
     needs global context), skips at every scale, a per-pixel MLP head (1x1 convs)."""
 
-    def __init__(self, k=15, c=12):
+    def __init__(self, k=15, c=12, shift=False):
         super().__init__()
         self.k = k
+        self.shift = shift
         self.e0 = conv_bn(4, c, 2)  # 128
         self.e1 = nn.Sequential(conv_bn(c, 2 * c, 2), Block(2 * c))  # 64
         self.e2 = nn.Sequential(conv_bn(2 * c, 4 * c, 2), Block(4 * c))  # 32
@@ -218,9 +221,13 @@ class FourierNet(nn.Module):
         self.d0 = conv_bn(2 * c + c, 2 * c)
         # A per-pixel MLP head: a 1x1 conv straight from 2c channels would confine the 2K+1
         # coefficients of every pixel to a (2c)-dimensional affine subspace.
-        self.out = nn.Sequential(nn.Conv2d(2 * c, 64, 1), nn.ReLU(inplace=True), nn.Conv2d(64, 2 * k + 1, 1))
+        # With `shift`, one more channel: the ray's depth centre d (tanh, zeta units), and the
+        # 2K+1 channels are the series of the occupancy *relative to d*, rotated into place
+        # below (`shift_series`): depth enters as a phase, so the network predicts d (smooth
+        # in the image) and a nearly depth-free profile instead of cos/sin(k pi d) itself.
+        self.out = nn.Sequential(nn.Conv2d(2 * c, 64, 1), nn.ReLU(inplace=True), nn.Conv2d(64, 2 * k + 1 + int(shift), 1))
 
-    def forward(self, x):
+    def forward(self, x, with_centre: bool = False):
         e0 = self.e0(x)
         e1 = self.e1(e0)
         e2 = self.e2(e1)
@@ -231,7 +238,25 @@ class FourierNet(nn.Module):
         d2 = self.d2(torch.cat([up(d3), e2], 1))
         d1 = self.d1(torch.cat([up(d2), e1], 1))
         d0 = self.d0(torch.cat([up(d1), e0], 1))
-        return self.out(d0)
+        out = self.out(d0)
+        if not self.shift:
+            return (out, None) if with_centre else out
+        d = torch.tanh(out[:, 2 * self.k + 1 :])
+        coeff = shift_series(out[:, : 2 * self.k + 1], d, self.k)
+        return (coeff, d) if with_centre else coeff
+
+
+def shift_series(rel: torch.Tensor, d: torch.Tensor, k: int) -> torch.Tensor:
+    """Series of f(z) = g(z - d) from the series of g ([B, 2K+1, H, W], channels c0, a1, b1,
+    ...) and the shift d [B, 1, H, W]: each (a_k, b_k) pair rotated by k pi d."""
+    kk = torch.arange(1, k + 1, dtype=rel.dtype, device=rel.device).view(1, k, 1, 1) * math.pi
+    ang = kk * d
+    cs, sn = torch.cos(ang), torch.sin(ang)
+    a, b = rel[:, 1::2], rel[:, 2::2]
+    na = a * cs - b * sn
+    nb = a * sn + b * cs
+    ab = torch.stack([na, nb], 2).flatten(1, 2)
+    return torch.cat([rel[:, :1], ab], 1)
 
 
 FOURIER_VARIANTS = {
@@ -241,7 +266,15 @@ FOURIER_VARIANTS = {
     "fourier-k31": (31, 12),
     "fourier-small": (15, 8),
     "fourier-tiny": (15, 6),
+    # name: (K, c, depth as a phase shift)
+    "fourier-shift": (15, 12, True),
 }
+
+
+def fourier_variant(name: str):
+    """(K, c, shift) of a Fourier variant."""
+    v = FOURIER_VARIANTS[name]
+    return (v[0], v[1], v[2] if len(v) > 2 else False)
 
 
 def encoder_input(rgb01: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

@@ -24,7 +24,7 @@ from tqdm import tqdm
 from . import crop as C
 from .data import Split, backgrounds, photometric, random_affine
 from . import fourier as FO
-from .nets import FOURIER_VARIANTS, ColorEncoder, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
+from .nets import FOURIER_VARIANTS, ColorEncoder, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
 
 
@@ -339,17 +339,26 @@ def train_fourier(args):
     is what the surface needs and stays finite for any series value."""
     torch.manual_seed(args.seed)
     gen = torch.Generator().manual_seed(args.seed)
-    k, width = FOURIER_VARIANTS[args.variant]
+    k, width, shift = fourier_variant(args.variant)
     tr = fourier_cached(args.data, "train", k)
     va = fourier_cached(args.data, "val", k)
-    net = FourierNet(k, width)
+    net = FourierNet(k, width, shift)
     ohem = OhemState(len(tr["rgb"]), tr["points"].shape[1], args.ohem)
     opt = torch.optim.Adam(net.parameters(), lr=args.lr)
     sched_total = max(args.steps, 1)
     run = Run(args.out, args)
     if args.init and not run.ckpt.exists():
         light = torch.load(args.init, weights_only=False)
-        net.load_state_dict({k: v.float() for k, v in light["net"].items()})
+        sd = {n: v.float() for n, v in light["net"].items()}
+        own = net.state_dict()
+        for n, v in sd.items():
+            if n in own and own[n].shape != v.shape and own[n].shape[1:] == v.shape[1:]:
+                # A shift variant from an unshifted checkpoint: the head gains the centre
+                # channel (kept at its fresh init); the series channels start from the old ones.
+                w = own[n].clone()
+                w[: v.shape[0]] = v
+                sd[n] = w
+        net.load_state_dict(sd)
         print(f"initialized from {args.init} (trained {light.get('step', '?')} steps before; optimizer state restarts)")
     tau = 10.0
 
@@ -375,9 +384,15 @@ def train_fourier(args):
             gparam["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * min(step / sched_total, 1.0)))
         items = ohem.sample_items(args.batch, gen)
         pidx = ohem.sample_points(items, args.points, gen)
-        pred = net(inputs(tr, items, None if args.no_aug else gen))
+        pred, d = net(inputs(tr, items, None if args.no_aug else gen), with_centre=True)
         dense, bce, occ, lab = losses(pred, tr, items, pidx)
         loss = dense + args.point_weight * bce.mean()
+        if d is not None:
+            # The shift variants: the depth centre supervised directly (L1, zeta units) on
+            # the rays that hold the body, so the phase starts near the right depth.
+            dt, ok = FO.centroid(tr["coeff"][items].float(), k)
+            if ok.any():
+                loss = loss + args.centre_weight * (d[:, 0] - dt).abs()[ok].mean()
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -415,6 +430,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--point-weight", type=float, default=0.1)
+    ap.add_argument("--centre-weight", type=float, default=1.0, help="Fourier shift variants: weight of the L1 loss on the ray's depth centre")
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) when --out has none")
     ap.add_argument("--ckpt-every", type=int, default=100)

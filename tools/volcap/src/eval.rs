@@ -293,10 +293,10 @@ fn turntable(models: &Models, c: &Case, res: usize, path: &Path) -> anyhow::Resu
     use volcap_engine::render::{RenderOptions, Renderer};
     let spec = GridSpec::from_resolution(res)?;
     let s = c.size;
-    let img = volcap_engine::model::preprocess::letterbox(&c.rgb, s, s);
-    let prob = models.segment(&img)?;
-    let crop = volcap_engine::model::preprocess::Crop::from_mask(&prob, s)
-        .ok_or_else(|| anyhow!("no person in the turntable image"))?;
+    let mut info = volcap_engine::model::FrameInfo::default();
+    let (img, prob, crop) = models
+        .prepare(&c.rgb, s, s, &mut info)
+        .map_err(|e| anyhow!("the turntable image: {e}"))?;
     let opts = RenderOptions {
         background: [0.85, 0.85, 0.85, 1.0],
         shade: true,
@@ -371,10 +371,12 @@ fn run_case(
         mesh_ms: 0.0,
     };
     let s = c.size;
-    // Mask IoU of the segmentation against the simulator's person mask.
+    // Mask IoU of the segmentation (the product's: the most prominent person kept) against
+    // the simulator's person mask.
     let img = volcap_engine::model::preprocess::letterbox(&c.rgb, s, s);
     let t = Instant::now();
-    let prob = models.segment(&img)?;
+    let mut prob = models.segment(&img)?;
+    volcap_engine::model::preprocess::keep_most_prominent(&mut prob, s);
     row.segment_ms = t.elapsed().as_secs_f64() * 1e3;
     let (mut inter, mut union) = (0usize, 0usize);
     for (p, m) in prob.iter().zip(&c.mask) {

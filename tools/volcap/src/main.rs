@@ -4,6 +4,7 @@ mod bench;
 mod ctl;
 mod eval;
 mod plot;
+mod reconstruct;
 mod simcmd;
 
 use clap::{Args, Parser, Subcommand};
@@ -29,6 +30,9 @@ enum Cmd {
     /// The full pipeline (segmentation -> shape -> localization -> mesh) on held-out
     /// simulator subjects against ground truth: Chamfer, P2S, IoU, mask IoU, worst 10, time.
     Eval(eval::EvalArgs),
+    /// Reconstruct people from single images (PNG/JPEG): per image a mask, a mesh (.glb) and
+    /// mesh-free renders at yaw 0/90/180/270.
+    Reconstruct(reconstruct::ReconstructArgs),
     /// The scene simulator: asset pack, rendering, benchmarks, datasets.
     #[command(subcommand)]
     Sim(simcmd::SimCmd),
@@ -103,6 +107,7 @@ fn main() -> ExitCode {
     let res = match cli.cmd {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
         Cmd::Eval(a) => eval::eval(&a),
+        Cmd::Reconstruct(a) => reconstruct::reconstruct(&a),
         Cmd::Sim(c) => simcmd::run(c),
         Cmd::Ctl(c) => ctl::run(c),
     };

@@ -97,6 +97,19 @@ impl OccupancyField for ModelField {
         let mut q = Vec::with_capacity(points.len());
         let mut m = [0.0f32];
         for (i, p) in points.iter().enumerate() {
+            // A non-finite point is refused wherever it falls (inside or outside the
+            // silhouette, either shape family): a NaN is never encoded or read as "outside".
+            if !p.is_finite() {
+                return Err(FieldError::NonFinite {
+                    index: None,
+                    point: p.to_array(),
+                    value: p
+                        .to_array()
+                        .into_iter()
+                        .find(|v| !v.is_finite())
+                        .unwrap_or(f32::NAN),
+                });
+            }
             let u = self.to_crop(*p);
             sample::bilinear(&self.mask, 1, s, s, u.x, u.y, &mut m);
             let outside_cube = u.x.abs() > 1.0 || u.y.abs() > 1.0;

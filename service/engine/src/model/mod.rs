@@ -1,7 +1,8 @@
 //! The trained networks (ONNX, run by tract) as engine fields.
 //!
-//! Per frame: [`Models::frame`] letterboxes the camera frame to 256x256, segments it, crops
-//! around the person with the shared rule ([`preprocess::Crop`]), runs the shape and colour
+//! Per frame: [`Models::frame`] letterboxes the camera frame to 256x256, segments it, keeps
+//! the most prominent person (the largest mask region; the others are counted), crops
+//! around them with the shared rule ([`preprocess::Crop`]), runs the shape and colour
 //! encoders once, and returns a [`ModelField`]: an [`OccupancyField`] + [`ColorField`] over
 //! the render view's NDC cube. Each query point is mapped into crop NDC (the view rotation
 //! about the crop centre, metric through the training camera's NDC extents), its feature is
@@ -498,11 +499,15 @@ pub enum FrameError {
     Model(#[from] ModelError),
 }
 
-/// Time per stage of [`Models::frame`], milliseconds.
+/// What [`Models::frame`] found and how long its stages took (milliseconds).
 #[derive(Debug, Clone, Copy, Default)]
-pub struct FrameTimes {
+pub struct FrameInfo {
     pub segment_ms: f64,
     pub encode_ms: f64,
+    /// People in view ([`preprocess::keep_most_prominent`]); the field is the largest one.
+    pub people: usize,
+    /// Fraction of the 256x256 input that is the chosen person's mask (> 0.5).
+    pub mask_fraction: f32,
 }
 
 /// The render view relative to the input camera: rotation about the crop centre (yaw about
@@ -530,11 +535,12 @@ impl Default for ModelView {
 pub const NDC_HALF_EXTENT_M: Vec3 = Vec3::new(1.15, 1.15, 1.5);
 
 impl Models {
-    /// Load `seg.onnx`, `shape-NAME.*` and `color.*` from `dir`.
+    /// Load `seg.onnx`, `shape-NAME.*` and `color.*` (the shape files at `precision`) from `dir`.
     pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
-        let sfx = precision.suffix();
+        // The segmentation is f32 at every precision: its int8 form lost accuracy on real
+        // photos and was slower (models/seg.md).
         let seg = Net::load(
-            &dir.join(format!("seg{sfx}.onnx")),
+            &dir.join("seg.onnx"),
             "seg",
             &[InputSpec {
                 name: "image",
@@ -564,24 +570,43 @@ impl Models {
         Ok(m)
     }
 
-    /// Segment, crop and encode one RGB8 frame; the field over `view`.
+    /// Letterbox and segment one RGB8 frame and keep its most prominent person
+    /// ([`preprocess::keep_most_prominent`]): the input square `[3, S, S]`, the person's soft
+    /// mask `[S, S]` (0 outside the chosen person) and its crop; `info` gets the people
+    /// count, the mask fraction and the segmentation time.
+    pub fn prepare(
+        &self,
+        rgb: &[u8],
+        width: usize,
+        height: usize,
+        info: &mut FrameInfo,
+    ) -> Result<(Vec<f32>, Vec<f32>, Crop), FrameError> {
+        let t = std::time::Instant::now();
+        let img = preprocess::letterbox(rgb, width, height);
+        let mut mask = self.segment(&img)?;
+        info.people = preprocess::keep_most_prominent(&mut mask, INPUT_SIZE);
+        info.mask_fraction =
+            mask.iter().filter(|&&m| m > 0.5).count() as f32 / (INPUT_SIZE * INPUT_SIZE) as f32;
+        info.segment_ms = t.elapsed().as_secs_f64() * 1e3;
+        let crop = Crop::from_mask(&mask, INPUT_SIZE).ok_or(FrameError::NoPerson)?;
+        Ok((img, mask, crop))
+    }
+
+    /// Segment, crop and encode one RGB8 frame (its most prominent person); the field over
+    /// `view`.
     pub fn frame(
         &self,
         rgb: &[u8],
         width: usize,
         height: usize,
         view: ModelView,
-    ) -> Result<(ModelField, FrameTimes), FrameError> {
-        let mut times = FrameTimes::default();
+    ) -> Result<(ModelField, FrameInfo), FrameError> {
+        let mut info = FrameInfo::default();
+        let (img, mask, crop) = self.prepare(rgb, width, height, &mut info)?;
         let t = std::time::Instant::now();
-        let img = preprocess::letterbox(rgb, width, height);
-        let mask = self.segment(&img)?;
-        times.segment_ms = t.elapsed().as_secs_f64() * 1e3;
-        let t = std::time::Instant::now();
-        let crop = Crop::from_mask(&mask, INPUT_SIZE).ok_or(FrameError::NoPerson)?;
         let field = self.encode(&img, &mask, crop, view)?;
-        times.encode_ms = t.elapsed().as_secs_f64() * 1e3;
-        Ok((field, times))
+        info.encode_ms = t.elapsed().as_secs_f64() * 1e3;
+        Ok((field, info))
     }
 
     /// Encode a letterboxed image `[3, S, S]` with its mask `[S, S]` through `crop`.

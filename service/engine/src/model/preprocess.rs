@@ -35,12 +35,7 @@ pub fn letterbox(rgb: &[u8], w: usize, h: usize) -> Vec<f32> {
         }
         return out;
     }
-    let scale = (s as f32 / w as f32).min(s as f32 / h as f32);
-    let (fw, fh) = (
-        ((w as f32 * scale).round() as usize).clamp(1, s),
-        ((h as f32 * scale).round() as usize).clamp(1, s),
-    );
-    let (ox, oy) = ((s - fw) / 2, (s - fh) / 2);
+    let (scale, fw, fh, ox, oy) = letterbox_geometry(w, h);
     for y in 0..fh {
         let sy = ((y as f32 + 0.5) / scale - 0.5).clamp(0.0, (h - 1) as f32);
         let y0 = sy.floor() as usize;
@@ -57,6 +52,45 @@ pub fn letterbox(rgb: &[u8], w: usize, h: usize) -> Vec<f32> {
                     + (p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx) * fy;
                 out[c * s * s + (oy + y) * s + ox + x] = v / 255.0;
             }
+        }
+    }
+    out
+}
+
+/// Where a `w x h` frame lands in the input square: scale, fitted size, offset (pixels).
+fn letterbox_geometry(w: usize, h: usize) -> (f32, usize, usize, usize, usize) {
+    let s = INPUT_SIZE;
+    let scale = (s as f32 / w as f32).min(s as f32 / h as f32);
+    let (fw, fh) = (
+        ((w as f32 * scale).round() as usize).clamp(1, s),
+        ((h as f32 * scale).round() as usize).clamp(1, s),
+    );
+    (scale, fw, fh, (s - fw) / 2, (s - fh) / 2)
+}
+
+/// A `[S, S]` mask of the input square back at the frame's own `w x h` (the inverse of
+/// [`letterbox`], bilinear), as 0/255 (person where the mask is > 0.5).
+pub fn unletterbox_mask(mask: &[f32], w: usize, h: usize) -> Vec<u8> {
+    let s = INPUT_SIZE;
+    let mut out = vec![0u8; w * h];
+    if w == 0 || h == 0 || mask.len() < s * s {
+        return out;
+    }
+    let (scale, fw, fh, ox, oy) = if w == s && h == s {
+        (1.0, s, s, 0, 0)
+    } else {
+        letterbox_geometry(w, h)
+    };
+    let at = |x: usize, y: usize| mask[(oy + y.min(fh - 1)) * s + ox + x.min(fw - 1)];
+    for y in 0..h {
+        let ly = ((y as f32 + 0.5) * scale - 0.5).clamp(0.0, (fh - 1) as f32);
+        let (y0, fy) = (ly.floor() as usize, ly - ly.floor());
+        for x in 0..w {
+            let lx = ((x as f32 + 0.5) * scale - 0.5).clamp(0.0, (fw - 1) as f32);
+            let (x0, fx) = (lx.floor() as usize, lx - lx.floor());
+            let v = (at(x0, y0) * (1.0 - fx) + at(x0 + 1, y0) * fx) * (1.0 - fy)
+                + (at(x0, y0 + 1) * (1.0 - fx) + at(x0 + 1, y0 + 1) * fx) * fy;
+            out[y * w + x] = if v > 0.5 { 255 } else { 0 };
         }
     }
     out
@@ -143,6 +177,65 @@ impl Crop {
     }
 }
 
+/// A mask region counts as a person when it covers at least this fraction of the frame
+/// (0.2 %: 131 pixels at 256x256, a person about a tenth of the frame high)...
+pub const MIN_PERSON_FRACTION: f32 = 0.002;
+/// ...and at least this fraction of the largest region (smaller ones are fragments).
+pub const MIN_PERSON_RELATIVE: f32 = 0.1;
+
+/// The people in a `[S, S]` soft mask and the most prominent one: people are the
+/// 8-connected regions of `mask > 0.5` that pass [`MIN_PERSON_FRACTION`] and
+/// [`MIN_PERSON_RELATIVE`]; the most prominent is the largest region (ties: the first in
+/// row-major order). Everything outside it is set to 0 in `mask`, so the crop and the
+/// encoders see one person. Returns the number of people (0: nothing is kept).
+pub fn keep_most_prominent(mask: &mut [f32], size: usize) -> usize {
+    let n = size * size;
+    let mask = &mut mask[..n];
+    let mut label = vec![0u32; n];
+    let mut areas: Vec<usize> = vec![0];
+    let mut stack = Vec::new();
+    for start in 0..n {
+        if mask[start] <= 0.5 || label[start] != 0 {
+            continue;
+        }
+        let id = areas.len() as u32;
+        let mut area = 0usize;
+        label[start] = id;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            area += 1;
+            let (x, y) = ((i % size) as i64, (i / size) as i64);
+            for dy in -1..=1i64 {
+                for dx in -1..=1i64 {
+                    let (xx, yy) = (x + dx, y + dy);
+                    if xx < 0 || yy < 0 || xx >= size as i64 || yy >= size as i64 {
+                        continue;
+                    }
+                    let j = yy as usize * size + xx as usize;
+                    if mask[j] > 0.5 && label[j] == 0 {
+                        label[j] = id;
+                        stack.push(j);
+                    }
+                }
+            }
+        }
+        areas.push(area);
+    }
+    let (best, &largest) =
+        areas.iter().enumerate().skip(1).fold(
+            (0, &0),
+            |acc, (i, a)| if *a > *acc.1 { (i, a) } else { acc },
+        );
+    let floor = (MIN_PERSON_FRACTION * n as f32).max(MIN_PERSON_RELATIVE * largest as f32);
+    let people = areas.iter().skip(1).filter(|&&a| a as f32 >= floor).count();
+    for (m, &l) in mask.iter_mut().zip(&label) {
+        if people == 0 || l as usize != best {
+            *m = 0.0;
+        }
+    }
+    people
+}
+
 /// The encoders' 4-channel input from RGB `[3, S, S]` in [0, 1] and mask `[S, S]`:
 /// `((rgb * 2 - 1) * mask, mask)`.
 pub fn encoder_input(rgb: &[f32], mask: &[f32], size: usize) -> Vec<f32> {
@@ -160,6 +253,61 @@ pub fn encoder_input(rgb: &[f32], mask: &[f32], size: usize) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn disc(mask: &mut [f32], size: usize, cx: f32, cy: f32, r: f32) {
+        for y in 0..size {
+            for x in 0..size {
+                if (x as f32 - cx).hypot(y as f32 - cy) <= r {
+                    mask[y * size + x] = 0.9;
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_mask_goes_back_to_the_frame_it_came_from() {
+        // A 400x200 frame: the letterbox is 256x128 at rows 64..192. A block of the frame
+        // marked in the square must come back at its place in the frame.
+        let s = INPUT_SIZE;
+        let (w, h) = (400usize, 200usize);
+        let mut sq = vec![0.0f32; s * s];
+        // Frame pixels x 100..200, y 50..150 -> square x 64..128, y 64+32..64+96.
+        for y in 96..160 {
+            for x in 64..128 {
+                sq[y * s + x] = 1.0;
+            }
+        }
+        let m = unletterbox_mask(&sq, w, h);
+        assert_eq!(m.len(), w * h);
+        let on = |x: usize, y: usize| m[y * w + x] == 255;
+        assert!(on(150, 100) && on(102, 52) && on(197, 147));
+        assert!(!on(95, 100) && !on(205, 100) && !on(150, 45) && !on(150, 155));
+        let count = m.iter().filter(|&&v| v == 255).count() as f64;
+        assert!((count / 10_000.0 - 1.0).abs() < 0.05, "{count}");
+    }
+
+    #[test]
+    fn the_largest_person_is_kept_and_people_are_counted() {
+        let s = 64;
+        let mut m = vec![0.0f32; s * s];
+        disc(&mut m, s, 16.0, 32.0, 6.0); // 113 px: a person (>= 0.2 % of 4096 and >= 10 % of the largest)
+        disc(&mut m, s, 44.0, 32.0, 12.0); // the most prominent
+        m[2] = 0.9; // one stray pixel: a fragment, not a person
+        let before = m.clone();
+        assert_eq!(keep_most_prominent(&mut m, s), 2);
+        for (i, (&a, &b)) in m.iter().zip(&before).enumerate() {
+            let (x, y) = ((i % s) as f32, (i / s) as f32);
+            let in_big = (x - 44.0).hypot(y - 32.0) <= 12.0;
+            assert_eq!(a, if in_big { b } else { 0.0 }, "pixel {x},{y}");
+        }
+        let mut empty = vec![0.2f32; s * s];
+        assert_eq!(keep_most_prominent(&mut empty, s), 0);
+        assert!(empty.iter().all(|&v| v == 0.0));
+        // A lone speck below the frame fraction is no person.
+        let mut speck = vec![0.0f32; s * s];
+        speck[100] = 1.0;
+        assert_eq!(keep_most_prominent(&mut speck, s), 0);
+    }
 
     #[test]
     fn crop_round_trips_points() {

@@ -1,0 +1,337 @@
+//! `volcap reconstruct IMAGE... --out DIR`: the offline single-image path.
+//!
+//! Per image `NAME.ext`: segmentation (the most prominent person), crop, encoders, then
+//! * `NAME.mask.png`: the person mask at the image's own size (0 / 255, greyscale);
+//! * `NAME.glb`: the surface (hierarchical localization at `--res`, marching cubes, vertex
+//!   colours from the colour field; glTF binary, metres, +Y up, +Z towards the camera);
+//! * `NAME.yaw000.png` .. `NAME.yaw270.png`: mesh-free renders at yaw 0/90/180/270 about the
+//!   person's crop centre, shaded, transparent background.
+//!
+//! Inputs: PNG or JPEG; greyscale, greyscale + alpha, RGBA and 16-bit images are converted to
+//! RGB8 (alpha dropped). Refused with a message naming the file: unreadable or non-image
+//! files, and images over [`MAX_SIDE`] pixels a side or [`MAX_PIXELS`] pixels in all (the
+//! header is read first; nothing that large is decoded). A failed image does not stop the
+//! others; the exit status is non-zero when any failed.
+
+use anyhow::{Context, anyhow, bail};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use volcap_engine::grid::{Grid, GridSpec};
+use volcap_engine::localize::{Localizer, Method, default_coarse};
+use volcap_engine::mesh::marching_cubes;
+use volcap_engine::model::preprocess::unletterbox_mask;
+use volcap_engine::model::{FrameError, FrameInfo, ModelView, Models, Precision};
+use volcap_engine::render::{RenderOptions, Renderer};
+
+/// Largest image side accepted, pixels.
+pub const MAX_SIDE: u32 = 8192;
+/// Largest image accepted, pixels in all (a 40 MP camera frame).
+pub const MAX_PIXELS: u64 = 40_000_000;
+/// Yaws of the renders, degrees.
+pub const YAWS: [f32; 4] = [0.0, 90.0, 180.0, 270.0];
+
+#[derive(Args, Debug, Clone)]
+pub struct ReconstructArgs {
+    /// Images (PNG or JPEG).
+    #[arg(required = true, value_name = "IMAGE")]
+    pub images: Vec<PathBuf>,
+    /// Output folder (created).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Shape model: NAME or NAME@int8 (files models/shape-NAME.*).
+    #[arg(long, default_value = "fourier")]
+    pub model: String,
+    /// Folder of the ONNX models.
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
+    /// Grid resolution (2^L + 1) of the mesh; the renders are this many pixels a side.
+    #[arg(long, default_value_t = 257)]
+    pub res: usize,
+    /// One JSON object per image on stdout (people found, mask fraction, ms per stage, files).
+    #[arg(long)]
+    pub json: bool,
+    /// Also write a contact sheet (PNG): a row per reconstructed image with the photo, its
+    /// mask and the four renders, each tile --res pixels, on grey.
+    #[arg(long, value_name = "PNG")]
+    pub sheet: Option<PathBuf>,
+}
+
+#[derive(Debug, Default, serde::Serialize)]
+struct ImageReport {
+    image: String,
+    ok: bool,
+    error: Option<String>,
+    width: u32,
+    height: u32,
+    people: usize,
+    mask_fraction: f32,
+    decode_ms: f64,
+    segment_ms: f64,
+    encode_ms: f64,
+    localize_ms: f64,
+    mesh_ms: f64,
+    render_ms: f64,
+    triangles: usize,
+    files: Vec<String>,
+}
+
+/// Read an image as RGB8, refusing what is not an image or too large, by name.
+pub fn read_rgb(path: &Path) -> anyhow::Result<(Vec<u8>, u32, u32)> {
+    let meta =
+        std::fs::metadata(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    if !meta.is_file() {
+        bail!("{}: not a regular file", path.display());
+    }
+    let reader = image::ImageReader::open(path)
+        .with_context(|| format!("{}: cannot open", path.display()))?
+        .with_guessed_format()
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let Some(format) = reader.format() else {
+        bail!("{}: not a PNG or JPEG image", path.display());
+    };
+    let (w, h) = reader
+        .into_dimensions()
+        .map_err(|e| anyhow!("{}: not a readable {format:?} image: {e}", path.display()))?;
+    if w == 0 || h == 0 {
+        bail!("{}: empty image ({w}x{h})", path.display());
+    }
+    if w > MAX_SIDE || h > MAX_SIDE || w as u64 * h as u64 > MAX_PIXELS {
+        bail!(
+            "{}: {w}x{h} is too large (at most {MAX_SIDE} pixels a side and {} MP); downscale it first",
+            path.display(),
+            MAX_PIXELS / 1_000_000
+        );
+    }
+    let img = image::ImageReader::open(path)
+        .with_context(|| format!("{}: cannot open", path.display()))?
+        .with_guessed_format()
+        .with_context(|| format!("{}: cannot read", path.display()))?
+        .decode()
+        .map_err(|e| anyhow!("{}: cannot decode: {e}", path.display()))?;
+    let rgb = img.to_rgb8();
+    Ok((rgb.into_raw(), w, h))
+}
+
+fn stem(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "image".into())
+}
+
+/// One row of the contact sheet: photo, mask, renders (RGBA tiles of any size).
+type SheetRow = Vec<image::RgbaImage>;
+
+fn one(
+    models: &Models,
+    path: &Path,
+    a: &ReconstructArgs,
+    spec: GridSpec,
+    rep: &mut ImageReport,
+    row: &mut SheetRow,
+) -> anyhow::Result<()> {
+    let t = Instant::now();
+    let (rgb, w, h) = read_rgb(path)?;
+    rep.decode_ms = t.elapsed().as_secs_f64() * 1e3;
+    (rep.width, rep.height) = (w, h);
+    let (w, h) = (w as usize, h as usize);
+    let name = stem(path);
+    let mut info = FrameInfo::default();
+    let prepared = models.prepare(&rgb, w, h, &mut info);
+    (rep.people, rep.mask_fraction, rep.segment_ms) =
+        (info.people, info.mask_fraction, info.segment_ms);
+    let save = |file: String, r: image::ImageResult<()>, rep: &mut ImageReport| {
+        r.with_context(|| format!("writing {}", a.out.join(&file).display()))?;
+        rep.files.push(file);
+        anyhow::Ok(())
+    };
+    // The mask is written whatever follows, an empty one included.
+    let (img, mask, crop) = match prepared {
+        Ok(p) => p,
+        Err(FrameError::NoPerson) => {
+            let file = format!("{name}.mask.png");
+            let m = image::GrayImage::from_raw(w as u32, h as u32, vec![0; w * h])
+                .ok_or_else(|| anyhow!("mask buffer"))?;
+            save(file.clone(), m.save(a.out.join(&file)), rep)?;
+            bail!("{}: no person found (mask written empty)", path.display());
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let file = format!("{name}.mask.png");
+    let m = image::GrayImage::from_raw(w as u32, h as u32, unletterbox_mask(&mask, w, h))
+        .ok_or_else(|| anyhow!("mask buffer"))?;
+    save(file.clone(), m.save(a.out.join(&file)), rep)?;
+    if a.sheet.is_some() {
+        let photo = image::RgbImage::from_raw(w as u32, h as u32, rgb)
+            .ok_or_else(|| anyhow!("image buffer"))?;
+        row.push(image::DynamicImage::ImageRgb8(photo).to_rgba8());
+        row.push(image::DynamicImage::ImageLuma8(m).to_rgba8());
+    }
+
+    let t = Instant::now();
+    let field = models.encode(&img, &mask, crop, ModelView::default())?;
+    rep.encode_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let mut grid = Grid::new(spec);
+    Localizer::new().run(
+        Method::Hierarchical,
+        &field,
+        spec,
+        default_coarse(spec),
+        &mut grid,
+    )?;
+    rep.localize_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let mut mesh = marching_cubes(&grid);
+    mesh.paint(&field)?;
+    rep.triangles = mesh.triangles.len();
+    rep.mesh_ms = t.elapsed().as_secs_f64() * 1e3;
+    let file = format!("{name}.glb");
+    std::fs::write(a.out.join(&file), mesh.to_glb())
+        .with_context(|| format!("writing {}", a.out.join(&file).display()))?;
+    rep.files.push(file);
+
+    let t = Instant::now();
+    let opts = RenderOptions {
+        background: [0.0; 4],
+        shade: true,
+        ..Default::default()
+    };
+    let mut r = Renderer::new();
+    let n = spec.n() as u32;
+    for yaw in YAWS {
+        let view = ModelView {
+            yaw_deg: yaw,
+            ..Default::default()
+        };
+        let field = models.encode(&img, &mask, crop, view)?;
+        r.render(&field, &field, spec, &opts)?;
+        let tile = image::RgbaImage::from_raw(n, n, r.rgba().to_vec())
+            .ok_or_else(|| anyhow!("render buffer size"))?;
+        let file = format!("{name}.yaw{:03}.png", yaw as u32);
+        save(file.clone(), tile.save(a.out.join(&file)), rep)?;
+        if a.sheet.is_some() {
+            row.push(tile);
+        }
+    }
+    rep.render_ms = t.elapsed().as_secs_f64() * 1e3;
+    Ok(())
+}
+
+pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
+    let spec = GridSpec::from_resolution(a.res).map_err(|e| anyhow!("--res {}: {e}", a.res))?;
+    let (name, precision) = match a.model.split_once('@') {
+        Some((n, "int8")) => (n, Precision::Int8),
+        Some((_, p)) => bail!(
+            "--model {}: unknown precision {p:?} (int8 or none)",
+            a.model
+        ),
+        None => (a.model.as_str(), Precision::F32),
+    };
+    let models = Models::load(&a.models_dir, name, precision)?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let bar = if a.json {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(a.images.len() as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} {msg} [{elapsed} < {eta}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut failed = 0usize;
+    let mut names = std::collections::HashSet::new();
+    let (mut row, mut rows) = (SheetRow::new(), Vec::<SheetRow>::new());
+    for path in &a.images {
+        bar.set_message(path.display().to_string());
+        let mut rep = ImageReport {
+            image: path.display().to_string(),
+            ..Default::default()
+        };
+        row.clear();
+        let r = if !names.insert(stem(path)) {
+            Err(anyhow!(
+                "{}: another input has the same name {:?}; its outputs would overwrite each other",
+                path.display(),
+                stem(path)
+            ))
+        } else {
+            one(&models, path, a, spec, &mut rep, &mut row)
+        };
+        match r {
+            Ok(()) => {
+                rep.ok = true;
+                rows.push(std::mem::take(&mut row));
+            }
+            Err(e) => {
+                failed += 1;
+                rep.error = Some(format!("{e:#}"));
+                bar.suspend(|| eprintln!("error: {e:#}"));
+            }
+        }
+        if a.json {
+            println!("{}", serde_json::to_string(&rep)?);
+        } else if rep.ok {
+            bar.suspend(|| {
+                println!(
+                    "{}: {} people, mask {:.1} %, seg {:.0} ms, encode {:.0} ms, localize {:.0} ms, mesh {:.0} ms ({} triangles), renders {:.0} ms -> {}",
+                    rep.image,
+                    rep.people,
+                    100.0 * rep.mask_fraction,
+                    rep.segment_ms,
+                    rep.encode_ms,
+                    rep.localize_ms,
+                    rep.mesh_ms,
+                    rep.triangles,
+                    rep.render_ms,
+                    a.out.display()
+                )
+            });
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    if let Some(path) = &a.sheet {
+        write_sheet(&rows, spec.n() as u32, path)?;
+    }
+    if failed > 0 {
+        bail!("{failed} of {} images failed", a.images.len());
+    }
+    Ok(())
+}
+
+/// Tiles of `tile` pixels (aspect kept, centred), a row per image, over grey.
+fn write_sheet(rows: &[SheetRow], tile: u32, path: &Path) -> anyhow::Result<()> {
+    let cols = rows.iter().map(|r| r.len()).max().unwrap_or(0) as u32;
+    if cols == 0 {
+        bail!(
+            "{}: no image was reconstructed, no sheet written",
+            path.display()
+        );
+    }
+    let mut sheet = image::RgbaImage::from_pixel(
+        cols * tile,
+        rows.len() as u32 * tile,
+        image::Rgba([128, 128, 128, 255]),
+    );
+    for (j, row) in rows.iter().enumerate() {
+        for (i, t) in row.iter().enumerate() {
+            let k = tile as f32 / t.width().max(t.height()) as f32;
+            let (tw, th) = (
+                ((t.width() as f32 * k).round() as u32).max(1),
+                ((t.height() as f32 * k).round() as u32).max(1),
+            );
+            let t = image::imageops::resize(t, tw, th, image::imageops::FilterType::Triangle);
+            image::imageops::overlay(
+                &mut sheet,
+                &t,
+                (i as u32 * tile + (tile - tw) / 2) as i64,
+                (j as u32 * tile + (tile - th) / 2) as i64,
+            );
+        }
+    }
+    sheet
+        .save(path)
+        .with_context(|| format!("writing {}", path.display()))
+}
