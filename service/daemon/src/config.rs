@@ -168,10 +168,36 @@ pub struct HttpConfig {
     pub client_limit: usize,
     /// Bearer token for state-changing endpoints; absent = those endpoints are off.
     pub token: Option<String>,
-    /// Seconds a client has to send its request head before it is dropped.
+    /// Seconds a client has to send its request head before it is dropped
+    /// ([`HEADER_TIMEOUT_S`]).
     #[serde(default = "d_header_timeout")]
     pub header_timeout_s: u64,
+    /// Seconds a response write may make no progress (a client that stopped reading)
+    /// before the connection is closed and its slot freed ([`WRITE_TIMEOUT_S`]).
+    #[serde(default = "d_write_timeout")]
+    pub write_timeout_s: u64,
+    /// Open connections per client address ([`PER_ADDRESS`]); more are closed at accept.
+    #[serde(default = "d_per_address")]
+    pub per_address_limit: usize,
+    /// Host names (besides IP literals, `localhost` and this machine's name) accepted in
+    /// the `Host` header; any other name is refused (DNS rebinding).
+    #[serde(default)]
+    pub allowed_hosts: Vec<String>,
 }
+
+fn d_write_timeout() -> u64 {
+    10
+}
+fn d_per_address() -> usize {
+    8
+}
+/// Accepted range of `http.write_timeout_s`.
+pub const WRITE_TIMEOUT_S: std::ops::RangeInclusive<u64> = 1..=300;
+/// Accepted range of `http.per_address_limit`.
+pub const PER_ADDRESS: std::ops::RangeInclusive<usize> = 1..=1000;
+
+/// Accepted range of `http.header_timeout_s`.
+pub const HEADER_TIMEOUT_S: std::ops::RangeInclusive<u64> = 1..=300;
 
 fn d_header_timeout() -> u64 {
     10
@@ -184,6 +210,9 @@ impl Default for HttpConfig {
             client_limit: d_limit(),
             token: None,
             header_timeout_s: d_header_timeout(),
+            write_timeout_s: d_write_timeout(),
+            per_address_limit: d_per_address(),
+            allowed_hosts: Vec::new(),
         }
     }
 }
@@ -257,14 +286,13 @@ pub enum ComputeBackend {
     Cpu,
 }
 
+/// The compute section. (There is no `threads` key: the pipeline's thread layout is fixed,
+/// one thread per stage, and a key that nothing honours must not exist.)
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ComputeConfig {
     #[serde(default)]
     pub backend: ComputeBackend,
-    /// Threads for the network runtime; 0 = one per core.
-    #[serde(default)]
-    pub threads: usize,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -356,6 +384,40 @@ impl Config {
             return bad(
                 "http.client_limit",
                 format!("{} must be in 1..=10000", self.http.client_limit),
+            );
+        }
+        if !HEADER_TIMEOUT_S.contains(&self.http.header_timeout_s) {
+            return bad(
+                "http.header_timeout_s",
+                format!(
+                    "{} must be in {}..={} (seconds)",
+                    self.http.header_timeout_s,
+                    HEADER_TIMEOUT_S.start(),
+                    HEADER_TIMEOUT_S.end()
+                ),
+            );
+        }
+        if !WRITE_TIMEOUT_S.contains(&self.http.write_timeout_s) {
+            return bad(
+                "http.write_timeout_s",
+                format!("{} must be in 1..=300 (seconds)", self.http.write_timeout_s),
+            );
+        }
+        if !PER_ADDRESS.contains(&self.http.per_address_limit) {
+            return bad(
+                "http.per_address_limit",
+                format!("{} must be in 1..=1000", self.http.per_address_limit),
+            );
+        }
+        if let Some(h) = self.http.allowed_hosts.iter().find(|h| {
+            h.trim().is_empty()
+                || !h
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '.' || c == '-')
+        }) {
+            return bad(
+                "http.allowed_hosts",
+                format!("{h:?} is not a host name (letters, digits, '.', '-')"),
             );
         }
         if !(0.002..=0.05).contains(&r.oracle_voxel_m) {
@@ -501,6 +563,43 @@ mod tests {
         assert!(c.http.bind.ip().is_loopback());
         let scene = c.scene_path().unwrap();
         assert!(scene.exists(), "{}", scene.display());
+    }
+
+    /// Hardening #5: numbers that passed the check and then broke the daemon.
+    #[test]
+    fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
+        let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+        for (extra, key, line) in [
+            (
+                "[http]\nheader_timeout_s = 18446744073709551615\n",
+                "http.header_timeout_s",
+                5,
+            ),
+            ("[http]\nheader_timeout_s = 0\n", "http.header_timeout_s", 5),
+            (
+                "[http]\nheader_timeout_s = 301\n",
+                "http.header_timeout_s",
+                5,
+            ),
+        ] {
+            let e = Config::parse(&format!("{base}{extra}"), Path::new("b.toml")).unwrap_err();
+            assert!(
+                e.contains(&format!("line {line}")) && e.contains(key) && e.contains("1..=300"),
+                "{extra}: {e}"
+            );
+        }
+        let e = Config::parse(
+            &format!("{base}[compute]\nthreads = 1000000\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(e.contains("threads") && e.contains("unknown field"), "{e}");
+        let ok = Config::parse(
+            &format!("{base}[http]\nheader_timeout_s = 300\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap();
+        assert_eq!(ok.http.header_timeout_s, 300);
     }
 
     #[test]

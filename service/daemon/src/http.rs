@@ -2,6 +2,7 @@
 //! through a `watch` channel: a slow client skips frames and never stalls the pipeline or
 //! other clients; a disconnected client's slot is freed when its body is dropped.
 
+use crate::netguard::{Backoff, HostAllow, PerAddress, WriteTimeout};
 use crate::pipeline::{STAGES, Shared};
 use axum::Router;
 use axum::body::Body;
@@ -24,10 +25,36 @@ pub struct App {
     /// Connected stream clients, for per-client figures in `/state`.
     pub table: Mutex<BTreeMap<u64, Arc<ClientStat>>>,
     pub next_id: AtomicU64,
+    /// Names accepted in the `Host` header besides IP literals.
+    pub hosts: HostAllow,
+    /// Wrong-token back-off per address.
+    pub backoff: Backoff,
+    /// One mesh computation at a time ([`MESH_CONCURRENCY`]); others get 503.
+    pub mesh_gate: tokio::sync::Semaphore,
+    /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can
+    /// never share its address), resolution, coarse level, and the bytes.
+    pub mesh_cache: Mutex<Option<MeshCache>>,
 }
 
+pub type MeshCache = (
+    std::sync::Weak<volcap_sim::oracle::SceneField>,
+    usize,
+    u32,
+    Arc<Vec<u8>>,
+);
+
+/// Mesh computations at once. Each holds one grid at the live resolution (4 bytes a point:
+/// 68 MB at 257^3, 540 MB at 513^3) and its mesh; the localization is the paper's
+/// hierarchical method.
+pub const MESH_CONCURRENCY: usize = 1;
+
 impl App {
-    pub fn new(shared: Arc<Shared>, client_limit: usize, token: Option<String>) -> Self {
+    pub fn new(
+        shared: Arc<Shared>,
+        client_limit: usize,
+        token: Option<String>,
+        allowed_hosts: &[String],
+    ) -> Self {
         Self {
             shared,
             clients: AtomicUsize::new(0),
@@ -35,7 +62,17 @@ impl App {
             token: Mutex::new(token),
             table: Mutex::new(BTreeMap::new()),
             next_id: AtomicU64::new(1),
+            hosts: HostAllow::new(allowed_hosts),
+            backoff: Backoff::default(),
+            mesh_gate: tokio::sync::Semaphore::new(MESH_CONCURRENCY),
+            mesh_cache: Mutex::new(None),
         }
+    }
+
+    /// Whether the request carries the configured token (no token configured: never).
+    fn authorized(&self, headers: &HeaderMap) -> bool {
+        let expected = self.token.lock().unwrap_or_else(|p| p.into_inner()).clone();
+        expected.is_some_and(|t| token_ok(&t, headers))
     }
 }
 
@@ -54,11 +91,40 @@ pub fn router(app: Arc<App>) -> Router {
         .route("/stream.mjpg", get(stream))
         .route("/snapshot.jpg", get(snapshot_jpg))
         .route("/snapshot.png", get(snapshot_png))
-        .route("/mesh.glb", get(mesh_glb))
+        .route("/mesh.glb", get(mesh_glb).head(mesh_head))
         .route("/state", get(state))
         .route("/metrics", get(metrics))
         .route("/view", post(set_view))
+        .layer(axum::middleware::from_fn_with_state(
+            app.clone(),
+            check_host,
+        ))
         .with_state(app)
+}
+
+/// Refuse requests whose `Host` names another site (DNS rebinding: a page on the LAN
+/// resolving its own name to this appliance).
+async fn check_host(
+    State(app): State<Arc<App>>,
+    req: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    let host = req
+        .headers()
+        .get(header::HOST)
+        .map(|h| h.to_str().unwrap_or("\u{fffd}"));
+    if !app.hosts.allows(host) {
+        return (
+            StatusCode::MISDIRECTED_REQUEST,
+            format!(
+                "host {:?} is not this appliance's (allowed: IP addresses, {}; config http.allowed_hosts)\n",
+                host.unwrap_or_default(),
+                app.hosts.names().join(", ")
+            ),
+        )
+            .into_response();
+    }
+    next.run(req).await
 }
 
 const BOUNDARY: &str = "volcapframe";
@@ -183,8 +249,11 @@ async fn snapshot_png(State(app): State<Arc<App>>) -> Response {
 }
 
 /// The current frame as a coloured mesh: hierarchical localization at the render
-/// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms); runs off
-/// the async runtime.
+/// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms): it runs off
+/// the async runtime, [`MESH_CONCURRENCY`] at a time (others get 503 with Retry-After), and
+/// its bytes are cached for the frame, so a repeated request for the same frame costs
+/// nothing. A client that leaves does not cancel the computation, but it cannot start
+/// another one: the work in flight stays bounded and fills the cache.
 async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     let field = app
         .shared
@@ -197,7 +266,36 @@ async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     };
     let live = app.shared.live();
     let (res, coarse) = (live.resolution, live.coarse_level);
-    let glb = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, String> {
+    let key = Arc::downgrade(&field);
+    let glb_response = |b: Arc<Vec<u8>>| {
+        ([(header::CONTENT_TYPE, "model/gltf-binary")], (*b).clone()).into_response()
+    };
+    let cached = |app: &App| {
+        app.mesh_cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .filter(|(k, r, c, _)| k.as_ptr() == Arc::as_ptr(&field) && (*r, *c) == (res, coarse))
+            .map(|(_, _, _, b)| b.clone())
+    };
+    if let Some(b) = cached(&app) {
+        return glb_response(b);
+    }
+    let Ok(permit) = app.mesh_gate.try_acquire() else {
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            [(header::RETRY_AFTER, "1")],
+            "a mesh is being computed; retry in a second\n",
+        )
+            .into_response();
+    };
+    // The frame may have been meshed while we waited for the gate.
+    if let Some(b) = cached(&app) {
+        return glb_response(b);
+    }
+    let app2 = app.clone();
+    let glb = tokio::task::spawn_blocking(move || -> Result<Arc<Vec<u8>>, String> {
+        let field = field;
         let spec =
             volcap_engine::grid::GridSpec::from_resolution(res).map_err(|e| e.to_string())?;
         let mut grid = volcap_engine::grid::Grid::new(spec);
@@ -211,12 +309,17 @@ async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
             )
             .map_err(|e| e.to_string())?;
         let mut mesh = volcap_engine::mesh::marching_cubes(&grid);
+        drop(grid);
         mesh.paint(field.as_ref()).map_err(|e| e.to_string())?;
-        Ok(mesh.to_glb())
+        let bytes = Arc::new(mesh.to_glb());
+        *app2.mesh_cache.lock().unwrap_or_else(|p| p.into_inner()) =
+            Some((key, res, coarse, bytes.clone()));
+        Ok(bytes)
     })
     .await;
+    drop(permit);
     match glb {
-        Ok(Ok(b)) => ([(header::CONTENT_TYPE, "model/gltf-binary")], b).into_response(),
+        Ok(Ok(b)) => glb_response(b),
         Ok(Err(e)) => (
             StatusCode::INTERNAL_SERVER_ERROR,
             format!("mesh failed: {e}\n"),
@@ -226,7 +329,23 @@ async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     }
 }
 
-fn state_json(app: &App) -> serde_json::Value {
+/// HEAD of the mesh: whether one can be had, computing nothing.
+async fn mesh_head(State(app): State<Arc<App>>) -> Response {
+    let ready = app
+        .shared
+        .latest_field
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .is_some();
+    if ready {
+        ([(header::CONTENT_TYPE, "model/gltf-binary")], "").into_response()
+    } else {
+        StatusCode::SERVICE_UNAVAILABLE.into_response()
+    }
+}
+
+/// `/state`; stream clients' addresses only with the token (`details`), counts to anyone.
+fn state_json(app: &App, details: bool) -> serde_json::Value {
     let sh = &app.shared;
     let st = sh.state.lock().unwrap_or_else(|p| p.into_inner()).clone();
     let (state, reason) = st.name_reason();
@@ -251,11 +370,15 @@ fn state_json(app: &App) -> serde_json::Value {
         .map(|(id, c)| {
             let secs = c.since.elapsed().as_secs_f64();
             let sent = c.sent.load(Ordering::Relaxed);
-            serde_json::json!({
-                "id": id, "peer": c.peer, "connected_s": secs, "frames_sent": sent,
+            let mut v = serde_json::json!({
+                "id": id, "connected_s": secs, "frames_sent": sent,
                 "frames_skipped": c.skipped.load(Ordering::Relaxed),
                 "fps": if secs > 0.0 { sent as f64 / secs } else { 0.0 },
-            })
+            });
+            if details {
+                v["peer"] = c.peer.clone().into();
+            }
+            v
         })
         .collect();
     serde_json::json!({
@@ -286,12 +409,68 @@ fn state_json(app: &App) -> serde_json::Value {
     })
 }
 
-async fn state(State(app): State<Arc<App>>) -> Response {
+async fn state(
+    State(app): State<Arc<App>>,
+    headers: HeaderMap,
+    peer: Option<axum::Extension<ConnectInfo<SocketAddr>>>,
+) -> Response {
+    // A wrong token here counts like one on /view (no free guessing through /state).
+    let details = headers.contains_key(header::AUTHORIZATION)
+        && match token_refusal(&app, &headers, peer_ip(&peer)) {
+            None => true,
+            Some(r) => return r,
+        };
     (
         [(header::CONTENT_TYPE, "application/json")],
-        state_json(&app).to_string(),
+        state_json(&app, details).to_string(),
     )
         .into_response()
+}
+
+fn peer_ip(peer: &Option<axum::Extension<ConnectInfo<SocketAddr>>>) -> Option<std::net::IpAddr> {
+    peer.as_ref().map(|axum::Extension(ConnectInfo(a))| a.ip())
+}
+
+/// The bearer token, with the per-address back-off: `None` when it is right; else the
+/// refusal: 403 when no token is configured, 429 (Retry-After) while the address must wait,
+/// 401 on a wrong token.
+fn token_refusal(
+    app: &App,
+    headers: &HeaderMap,
+    ip: Option<std::net::IpAddr>,
+) -> Option<Response> {
+    let configured = app
+        .token
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .is_some();
+    if !configured {
+        return Some((
+            StatusCode::FORBIDDEN,
+            "controls are off: set http.token in the config\n",
+        )
+            .into_response());
+    }
+    if let Some(wait) = ip.and_then(|ip| app.backoff.wait(ip)) {
+        let secs = wait.as_secs_f64().ceil().max(1.0) as u64;
+        return Some((
+            StatusCode::TOO_MANY_REQUESTS,
+            [(header::RETRY_AFTER, secs.to_string())],
+            format!("too many wrong tokens from this address; retry in {secs} s\n"),
+        )
+            .into_response());
+    }
+    if app.authorized(headers) {
+        if let Some(ip) = ip {
+            app.backoff.succeeded(ip);
+        }
+        None
+    } else {
+        if let Some(ip) = ip {
+            app.backoff.failed(ip);
+        }
+        Some((StatusCode::UNAUTHORIZED, "bad or missing bearer token\n").into_response())
+    }
 }
 
 async fn metrics(State(app): State<Arc<App>>) -> Response {
@@ -351,18 +530,11 @@ struct ViewQuery {
 async fn set_view(
     State(app): State<Arc<App>>,
     headers: HeaderMap,
+    peer: Option<axum::Extension<ConnectInfo<SocketAddr>>>,
     q: Result<Query<ViewQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Response {
-    let expected = app.token.lock().unwrap_or_else(|p| p.into_inner()).clone();
-    let Some(expected) = expected else {
-        return (
-            StatusCode::FORBIDDEN,
-            "view controls are off: set http.token in the config\n",
-        )
-            .into_response();
-    };
-    if !token_ok(&expected, &headers) {
-        return (StatusCode::UNAUTHORIZED, "bad or missing bearer token\n").into_response();
+    if let Some(r) = token_refusal(&app, &headers, peer_ip(&peer)) {
+        return r;
     }
     let Ok(Query(q)) = q else {
         return (
@@ -371,19 +543,10 @@ async fn set_view(
         )
             .into_response();
     };
-    let background = match q.background.as_deref().map(|b| {
-        let v: Vec<f32> = b.split(',').filter_map(|x| x.trim().parse().ok()).collect();
-        <[f32; 4]>::try_from(v)
-    }) {
+    let background = match q.background.as_deref().map(parse_background) {
         None => None,
         Some(Ok(bg)) => Some(bg),
-        Some(Err(_)) => {
-            return (
-                StatusCode::BAD_REQUEST,
-                "background: four numbers r,g,b,a in [0, 1]\n",
-            )
-                .into_response();
-        }
+        Some(Err(e)) => return (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
     };
     match app.shared.update_live(|l| {
         if let Some(bg) = background {
@@ -403,6 +566,30 @@ async fn set_view(
     }
 }
 
+/// `r,g,b,a`: exactly four finite numbers in [0, 1], nothing else; the error quotes the
+/// value given.
+pub fn parse_background(text: &str) -> Result<[f32; 4], String> {
+    let fail = |why: String| {
+        Err(format!(
+            "background {text:?}: {why} (expected four numbers r,g,b,a in [0, 1])"
+        ))
+    };
+    let parts: Vec<&str> = text.split(',').collect();
+    if parts.len() != 4 {
+        return fail(format!("{} values", parts.len()));
+    }
+    let mut out = [0.0f32; 4];
+    for (o, p) in out.iter_mut().zip(&parts) {
+        let p = p.trim();
+        match p.parse::<f32>() {
+            Ok(v) if v.is_finite() && (0.0..=1.0).contains(&v) => *o = v,
+            Ok(_) => return fail(format!("{p:?} is not in [0, 1]")),
+            Err(_) => return fail(format!("{p:?} is not a number")),
+        }
+    }
+    Ok(out)
+}
+
 /// Limits of the HTTP server: it binds only the configured address (the caller's listener).
 #[derive(Debug, Clone, Copy)]
 pub struct Limits {
@@ -415,15 +602,25 @@ pub struct Limits {
     pub max_connections: usize,
     /// Request bodies (no endpoint takes one).
     pub max_body_bytes: usize,
+    /// Open connections per client address.
+    pub per_address: usize,
+    /// A response write that makes no progress this long ends the connection.
+    pub write_timeout: std::time::Duration,
+    /// Kernel send buffer per connection: small, so that a slow stream client skips frames
+    /// (latest wins) instead of queueing seconds of them, and stalls show up as such.
+    pub send_buffer_bytes: usize,
 }
 
 impl Limits {
-    pub fn new(client_limit: usize, header_timeout_s: u64) -> Self {
+    pub fn new(http: &crate::config::HttpConfig) -> Self {
         Self {
-            header_timeout: std::time::Duration::from_secs(header_timeout_s),
+            header_timeout: std::time::Duration::from_secs(http.header_timeout_s),
             max_header_bytes: 16 * 1024,
-            max_connections: client_limit + 64,
+            max_connections: http.client_limit + 64,
             max_body_bytes: 4096,
+            per_address: http.per_address_limit,
+            write_timeout: std::time::Duration::from_secs(http.write_timeout_s),
+            send_buffer_bytes: 256 * 1024,
         }
     }
 }
@@ -437,6 +634,7 @@ pub async fn serve(
 ) -> std::io::Result<()> {
     let router = router(app).layer(axum::extract::DefaultBodyLimit::max(limits.max_body_bytes));
     let permits = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
+    let per_address = Arc::new(PerAddress::default());
     tokio::pin!(shutdown);
     loop {
         let (stream, peer) = tokio::select! {
@@ -451,22 +649,30 @@ pub async fn serve(
                 }
             },
         };
+        // One address cannot hold more than its share (the rest stay for everyone else).
+        let Some(slot) = per_address.enter(peer.ip(), limits.per_address) else {
+            drop(stream);
+            continue;
+        };
         let Ok(permit) = permits.clone().try_acquire_owned() else {
             drop(stream);
             continue;
         };
         let _ = stream.set_nodelay(true);
+        let _ = socket2::SockRef::from(&stream).set_send_buffer_size(limits.send_buffer_bytes);
         let svc = router.clone().layer(axum::Extension(ConnectInfo(peer)));
         let svc = hyper_util::service::TowerToHyperService::new(svc);
+        let io = WriteTimeout::new(stream, limits.write_timeout);
         tokio::spawn(async move {
             let conn = hyper::server::conn::http1::Builder::new()
                 .timer(hyper_util::rt::TokioTimer::new())
                 .header_read_timeout(limits.header_timeout)
                 .max_buf_size(limits.max_header_bytes.max(8192))
                 .max_headers(64)
-                .serve_connection(hyper_util::rt::TokioIo::new(stream), svc);
+                .serve_connection(hyper_util::rt::TokioIo::new(io), svc);
             let _ = conn.await;
             drop(permit);
+            drop(slot);
         });
     }
 }
@@ -474,6 +680,28 @@ pub async fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Hardening #14: loose lists were accepted as something else; `inf` was reported as NaN.
+    #[test]
+    fn background_parses_strictly_and_quotes_the_value() {
+        assert_eq!(parse_background("0, 0.5,1,0"), Ok([0.0, 0.5, 1.0, 0.0]));
+        for (bad, says) in [
+            ("0,x,0,0,0", "5 values"),
+            ("0,0,0,0,,,,", "8 values"),
+            ("0,x,0,0", "\"x\" is not a number"),
+            ("0,0,0", "3 values"),
+            ("inf,0,0,1", "\"inf\" is not in [0, 1]"),
+            ("NaN,0,0,1", "\"NaN\" is not in [0, 1]"),
+            ("0,0,0,2", "\"2\" is not in [0, 1]"),
+            ("", "1 values"),
+        ] {
+            let e = parse_background(bad).unwrap_err();
+            assert!(
+                e.contains(&format!("{bad:?}")) && e.contains(says),
+                "{bad}: {e}"
+            );
+        }
+    }
 
     #[test]
     fn token_compare() {

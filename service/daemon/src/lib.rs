@@ -5,6 +5,7 @@ pub mod capture;
 pub mod config;
 pub mod dbus;
 pub mod http;
+pub mod netguard;
 pub mod notify;
 pub mod pipeline;
 pub mod placeholder;

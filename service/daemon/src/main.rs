@@ -115,6 +115,7 @@ fn main() -> ExitCode {
         shared.clone(),
         cfg.http.client_limit,
         cfg.http.token.clone(),
+        &cfg.http.allowed_hosts,
     ));
     let ctl = Arc::new(dbus::Control {
         shared: shared.clone(),
@@ -162,8 +163,9 @@ fn main() -> ExitCode {
         cfg.render.resolution.0,
     );
     let bus = cfg.dbus.bus;
-    let limits = http::Limits::new(cfg.http.client_limit, cfg.http.header_timeout_s);
+    let limits = http::Limits::new(&cfg.http);
     let served = rt.block_on(async move {
+        tokio::spawn(signals(ctl.clone()));
         tokio::spawn(dbus::serve(ctl, bus));
         http::serve(listener, app, limits, shutdown_signal()).await
     });
@@ -184,6 +186,35 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("volcapd: http server failed: {e}");
             ExitCode::from(EXIT_RUNTIME)
+        }
+    }
+}
+
+/// SIGHUP reloads the config file like D-Bus `Reload` (the daemon convention; the unit's
+/// `ExecReload=` sends it); a bad file is logged and the running config kept. SIGUSR1 and
+/// SIGUSR2 are logged and otherwise ignored (their default action would end the daemon).
+async fn signals(ctl: Arc<dbus::Control>) {
+    use tokio::signal::unix::{SignalKind, signal};
+    let (Ok(mut hup), Ok(mut usr1), Ok(mut usr2)) = (
+        signal(SignalKind::hangup()),
+        signal(SignalKind::user_defined1()),
+        signal(SignalKind::user_defined2()),
+    ) else {
+        tracing::warn!("cannot install the SIGHUP/SIGUSR handlers");
+        return;
+    };
+    loop {
+        tokio::select! {
+            _ = hup.recv() => {
+                let ctl = ctl.clone();
+                match tokio::task::spawn_blocking(move || ctl.reload()).await {
+                    Ok(Ok(what)) => tracing::info!("SIGHUP: reloaded: {what}"),
+                    Ok(Err(e)) => tracing::error!("SIGHUP: reload refused, running config kept: {e}"),
+                    Err(e) => tracing::error!("SIGHUP: reload task failed: {e}"),
+                }
+            }
+            _ = usr1.recv() => tracing::warn!("SIGUSR1 received: ignored (SIGHUP reloads, SIGTERM stops)"),
+            _ = usr2.recv() => tracing::warn!("SIGUSR2 received: ignored (SIGHUP reloads, SIGTERM stops)"),
         }
     }
 }

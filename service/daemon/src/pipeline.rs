@@ -291,6 +291,9 @@ pub struct Shared {
 
 pub const THREADS: [&str; 3] = ["capture", "render", "encode"];
 
+/// Frames skipped in a row (corrupt, truncated) before the state says so.
+pub const SKIPS_DEGRADE: u64 = 5;
+
 impl Shared {
     pub fn new(
         cfg: &Config,
@@ -474,6 +477,7 @@ pub fn start(
                     let mut last_placeholder: Option<Instant> = None;
                     let mut last_kind = "";
                     let mut skips = 0u64;
+                    let mut skips_in_a_row = 0u64;
                     while !sh.stop.load(Ordering::Relaxed) {
                         sh.beat(0);
                         let swap = sh
@@ -507,6 +511,7 @@ pub fn start(
                         }
                         match step {
                             Step::Frame(f) => {
+                                skips_in_a_row = 0;
                                 if last_kind != "running" {
                                     tracing::info!(source = %sup.describe(), "camera running");
                                     last_kind = "running";
@@ -518,8 +523,40 @@ pub fn start(
                             }
                             Step::Skipped(s) => {
                                 skips += 1;
+                                skips_in_a_row += 1;
                                 if skips <= 10 || skips.is_power_of_two() {
                                     tracing::warn!(skipped = skips, "camera frame skipped: {s:?}");
+                                }
+                                // Nothing decodable for a while (a folder of bad files, a
+                                // garbled stream): say so, with a placeholder (which also
+                                // lets systemd see the daemon up), instead of "starting".
+                                if skips_in_a_row >= SKIPS_DEGRADE {
+                                    let why = format!(
+                                        "no decodable frame from {}: {skips_in_a_row} skipped in a row (last: {})",
+                                        sup.describe(),
+                                        match &s {
+                                            Skip::Truncated(m) | Skip::Corrupt(m) => m,
+                                        }
+                                    );
+                                    sh.set_state(PipelineState::Degraded(why.clone()));
+                                    if last_placeholder
+                                        .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
+                                    {
+                                        last_placeholder = Some(Instant::now());
+                                        let live = sh.live();
+                                        placeholders.put(Rendered {
+                                            index: 0,
+                                            at: Instant::now(),
+                                            rgba: crate::placeholder::frame(
+                                                live.resolution,
+                                                live.background,
+                                                "NO USABLE FRAME",
+                                                &why,
+                                            ),
+                                            size: live.resolution,
+                                            placeholder: true,
+                                        });
+                                    }
                                 }
                             }
                             Step::State(state) => {
@@ -711,7 +748,13 @@ pub fn start(
                         }) {
                             sh.stats[2].dropped.fetch_add(1, Ordering::Relaxed);
                         }
-                        sh.set_state(PipelineState::Running);
+                        // Running only while the camera is: a frame captured before the
+                        // camera was lost must not paint over the lost state.
+                        let camera_running =
+                            sh.camera.lock().unwrap_or_else(|p| p.into_inner()).state == "running";
+                        if camera_running {
+                            sh.set_state(PipelineState::Running);
+                        }
                     }
                 })
                 .expect("spawning the render thread"),

@@ -64,7 +64,7 @@ fn http_state(addr: &str) -> serde_json::Value {
     let mut s = std::net::TcpStream::connect(addr).unwrap();
     write!(
         s,
-        "GET /state HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        "GET /state HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
     )
     .unwrap();
     let mut buf = String::new();

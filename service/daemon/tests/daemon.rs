@@ -258,7 +258,7 @@ fn token_enables_view_controls_and_client_limit_holds() {
     // Two streams fill the limit; the third is refused; closing one frees a slot at once.
     let open = |addr: &str| {
         let mut s = TcpStream::connect(addr).unwrap();
-        write!(s, "GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+        write!(s, "GET /stream.mjpg HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
         let mut b = [0u8; 64];
         s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
         let n = s.read(&mut b).unwrap();
@@ -380,7 +380,7 @@ fn hundred_slow_clients_do_not_stall_the_pipeline() {
     std::fs::write(
         dir.join("b.toml"),
         format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[http]\nclient_limit = 120\n",
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[http]\nclient_limit = 120\nper_address_limit = 200\n",
             scene.display()
         ),
     )
@@ -401,7 +401,7 @@ fn hundred_slow_clients_do_not_stall_the_pipeline() {
             let addr = d.addr.clone();
             std::thread::spawn(move || {
                 let mut s = TcpStream::connect(&addr).unwrap();
-                write!(s, "GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+                write!(s, "GET /stream.mjpg HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
                 s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
                 // Slow: read a little now and then, for a bounded time.
                 let mut got = 0usize;
@@ -713,7 +713,7 @@ fn http_limits_hold() {
     std::fs::write(
         dir.join("b.toml"),
         format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nresolution = 33\ncoarse_level = 2\n[http]\nclient_limit = 1\nheader_timeout_s = 1\n[dbus]\nbus = \"none\"\n",
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nresolution = 33\ncoarse_level = 2\n[http]\nclient_limit = 1\nheader_timeout_s = 1\nper_address_limit = 1000\n[dbus]\nbus = \"none\"\n",
             scene.display()
         ),
     )
@@ -721,7 +721,7 @@ fn http_limits_hold() {
     let d = start(&dir.join("b.toml"));
     // Slow head: dropped after the timeout.
     let mut slow = TcpStream::connect(&d.addr).unwrap();
-    slow.write_all(b"GET /state HTTP/1.1\r\nHost: x\r\n")
+    slow.write_all(b"GET /state HTTP/1.1\r\nHost: 127.0.0.1\r\n")
         .unwrap();
     slow.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
     let t = Instant::now();
@@ -742,7 +742,7 @@ fn http_limits_hold() {
     let filler = "a".repeat(64 * 1024);
     let _ = write!(
         big,
-        "GET /state HTTP/1.1\r\nHost: x\r\nX-Filler: {filler}\r\n\r\n"
+        "GET /state HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Filler: {filler}\r\n\r\n"
     );
     let mut head = Vec::new();
     let _ = big.read_to_end(&mut head);

@@ -489,3 +489,59 @@ fn segmentation_and_colour_match_pytorch_golden_vectors() {
         "colour features differ from PyTorch by {worst}"
     );
 }
+
+/// Hardening #10: an ONNX file whose weights are all NaN passed every check and the daemon
+/// published garbage as "running". The load probe refuses it, naming the file, for the
+/// segmentation, both shape families and the colour networks.
+#[test]
+fn models_with_nan_weights_are_refused_at_load() {
+    use prost::Message;
+    let poison = |src: &Path, dst: &Path| {
+        use tract_onnx::prelude::Framework;
+        let mut m = tract_onnx::onnx().proto_model_for_path(src).unwrap();
+        let g = m.graph.as_mut().unwrap();
+        let mut poisoned = 0;
+        for t in &mut g.initializer {
+            if t.data_type == 1 {
+                // FLOAT: raw little-endian bytes or the float_data list.
+                if !t.raw_data.is_empty() {
+                    for c in t.raw_data.chunks_exact_mut(4) {
+                        c.copy_from_slice(&f32::NAN.to_le_bytes());
+                    }
+                } else {
+                    t.float_data.iter_mut().for_each(|v| *v = f32::NAN);
+                }
+                poisoned += 1;
+            }
+        }
+        assert!(poisoned > 0, "{}: no float weights", src.display());
+        std::fs::write(dst, m.encode_to_vec()).unwrap();
+    };
+    for file in [
+        "seg.onnx",
+        "shape-fourier.fourier.onnx",
+        "shape-compact.encoder.onnx",
+        "shape-compact.mlp.onnx",
+        "color.encoder.onnx",
+    ] {
+        let dir = tmp(&format!("nan-{file}"));
+        for e in std::fs::read_dir(models_dir()).unwrap() {
+            let e = e.unwrap();
+            if e.file_type().unwrap().is_file() {
+                std::fs::copy(e.path(), dir.join(e.file_name())).unwrap();
+            }
+        }
+        poison(&models_dir().join(file), &dir.join(file));
+        let shape = if file.contains("compact") {
+            "compact"
+        } else {
+            "fourier"
+        };
+        let e = Models::load(&dir, shape, Precision::F32)
+            .err()
+            .unwrap_or_else(|| panic!("{file} with NaN weights was accepted"))
+            .to_string();
+        assert!(e.contains(file) && e.contains("non-finite"), "{file}: {e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

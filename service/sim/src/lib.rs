@@ -16,6 +16,7 @@ pub mod assets;
 pub mod camera;
 pub mod dataset;
 pub mod effects;
+pub mod files;
 pub mod makehuman;
 pub mod oracle;
 pub mod pose;

@@ -12,6 +12,9 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use toml::Spanned;
 
+/// Largest scene file accepted (scenes are a few kB of TOML).
+pub const MAX_SCENE_BYTES: u64 = 1 << 20;
+
 /// A scene could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -457,10 +460,17 @@ impl Scene {
         Ok(s)
     }
 
+    /// Load a scene file: a regular file of at most [`MAX_SCENE_BYTES`] (a FIFO, a device
+    /// or a huge file is refused, never read without end).
     pub fn load(file: &Path) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(file).map_err(|source| SceneError::Io {
+        let bytes =
+            crate::files::read_regular(file, MAX_SCENE_BYTES).map_err(|source| SceneError::Io {
+                file: file.to_path_buf(),
+                source,
+            })?;
+        let text = String::from_utf8(bytes).map_err(|e| SceneError::Parse {
             file: file.to_path_buf(),
-            source,
+            message: format!("not UTF-8 text: {e}"),
         })?;
         Self::parse(&text, file)
     }

@@ -9,7 +9,16 @@ use std::time::{Duration, Instant};
 
 /// Largest MJPEG file replayed from memory.
 const MAX_FILE: u64 = 2 << 30;
-const IMAGE_EXTS: [&str; 5] = ["jpg", "jpeg", "png", "ppm", "bmp"];
+/// Largest image file in a folder.
+const MAX_IMAGE_FILE: u64 = 64 << 20;
+/// Shortest frame of an MJPEG stream: a `FF D8 FF` closer than this to the previous one is
+/// part of that frame (no JPEG is this small), so the index holds at most one entry per
+/// this many bytes whatever the file contains.
+pub const MIN_FRAME_BYTES: usize = 128;
+/// Most frames indexed in one MJPEG file (9.7 hours at 30 fps; an index of 16 MB).
+pub const MAX_FRAMES: usize = 1 << 20;
+/// Image files picked up in a folder (all decoded by the `image` crate).
+const IMAGE_EXTS: [&str; 6] = ["jpg", "jpeg", "png", "ppm", "pnm", "bmp"];
 
 enum Source {
     Mjpeg {
@@ -53,19 +62,26 @@ impl FileCamera {
 }
 
 /// Split an MJPEG byte stream into frames: each frame starts at a JPEG start-of-image
-/// (`FF D8 FF`) and runs to the next one.
-pub fn split_mjpeg(data: &[u8]) -> Vec<(usize, usize)> {
-    let starts: Vec<usize> = data
-        .windows(3)
-        .enumerate()
-        .filter(|(_, w)| *w == [0xFF, 0xD8, 0xFF])
-        .map(|(i, _)| i)
-        .collect();
-    starts
-        .iter()
-        .enumerate()
-        .map(|(k, &s)| (s, starts.get(k + 1).copied().unwrap_or(data.len())))
-        .collect()
+/// (`FF D8 FF`) at least [`MIN_FRAME_BYTES`] after the previous start and runs to the
+/// next one. `None` when there would be more than `max_frames`.
+pub fn split_mjpeg(data: &[u8], max_frames: usize) -> Option<Vec<(usize, usize)>> {
+    let mut frames: Vec<(usize, usize)> = Vec::new();
+    let mut i = 0;
+    while i + 3 <= data.len() {
+        if data[i..i + 3] == [0xFF, 0xD8, 0xFF] {
+            if let Some(last) = frames.last_mut() {
+                last.1 = i;
+            }
+            if frames.len() == max_frames {
+                return None;
+            }
+            frames.push((i, data.len()));
+            i += MIN_FRAME_BYTES;
+        } else {
+            i += 1;
+        }
+    }
+    Some(frames)
 }
 
 /// Cut whatever follows a frame's last end-of-image marker (multipart headers, padding).
@@ -86,13 +102,17 @@ fn list_images(dir: &Path) -> Result<Vec<PathBuf>, Fault> {
                 .and_then(|e| e.to_str())
                 .is_some_and(|e| IMAGE_EXTS.contains(&e.to_ascii_lowercase().as_str()))
         })
+        // Regular files only (symlinks followed): a FIFO or device named like an image is
+        // not a frame (and is checked again at read time, without blocking).
+        .filter(|p| std::fs::metadata(p).is_ok_and(|m| m.is_file()))
         .collect();
     files.sort();
     Ok(files)
 }
 
 fn decode_image(p: &Path) -> Result<(Vec<u8>, usize, usize), Skip> {
-    let bytes = std::fs::read(p).map_err(|e| Skip::Corrupt(format!("{}: {e}", p.display())))?;
+    let bytes = volcap_sim::files::read_regular(p, MAX_IMAGE_FILE)
+        .map_err(|e| Skip::Corrupt(format!("{}: {e}", p.display())))?;
     let is_jpeg = bytes.starts_with(&[0xFF, 0xD8]);
     if is_jpeg {
         return decode::mjpeg(&bytes).map_err(|s| match s {
@@ -142,9 +162,17 @@ impl Camera for FileCamera {
                     MAX_FILE
                 )));
             }
-            let data = std::fs::read(&self.path)
-                .map_err(|e| Fault::NoDevice(format!("{}: {e}", self.path.display())))?;
-            let frames = split_mjpeg(&data);
+            // A regular file only (a device such as /dev/zero would be read without end),
+            // read up to the limit whatever its size claims.
+            let data = volcap_sim::files::read_regular(&self.path, MAX_FILE)
+                .map_err(|e| Fault::Failed(format!("{}: {e}", self.path.display())))?;
+            let frames = split_mjpeg(&data, MAX_FRAMES).ok_or_else(|| Fault::FormatRefused {
+                wanted: format!("an MJPEG file of at most {MAX_FRAMES} frames"),
+                offered: format!(
+                    "{} bytes with more JPEG start markers than that",
+                    data.len()
+                ),
+            })?;
             if frames.is_empty() {
                 return Err(Fault::FormatRefused {
                     wanted: "MJPEG (concatenated JPEG frames)".into(),
@@ -339,6 +367,73 @@ mod tests {
         std::fs::write(&p, b"plain text, no frames").unwrap();
         let mut cam = FileCamera::new(p, 10.0, false);
         assert!(matches!(cam.open(), Err(Fault::FormatRefused { .. })));
+        let _ = std::fs::remove_dir_all(d);
+    }
+
+    /// Hardening #7: 30 MB of repeated `FF D8 FF` built a 286 MB frame index.
+    #[test]
+    fn the_mjpeg_index_is_bounded_by_bytes_and_frames() {
+        let junk: Vec<u8> = [0xFF, 0xD8, 0xFF].repeat(10_000_000);
+        let frames = split_mjpeg(&junk, MAX_FRAMES).unwrap();
+        let index_bytes = frames.len() * std::mem::size_of::<(usize, usize)>();
+        assert!(
+            frames.len() <= junk.len() / MIN_FRAME_BYTES + 1,
+            "{}",
+            frames.len()
+        );
+        assert!(
+            index_bytes < 4 << 20,
+            "index of {index_bytes} bytes for 30 MB"
+        );
+        assert!(
+            split_mjpeg(&junk, 1000).is_none(),
+            "more frames than allowed: refused"
+        );
+        // Real frames are unaffected.
+        let good = jpeg(24, 16, 200);
+        let two = [good.clone(), good.clone()].concat();
+        assert_eq!(
+            split_mjpeg(&two, MAX_FRAMES).unwrap(),
+            vec![(0, good.len()), (good.len(), 2 * good.len())]
+        );
+    }
+
+    /// Hardening #6 and #11: a FIFO in an image folder blocked the capture thread forever,
+    /// `/dev/zero` as the MJPEG path grew memory by 1 GB/s, and `.ppm`/`.bmp` files were
+    /// picked up but never decoded.
+    #[test]
+    fn fifos_devices_are_refused_and_ppm_bmp_decode() {
+        let d = tmp("special");
+        std::fs::write(d.join("a.jpg"), jpeg(8, 8, 200)).unwrap();
+        let img = image::RgbImage::from_pixel(6, 4, image::Rgb([10, 250, 30]));
+        img.save(d.join("b.ppm")).unwrap();
+        img.save(d.join("c.bmp")).unwrap();
+        let fifo = d.join("d.jpg");
+        let fifo_made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .is_ok_and(|s| s.success());
+        let mut cam = FileCamera::new(d.clone(), 1000.0, false);
+        cam.open().unwrap();
+        assert_eq!(cam.frame_count(), 3, "the FIFO is not listed");
+        let t = Instant::now();
+        let (ok, bad, end) = drain(&mut cam);
+        assert!(t.elapsed() < Duration::from_secs(2));
+        assert_eq!(ok.len(), 3, "jpg, ppm and bmp decode: {bad:?}");
+        assert!(matches!(end, Fault::Ended(_)));
+        if fifo_made {
+            // Swapped in after the listing: refused at read time, without blocking.
+            let e = decode_image(&fifo).unwrap_err();
+            assert!(
+                matches!(&e, Skip::Corrupt(m) if m.contains("FIFO")),
+                "{e:?}"
+            );
+        }
+        let mut cam = FileCamera::new("/dev/zero".into(), 10.0, false);
+        let t = Instant::now();
+        let e = cam.open().unwrap_err();
+        assert!(t.elapsed() < Duration::from_secs(1));
+        assert!(format!("{e}").contains("device"), "{e}");
         let _ = std::fs::remove_dir_all(d);
     }
 }

@@ -275,8 +275,18 @@ pub fn factory(cfg: &Config) -> Result<(CameraFactory, String), String> {
                 .as_deref()
                 .map(|p| cfg.resolve(p))
                 .ok_or("camera.path is required")?;
-            if !path.exists() {
-                return Err(format!("camera.path: {} does not exist", path.display()));
+            match std::fs::metadata(&path) {
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    return Err(format!("camera.path: {} does not exist", path.display()));
+                }
+                Err(e) => return Err(format!("camera.path: {}: {e}", path.display())),
+                Ok(m) if !(m.is_file() || m.is_dir()) => {
+                    return Err(format!(
+                        "camera.path: {} is neither a regular file (MJPEG) nor a folder of images",
+                        path.display()
+                    ));
+                }
+                Ok(_) => {}
             }
             let cam = file::FileCamera::new(
                 path,

@@ -138,6 +138,28 @@ impl Net {
             .graph
             .as_ref()
             .ok_or_else(|| file("no graph".into()))?;
+        // Weights that are NaN or infinite make any output meaningless, and saturating
+        // activations (sigmoid, hard-swish) can hide them from an output check: refuse them.
+        for t in &graph.initializer {
+            let bad = if t.data_type == 1 {
+                if t.raw_data.is_empty() {
+                    t.float_data.iter().find(|v| !v.is_finite()).copied()
+                } else {
+                    t.raw_data
+                        .chunks_exact(4)
+                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                        .find(|v| !v.is_finite())
+                }
+            } else {
+                None
+            };
+            if let Some(v) = bad {
+                return Err(file(format!(
+                    "weight {:?} holds a non-finite value ({v}): broken weights",
+                    t.name
+                )));
+            }
+        }
         let names: Vec<String> = graph.input.iter().map(|i| i.name.clone()).collect();
         let want: Vec<String> = inputs.iter().map(|i| i.name.to_string()).collect();
         if names != want {
@@ -196,11 +218,43 @@ impl Net {
             .into_optimized()
             .and_then(|m| m.into_runnable())
             .map_err(|e| file(format!("cannot optimize: {e:#}")))?;
-        Ok(Net {
+        let net = Net {
             path: path.to_path_buf(),
             plan,
             meta,
-        })
+        };
+        net.probe(inputs)?;
+        Ok(net)
+    }
+
+    /// Run once on a fixed probe input (0.5 everywhere, batch 1): a file whose weights are
+    /// broken (NaN, infinities) gives non-finite output for any input and is refused here,
+    /// at load, instead of publishing garbage as "running".
+    fn probe(&self, inputs: &[InputSpec]) -> Result<(), ModelError> {
+        let shapes: Vec<Vec<usize>> = inputs
+            .iter()
+            .map(|i| i.shape.iter().map(|d| d.unwrap_or(1)).collect())
+            .collect();
+        let data: Vec<Vec<f32>> = shapes
+            .iter()
+            .map(|s| vec![0.5f32; s.iter().product()])
+            .collect();
+        let args: Vec<(&[usize], &[f32])> = shapes
+            .iter()
+            .zip(&data)
+            .map(|(s, d)| (s.as_slice(), d.as_slice()))
+            .collect();
+        let out = self.run(&args)?;
+        if let Some((i, v)) = out.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(ModelError::File {
+                path: self.path.display().to_string(),
+                msg: format!(
+                    "the probe input (0.5 everywhere) gives a non-finite output ({v} at element {i} of {}): broken weights",
+                    out.len()
+                ),
+            });
+        }
+        Ok(())
     }
 
     pub fn meta(&self, key: &str) -> Option<&str> {
