@@ -24,6 +24,14 @@ fn app() -> Arc<http::App> {
 
 fuzz_target!(|data: &[u8]| {
     let text = String::from_utf8_lossy(data);
+    // The parsers that see raw client text: the Host allow-list and the background list.
+    static HOSTS: OnceLock<volcapd::netguard::HostAllow> = OnceLock::new();
+    let _ = HOSTS
+        .get_or_init(|| volcapd::netguard::HostAllow::new(&["volcap.lan".into()]))
+        .allows(Some(&text));
+    if let Ok(bg) = http::parse_background(&text) {
+        assert!(bg.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
     let mut parts = text.splitn(3, '\n');
     let method = parts.next().unwrap_or("GET");
     let uri = parts.next().unwrap_or("/");
