@@ -434,31 +434,31 @@ fn peer_ip(peer: &Option<axum::Extension<ConnectInfo<SocketAddr>>>) -> Option<st
 /// The bearer token, with the per-address back-off: `None` when it is right; else the
 /// refusal: 403 when no token is configured, 429 (Retry-After) while the address must wait,
 /// 401 on a wrong token.
-fn token_refusal(
-    app: &App,
-    headers: &HeaderMap,
-    ip: Option<std::net::IpAddr>,
-) -> Option<Response> {
+fn token_refusal(app: &App, headers: &HeaderMap, ip: Option<std::net::IpAddr>) -> Option<Response> {
     let configured = app
         .token
         .lock()
         .unwrap_or_else(|p| p.into_inner())
         .is_some();
     if !configured {
-        return Some((
-            StatusCode::FORBIDDEN,
-            "controls are off: set http.token in the config\n",
-        )
-            .into_response());
+        return Some(
+            (
+                StatusCode::FORBIDDEN,
+                "controls are off: set http.token in the config\n",
+            )
+                .into_response(),
+        );
     }
     if let Some(wait) = ip.and_then(|ip| app.backoff.wait(ip)) {
         let secs = wait.as_secs_f64().ceil().max(1.0) as u64;
-        return Some((
-            StatusCode::TOO_MANY_REQUESTS,
-            [(header::RETRY_AFTER, secs.to_string())],
-            format!("too many wrong tokens from this address; retry in {secs} s\n"),
-        )
-            .into_response());
+        return Some(
+            (
+                StatusCode::TOO_MANY_REQUESTS,
+                [(header::RETRY_AFTER, secs.to_string())],
+                format!("too many wrong tokens from this address; retry in {secs} s\n"),
+            )
+                .into_response(),
+        );
     }
     if app.authorized(headers) {
         if let Some(ip) = ip {
