@@ -56,6 +56,47 @@ pub struct Evaluator<'f> {
     count: u64,
     pts: Vec<Vec3>,
     out: Vec<f32>,
+    threads: usize,
+}
+
+/// Smallest batch part worth a thread of its own (below it, one thread evaluates).
+pub const PAR_MIN_POINTS: usize = 512;
+
+/// `field` on `pts` into `out`, split into up to `threads` contiguous parts evaluated at
+/// once (scoped threads). Every point is evaluated exactly as alone: the values do not
+/// depend on the split.
+pub fn occupancy_split(
+    field: &dyn OccupancyField,
+    pts: &[Vec3],
+    out: &mut [f32],
+    threads: usize,
+) -> Result<(), FieldError> {
+    let parts = threads.min(pts.len() / PAR_MIN_POINTS).max(1);
+    if parts == 1 {
+        return field.occupancy(pts, out);
+    }
+    let size = pts.len().div_ceil(parts);
+    std::thread::scope(|s| {
+        let mut handles = Vec::with_capacity(parts - 1);
+        let mut chunks = pts.chunks(size).zip(out.chunks_mut(size));
+        let first = chunks.next();
+        for (p, o) in chunks {
+            handles.push(s.spawn(move || field.occupancy(p, o)));
+        }
+        let mut result = match first {
+            Some((p, o)) => field.occupancy(p, o),
+            None => Ok(()),
+        };
+        for h in handles {
+            let r = h
+                .join()
+                .unwrap_or_else(|_| Err(FieldError::Backend("evaluation thread panicked".into())));
+            if result.is_ok() {
+                result = r;
+            }
+        }
+        result
+    })
 }
 
 impl<'f> Evaluator<'f> {
@@ -65,7 +106,14 @@ impl<'f> Evaluator<'f> {
             count: 0,
             pts: Vec::with_capacity(BATCH),
             out: vec![0.0; BATCH],
+            threads: 1,
         }
+    }
+
+    /// Evaluate each batch on up to `threads` threads (1: the calling thread only).
+    pub fn with_threads(mut self, threads: usize) -> Self {
+        self.threads = threads.max(1);
+        self
     }
 
     /// Evaluations so far.
@@ -110,7 +158,7 @@ impl<'f> Evaluator<'f> {
             self.pts
                 .extend(chunk.iter().map(|&l| spec.world(spec.unlinear(l as usize))));
             let out = &mut self.out[..chunk.len()];
-            self.field.occupancy(&self.pts, out)?;
+            occupancy_split(self.field, &self.pts, out, self.threads)?;
             self.count += chunk.len() as u64;
             let out = &self.out[..chunk.len()];
             self.check(out, Some(spec), chunk)?;
@@ -132,7 +180,7 @@ impl<'f> Evaluator<'f> {
         for (pc, oc) in points.chunks(BATCH).zip(out.chunks_mut(BATCH)) {
             self.pts.clear();
             self.pts.extend_from_slice(pc);
-            self.field.occupancy(pc, oc)?;
+            occupancy_split(self.field, pc, oc, self.threads)?;
             self.count += pc.len() as u64;
             self.check(oc, None, &[])?;
         }

@@ -65,6 +65,7 @@ pub struct RenderStats {
 /// A mesh-free renderer; owns its buffers and reuses them frame to frame.
 #[derive(Default)]
 pub struct Renderer {
+    threads: usize,
     hier: Hierarchical,
     grid: Option<Grid>,
     coarse_hit: Vec<i32>,
@@ -107,6 +108,12 @@ impl Renderer {
         Self::default()
     }
 
+    /// Threads for field evaluation (1, the default: the calling thread only). The image
+    /// does not depend on it.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
+    }
+
     /// Render `field` coloured by `colors` on a grid of level `spec.level()`.
     pub fn render(
         &mut self,
@@ -127,7 +134,7 @@ impl Renderer {
         let mut stats = RenderStats::default();
 
         // 1. Localize to L - 1 inside the level-L grid.
-        let mut ev = Evaluator::new(field);
+        let mut ev = Evaluator::new(field).with_threads(self.threads);
         self.hier
             .run(&mut ev, grid, coarse, big_l - 1, HierarchicalMode::Paper)?;
         stats.coarse_evaluations = ev.count();

@@ -88,6 +88,10 @@ pub struct LocalizeArgs {
     /// Scene drawn in the plot (default capsule-human if measured, else the first scene).
     #[arg(long)]
     pub plot_scene: Option<String>,
+    /// Threads for field evaluation (each batch split across them; the values and the
+    /// evaluated points do not change).
+    #[arg(long, default_value_t = 1)]
+    pub threads: usize,
 }
 
 /// The `--coarse-level` help, from the engine's constants (so it cannot drift from them).

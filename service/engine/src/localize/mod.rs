@@ -164,6 +164,7 @@ pub enum LocalizeError {
 pub struct Localizer {
     hier: Hierarchical,
     scratch: Scratch,
+    threads: usize,
 }
 
 /// Reusable scratch shared by the baseline methods.
@@ -181,6 +182,12 @@ impl Localizer {
         Self::default()
     }
 
+    /// Threads for field evaluation (1, the default: the calling thread only). The values
+    /// and the evaluated set do not depend on it.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads.max(1);
+    }
+
     /// Localize the surface of `field` on `spec` with `method`, starting (for coarse-to-fine
     /// methods) at `coarse_level`, writing into `grid` (re-targeted to `spec`).
     pub fn run(
@@ -193,7 +200,7 @@ impl Localizer {
     ) -> Result<LocalizeStats, LocalizeError> {
         let coarse = check_coarse(spec, coarse_level)?;
         grid.reset(spec);
-        let mut ev = Evaluator::new(field);
+        let mut ev = Evaluator::new(field).with_threads(self.threads);
         let mut stats = LocalizeStats::default();
         match method {
             Method::Dense => dense::run(&mut ev, grid, &mut self.scratch)?,
