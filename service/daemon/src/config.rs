@@ -286,14 +286,33 @@ pub enum ComputeBackend {
     Cpu,
 }
 
-/// The compute section. (There is no `threads` key: the pipeline's thread layout is fixed,
-/// one thread per stage, and a key that nothing honours must not exist.)
-#[derive(Debug, Clone, Default, Deserialize)]
+/// The compute section.
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ComputeConfig {
     #[serde(default)]
     pub backend: ComputeBackend,
+    /// Threads that evaluate the field for the render stage (each batch of points split
+    /// across them; the image does not change), [`THREADS`]. The other pipeline stages have
+    /// one thread each.
+    #[serde(default = "d_threads")]
+    pub threads: usize,
 }
+
+impl Default for ComputeConfig {
+    fn default() -> Self {
+        Self {
+            backend: ComputeBackend::default(),
+            threads: d_threads(),
+        }
+    }
+}
+
+fn d_threads() -> usize {
+    1
+}
+/// Accepted range of `compute.threads`.
+pub const THREADS: std::ops::RangeInclusive<usize> = 1..=64;
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -395,6 +414,12 @@ impl Config {
                     HEADER_TIMEOUT_S.start(),
                     HEADER_TIMEOUT_S.end()
                 ),
+            );
+        }
+        if !THREADS.contains(&self.compute.threads) {
+            return bad(
+                "compute.threads",
+                format!("{} must be in 1..=64", self.compute.threads),
             );
         }
         if !WRITE_TIMEOUT_S.contains(&self.http.write_timeout_s) {
@@ -593,7 +618,10 @@ mod tests {
             Path::new("b.toml"),
         )
         .unwrap_err();
-        assert!(e.contains("threads") && e.contains("unknown field"), "{e}");
+        assert!(
+            e.contains("line 5") && e.contains("compute.threads") && e.contains("1..=64"),
+            "{e}"
+        );
         let ok = Config::parse(
             &format!("{base}[http]\nheader_timeout_s = 300\n"),
             Path::new("b.toml"),

@@ -86,9 +86,30 @@ impl Control {
         if new.dbus != old.dbus {
             restart.push("dbus");
         }
+        // Server limits are set when the listener starts.
+        if new.http.header_timeout_s != old.http.header_timeout_s {
+            restart.push("http.header_timeout_s");
+        }
+        if new.http.write_timeout_s != old.http.write_timeout_s {
+            restart.push("http.write_timeout_s");
+        }
+        if new.http.per_address_limit != old.http.per_address_limit {
+            restart.push("http.per_address_limit");
+        }
+        if new.http.allowed_hosts != old.http.allowed_hosts {
+            restart.push("http.allowed_hosts");
+        }
+        if new.compute.threads != old.compute.threads {
+            restart.push("compute.threads");
+        }
         // Keep what is running, take the rest of the new file.
         let mut keep = new;
         keep.http.bind = old.http.bind;
+        keep.http.header_timeout_s = old.http.header_timeout_s;
+        keep.http.write_timeout_s = old.http.write_timeout_s;
+        keep.http.per_address_limit = old.http.per_address_limit;
+        keep.http.allowed_hosts = old.http.allowed_hosts.clone();
+        keep.compute.threads = old.compute.threads;
         keep.render.field = old.render.field;
         keep.render.oracle_voxel_m = old.render.oracle_voxel_m;
         keep.dbus = old.dbus;

@@ -612,11 +612,13 @@ pub fn start(
         let (sh, input, out) = (shared.clone(), captured.clone(), rendered.clone());
         let voxel = cfg.render.oracle_voxel_m;
         let mode = cfg.field();
+        let eval_threads = cfg.compute.threads;
         threads.push(
             std::thread::Builder::new()
                 .name("render".into())
                 .spawn(move || {
                     let mut renderer = Renderer::new();
+                    renderer.set_threads(eval_threads);
                     let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
                         let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
                         sh.set_state(PipelineState::Degraded(why));
