@@ -23,7 +23,7 @@ pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>
         .name("notify".into())
         .spawn(move || {
             let mut ready = false;
-            let mut last_beats = [0u64; 3];
+            let mut last_beats = [0u64; THREADS.len()];
             let mut last_status = String::new();
             let mut stalled_logged = false;
             while !shared.stop.load(Ordering::Relaxed) {
@@ -36,9 +36,12 @@ pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>
                 let beats = shared.beats.each_ref().map(|b| b.load(Ordering::Relaxed));
                 let stalled: Vec<&str> = THREADS
                     .iter()
+                    .enumerate()
                     .zip(beats.iter().zip(&last_beats))
-                    .filter(|(_, (now, before))| now == before)
-                    .map(|(name, _)| *name)
+                    .filter(|((i, _), (now, before))| {
+                        crate::pipeline::thread_runs(*i, shared.mode) && now == before
+                    })
+                    .map(|((_, name), _)| *name)
                     .collect();
                 last_beats = beats;
                 let status = if stalled.is_empty() {

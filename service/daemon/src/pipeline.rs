@@ -18,6 +18,7 @@ use volcap_sim::camera::Camera as SimView;
 pub struct Slot<T> {
     item: Mutex<Option<T>>,
     ready: Condvar,
+    emptied: Condvar,
 }
 
 impl<T> Default for Slot<T> {
@@ -25,6 +26,7 @@ impl<T> Default for Slot<T> {
         Self {
             item: Mutex::new(None),
             ready: Condvar::new(),
+            emptied: Condvar::new(),
         }
     }
 }
@@ -45,7 +47,23 @@ impl<T> Slot<T> {
             .ready
             .wait_timeout_while(g, timeout, |v| v.is_none())
             .unwrap_or_else(|p| p.into_inner());
-        g.take()
+        let v = g.take();
+        if v.is_some() {
+            self.emptied.notify_all();
+        }
+        v
+    }
+
+    /// Wait up to `timeout` until the slot is empty (its item taken); true when it is. A
+    /// producer that waits here before computing the next item works only as fast as its
+    /// consumer takes (no work thrown away on a bottleneck further down).
+    pub fn wait_empty(&self, timeout: Duration) -> bool {
+        let g = self.item.lock().unwrap_or_else(|p| p.into_inner());
+        let (g, _) = self
+            .emptied
+            .wait_timeout_while(g, timeout, |v| v.is_some())
+            .unwrap_or_else(|p| p.into_inner());
+        g.is_none()
     }
 }
 
@@ -282,14 +300,20 @@ pub struct Shared {
     pub camera_swap: Mutex<Option<CameraFactory>>,
     /// One counter per pipeline thread, bumped every loop turn (idle turns included): a
     /// counter that stops moving is a stalled thread, and the watchdog stops its pings.
-    pub beats: [AtomicU64; 3],
+    pub beats: [AtomicU64; 4],
     /// People in view in the latest rendered frame (model mode: regions of the
     /// segmentation, the largest one rendered; oracle mode: the simulator's count);
     /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
     pub people: AtomicUsize,
 }
 
-pub const THREADS: [&str; 3] = ["capture", "render", "encode"];
+pub const THREADS: [&str; 4] = ["capture", "render", "encode", "field"];
+
+/// Whether pipeline thread `i` of [`THREADS`] runs in `mode` (the field stage has a thread
+/// of its own in model mode only).
+pub fn thread_runs(i: usize, mode: &str) -> bool {
+    THREADS[i] != "field" || mode == "model"
+}
 
 /// Frames skipped in a row (corrupt, truncated) before the state says so.
 pub const SKIPS_DEGRADE: u64 = 5;
@@ -445,6 +469,24 @@ fn render_field(
     }
     sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
     Some(renderer.rgba().to_vec())
+}
+
+/// What the field thread hands the render thread: the model's field of a frame, or why
+/// there is none (shown as a degraded state with a placeholder).
+pub type FieldOutcome = Result<volcap_engine::model::ModelField, String>;
+
+/// The model's view for the live settings: orbit yaw/pitch about the crop centre; a distance
+/// is relative to a 2.5 m nominal one (0 keeps the crop).
+fn model_view(live: &Live) -> volcap_engine::model::ModelView {
+    volcap_engine::model::ModelView {
+        yaw_deg: live.yaw,
+        pitch_deg: live.pitch,
+        zoom: if live.distance > 0.0 {
+            2.5 / live.distance
+        } else {
+            1.0
+        },
+    }
 }
 
 /// Start the pipeline threads.
@@ -606,10 +648,58 @@ pub fn start(
         );
     }
 
-    // Field + render: the oracle field through the engine's localization and renderer, or
-    // the camera frame itself.
+    // Model mode: segmentation and encoders on a thread of their own, so that frame N + 1 is
+    // segmented and encoded while frame N is localized and rendered (latest wins between).
+    let fielded: Arc<Slot<(Frame, FieldOutcome)>> = Arc::default();
+    if let (FieldMode::Model, Some(models)) = (cfg.field(), models.clone()) {
+        let (sh, input, out) = (shared.clone(), captured.clone(), fielded.clone());
+        threads.push(
+            std::thread::Builder::new()
+                .name("field".into())
+                .spawn(move || {
+                    while !sh.stop.load(Ordering::Relaxed) {
+                        sh.beat(3);
+                        // One field in flight: compute the next only once the render thread
+                        // has taken the last (then take the newest frame).
+                        if !out.wait_empty(Duration::from_millis(200)) {
+                            continue;
+                        }
+                        let Some(f) = input.take(Duration::from_millis(200)) else {
+                            continue;
+                        };
+                        let live = sh.live();
+                        if live.paused {
+                            sh.set_state(PipelineState::Paused);
+                            continue;
+                        }
+                        let t = Instant::now();
+                        let view = model_view(&live);
+                        let outcome = match models.frame(&f.rgb, f.width, f.height, view) {
+                            Ok((field, info)) => {
+                                sh.people.store(info.people, Ordering::Relaxed);
+                                sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
+                                Ok(field)
+                            }
+                            Err(volcap_engine::model::FrameError::NoPerson) => {
+                                sh.people.store(0, Ordering::Relaxed);
+                                Err("no person in view".to_string())
+                            }
+                            Err(e) => Err(format!("model: {e}")),
+                        };
+                        if out.put((f, outcome)) {
+                            sh.stats[1].dropped.fetch_add(1, Ordering::Relaxed);
+                        }
+                    }
+                })
+                .expect("spawning the field thread"),
+        );
+    }
+
+    // Render: the model's field (from the field thread), the oracle field through the
+    // engine's localization and renderer, or the camera frame itself.
     {
         let (sh, input, out) = (shared.clone(), captured.clone(), rendered.clone());
+        let fielded = fielded.clone();
         let voxel = cfg.render.oracle_voxel_m;
         let mode = cfg.field();
         let eval_threads = cfg.compute.threads;
@@ -634,8 +724,16 @@ pub fn start(
                     };
                     while !sh.stop.load(Ordering::Relaxed) {
                         sh.beat(1);
-                        let Some(f) = input.take(Duration::from_millis(200)) else {
-                            continue;
+                        let (f, outcome) = if mode == FieldMode::Model {
+                            let Some((f, o)) = fielded.take(Duration::from_millis(200)) else {
+                                continue;
+                            };
+                            (f, Some(o))
+                        } else {
+                            let Some(f) = input.take(Duration::from_millis(200)) else {
+                                continue;
+                            };
+                            (f, None)
                         };
                         let live = sh.live();
                         if live.paused {
@@ -651,42 +749,22 @@ pub fn start(
                                 rgba
                             }
                             FieldMode::Model => {
-                                let Some(models) = &models else {
-                                    degraded(
-                                        "model mode without loaded models".into(),
-                                        &f,
-                                        size,
-                                        bg,
-                                    );
-                                    continue;
-                                };
-                                let t = Instant::now();
-                                let view = volcap_engine::model::ModelView {
-                                    yaw_deg: live.yaw,
-                                    pitch_deg: live.pitch,
-                                    // 0 keeps the crop; otherwise relative to a 2.5 m nominal distance.
-                                    zoom: if live.distance > 0.0 {
-                                        2.5 / live.distance
-                                    } else {
-                                        1.0
-                                    },
-                                };
-                                let field = match models.frame(&f.rgb, f.width, f.height, view) {
-                                    Ok((field, info)) => {
-                                        sh.people.store(info.people, Ordering::Relaxed);
-                                        field
-                                    }
-                                    Err(volcap_engine::model::FrameError::NoPerson) => {
-                                        sh.people.store(0, Ordering::Relaxed);
-                                        degraded("no person in view".into(), &f, size, bg);
+                                let field = match outcome {
+                                    Some(Ok(field)) => field,
+                                    Some(Err(why)) => {
+                                        degraded(why, &f, size, bg);
                                         continue;
                                     }
-                                    Err(e) => {
-                                        degraded(format!("model: {e}"), &f, size, bg);
+                                    None => {
+                                        degraded(
+                                            "model mode without loaded models".into(),
+                                            &f,
+                                            size,
+                                            bg,
+                                        );
                                         continue;
                                     }
                                 };
-                                sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
                                 let Some(rgba) =
                                     render_field(&mut renderer, &sh, &field, &field, &live)
                                 else {
@@ -824,6 +902,27 @@ pub fn start(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_slot_tells_its_producer_when_it_was_taken() {
+        let slot: Arc<Slot<u32>> = Arc::default();
+        assert!(slot.wait_empty(Duration::from_millis(1)), "empty at first");
+        assert!(!slot.put(1));
+        assert!(!slot.wait_empty(Duration::from_millis(20)), "not taken yet");
+        let s2 = slot.clone();
+        let consumer = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(50));
+            s2.take(Duration::from_secs(1))
+        });
+        let t = Instant::now();
+        assert!(slot.wait_empty(Duration::from_secs(5)));
+        assert!(t.elapsed() < Duration::from_secs(2));
+        assert_eq!(consumer.join().unwrap(), Some(1));
+        // Latest wins: a put over an unconsumed item reports the drop.
+        slot.put(2);
+        assert!(slot.put(3));
+        assert_eq!(slot.take(Duration::from_millis(1)), Some(3));
+    }
 
     #[test]
     fn letterbox_keeps_aspect_and_centres() {
