@@ -349,6 +349,26 @@ fn bad<T>(key: impl Into<String>, msg: impl Into<String>) -> Result<T, Bad> {
     })
 }
 
+/// `value` within `range`, or an error naming the key and the range ("N must be in A..=B").
+fn in_range<T: PartialOrd + std::fmt::Display>(
+    key: &str,
+    value: T,
+    range: &std::ops::RangeInclusive<T>,
+    unit: &str,
+) -> Result<(), Bad> {
+    if range.contains(&value) {
+        return Ok(());
+    }
+    bad(
+        key,
+        format!(
+            "{value} must be in {}..={}{unit}",
+            range.start(),
+            range.end()
+        ),
+    )
+}
+
 /// The 1-based line where `key` of `[table]` is set, if it is set in the text.
 pub fn line_of(text: &str, dotted: &str) -> Option<usize> {
     let (table, key) = dotted.rsplit_once('.').unwrap_or(("", dotted));
@@ -399,41 +419,31 @@ impl Config {
                 ),
             );
         }
-        if self.http.client_limit == 0 || self.http.client_limit > 10_000 {
-            return bad(
-                "http.client_limit",
-                format!("{} must be in 1..=10000", self.http.client_limit),
-            );
-        }
-        if !HEADER_TIMEOUT_S.contains(&self.http.header_timeout_s) {
-            return bad(
-                "http.header_timeout_s",
-                format!(
-                    "{} must be in {}..={} (seconds)",
-                    self.http.header_timeout_s,
-                    HEADER_TIMEOUT_S.start(),
-                    HEADER_TIMEOUT_S.end()
-                ),
-            );
-        }
-        if !THREADS.contains(&self.compute.threads) {
-            return bad(
-                "compute.threads",
-                format!("{} must be in 1..=64", self.compute.threads),
-            );
-        }
-        if !WRITE_TIMEOUT_S.contains(&self.http.write_timeout_s) {
-            return bad(
-                "http.write_timeout_s",
-                format!("{} must be in 1..=300 (seconds)", self.http.write_timeout_s),
-            );
-        }
-        if !PER_ADDRESS.contains(&self.http.per_address_limit) {
-            return bad(
-                "http.per_address_limit",
-                format!("{} must be in 1..=1000", self.http.per_address_limit),
-            );
-        }
+        in_range(
+            "http.client_limit",
+            self.http.client_limit,
+            &(1..=10_000),
+            "",
+        )?;
+        in_range(
+            "http.header_timeout_s",
+            self.http.header_timeout_s,
+            &HEADER_TIMEOUT_S,
+            " (seconds)",
+        )?;
+        in_range("compute.threads", self.compute.threads, &THREADS, "")?;
+        in_range(
+            "http.write_timeout_s",
+            self.http.write_timeout_s,
+            &WRITE_TIMEOUT_S,
+            " (seconds)",
+        )?;
+        in_range(
+            "http.per_address_limit",
+            self.http.per_address_limit,
+            &PER_ADDRESS,
+            "",
+        )?;
         if let Some(h) = self.http.allowed_hosts.iter().find(|h| {
             h.trim().is_empty()
                 || !h

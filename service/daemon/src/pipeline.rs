@@ -6,115 +6,20 @@
 
 use crate::capture::{Backoff, Camera, CameraState, Frame, Skip, Step, Supervisor};
 use crate::config::{Config, FieldMode};
+
+mod field_stage;
+mod live;
+mod slot;
 use glam::{Quat, Vec3};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use volcap_engine::grid::GridSpec;
 use volcap_engine::render::{RenderOptions, Renderer};
 use volcap_sim::camera::Camera as SimView;
 
-/// A one-item slot: `put` replaces what is there (and reports the overwrite), `take` waits.
-pub struct Slot<T> {
-    item: Mutex<Option<T>>,
-    ready: Condvar,
-    emptied: Condvar,
-}
-
-impl<T> Default for Slot<T> {
-    fn default() -> Self {
-        Self {
-            item: Mutex::new(None),
-            ready: Condvar::new(),
-            emptied: Condvar::new(),
-        }
-    }
-}
-
-impl<T> Slot<T> {
-    /// Put `v`; returns true when an unconsumed item was overwritten (a drop).
-    pub fn put(&self, v: T) -> bool {
-        let mut g = self.item.lock().unwrap_or_else(|p| p.into_inner());
-        let dropped = g.replace(v).is_some();
-        self.ready.notify_one();
-        dropped
-    }
-
-    /// Take the latest item, waiting up to `timeout`.
-    pub fn take(&self, timeout: Duration) -> Option<T> {
-        let g = self.item.lock().unwrap_or_else(|p| p.into_inner());
-        let (mut g, _) = self
-            .ready
-            .wait_timeout_while(g, timeout, |v| v.is_none())
-            .unwrap_or_else(|p| p.into_inner());
-        let v = g.take();
-        if v.is_some() {
-            self.emptied.notify_all();
-        }
-        v
-    }
-
-    /// Wait up to `timeout` until the slot is empty (its item taken); true when it is. A
-    /// producer that waits here before computing the next item works only as fast as its
-    /// consumer takes (no work thrown away on a bottleneck further down).
-    pub fn wait_empty(&self, timeout: Duration) -> bool {
-        let g = self.item.lock().unwrap_or_else(|p| p.into_inner());
-        let (g, _) = self
-            .emptied
-            .wait_timeout_while(g, timeout, |v| v.is_some())
-            .unwrap_or_else(|p| p.into_inner());
-        g.is_none()
-    }
-}
-
-/// Rolling per-stage timings: the last 256 (when, ms) samples.
-#[derive(Default)]
-pub struct StageStats {
-    samples: Mutex<std::collections::VecDeque<(Instant, f64)>>,
-    pub frames: AtomicU64,
-    pub dropped: AtomicU64,
-}
-
-impl StageStats {
-    pub fn record(&self, ms: f64) {
-        let mut s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
-        if s.len() >= 256 {
-            s.pop_front();
-        }
-        s.push_back((Instant::now(), ms));
-        self.frames.fetch_add(1, Ordering::Relaxed);
-    }
-
-    /// Frames per second over the last 5 s (0 when none).
-    pub fn recent_fps(&self) -> f64 {
-        let s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
-        let window = Duration::from_secs(5);
-        // Samples are in time order: the recent ones are a suffix.
-        let recent = s.iter().skip_while(|(t, _)| t.elapsed() > window);
-        let (n, first) = recent.fold((0usize, None), |(n, f), (t, _)| (n + 1, f.or(Some(*t))));
-        match first {
-            Some(first) if n > 1 => (n - 1) as f64 / first.elapsed().as_secs_f64().max(1e-3),
-            _ => 0.0,
-        }
-    }
-
-    /// (p50, p99) in ms over the last 256 frames.
-    pub fn percentiles(&self) -> (f64, f64) {
-        let mut v: Vec<f64> = self
-            .samples
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .iter()
-            .map(|(_, ms)| *ms)
-            .collect();
-        if v.is_empty() {
-            return (0.0, 0.0);
-        }
-        v.sort_by(f64::total_cmp);
-        let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
-        (q(0.5), q(0.99))
-    }
-}
+pub use live::{Live, LiveError};
+pub use slot::{Slot, StageStats};
 
 /// What the pipeline is doing, for /state and the viewer.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -184,105 +89,6 @@ pub struct CameraStatus {
     pub opens: u64,
 }
 
-/// What can be changed while running (HTTP view controls, D-Bus, config reload).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct Live {
-    /// Orbit about the scene's look-at point, degrees.
-    pub yaw: f32,
-    pub pitch: f32,
-    /// Eye distance from the look-at point in metres; 0 keeps the camera's own.
-    pub distance: f32,
-    /// Grid points per axis (2^L + 1) = output size in pixels.
-    pub resolution: usize,
-    pub coarse_level: u32,
-    /// RGBA in [0, 1]; alpha 0 gives transparent PNG snapshots.
-    pub background: [f32; 4],
-    pub paused: bool,
-}
-
-impl Live {
-    pub fn from_config(cfg: &Config) -> Self {
-        Self {
-            yaw: cfg.render.yaw.rem_euclid(360.0),
-            pitch: cfg.render.pitch,
-            distance: cfg.render.distance,
-            resolution: cfg.render.resolution.0,
-            coarse_level: cfg.render.coarse_level,
-            background: cfg.render.background,
-            paused: false,
-        }
-    }
-
-    /// The one validation of every live setting, whoever sets it (config, HTTP, D-Bus).
-    pub fn check(&self) -> Result<(), LiveError> {
-        let bad = |field, msg: String| Err(LiveError { field, msg });
-        if !self.yaw.is_finite() {
-            return bad("yaw", format!("yaw {}: need a finite value", self.yaw));
-        }
-        if !self.pitch.is_finite() || self.pitch.abs() > 80.0 {
-            return bad(
-                "pitch",
-                format!(
-                    "yaw {} / pitch {}: need finite values, |pitch| <= 80",
-                    self.yaw, self.pitch
-                ),
-            );
-        }
-        if !(self.distance == 0.0 || (0.5..=10.0).contains(&self.distance)) {
-            return bad(
-                "distance",
-                format!(
-                    "distance {}: 0 (the camera's own) or 0.5..=10 metres",
-                    self.distance
-                ),
-            );
-        }
-        if !crate::config::GRID_RESOLUTIONS.contains(&self.resolution) {
-            return bad(
-                "resolution",
-                format!(
-                    "resolution {}: one of 33, 65, 129, 257, 513 (levels 5..=9)",
-                    self.resolution
-                ),
-            );
-        }
-        let l = (self.resolution - 1).trailing_zeros();
-        if self.coarse_level < 1 || self.coarse_level >= l {
-            return bad(
-                "coarse_level",
-                format!(
-                    "{} must be in 1..{l} for resolution {}",
-                    self.coarse_level, self.resolution
-                ),
-            );
-        }
-        if self.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
-            return bad("background", "values must be in [0, 1]".into());
-        }
-        Ok(())
-    }
-
-    /// Change the grid resolution, bringing the coarse level into range for it.
-    pub fn set_resolution(&mut self, resolution: usize) {
-        self.resolution = resolution;
-        let levels = (resolution.max(2) - 1).trailing_zeros();
-        self.coarse_level = self.coarse_level.min(levels.saturating_sub(1));
-    }
-}
-
-/// A live setting out of range: which one (the `render.` key in the config) and why.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LiveError {
-    pub field: &'static str,
-    pub msg: String,
-}
-
-impl std::fmt::Display for LiveError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.msg)
-    }
-}
-
 /// Shared between the pipeline threads, the HTTP server, D-Bus and the watchdog.
 pub struct Shared {
     pub stats: [StageStats; 4],
@@ -343,6 +149,14 @@ impl Shared {
             beats: Default::default(),
             people: AtomicUsize::new(usize::MAX),
         }
+    }
+
+    /// The latest frame's oracle field, if any.
+    pub fn latest_field(&self) -> Option<Arc<volcap_sim::oracle::SceneField>> {
+        self.latest_field
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 
     pub fn set_state(&self, s: PipelineState) {
@@ -471,23 +285,7 @@ fn render_field(
     Some(renderer.rgba().to_vec())
 }
 
-/// What the field thread hands the render thread: the model's field of a frame, or why
-/// there is none (shown as a degraded state with a placeholder).
-pub type FieldOutcome = Result<volcap_engine::model::ModelField, String>;
-
-/// The model's view for the live settings: orbit yaw/pitch about the crop centre; a distance
-/// is relative to a 2.5 m nominal one (0 keeps the crop).
-fn model_view(live: &Live) -> volcap_engine::model::ModelView {
-    volcap_engine::model::ModelView {
-        yaw_deg: live.yaw,
-        pitch_deg: live.pitch,
-        zoom: if live.distance > 0.0 {
-            2.5 / live.distance
-        } else {
-            1.0
-        },
-    }
-}
+pub use field_stage::FieldOutcome;
 
 /// Start the pipeline threads.
 pub fn start(
@@ -652,47 +450,12 @@ pub fn start(
     // segmented and encoded while frame N is localized and rendered (latest wins between).
     let fielded: Arc<Slot<(Frame, FieldOutcome)>> = Arc::default();
     if let (FieldMode::Model, Some(models)) = (cfg.field(), models.clone()) {
-        let (sh, input, out) = (shared.clone(), captured.clone(), fielded.clone());
-        threads.push(
-            std::thread::Builder::new()
-                .name("field".into())
-                .spawn(move || {
-                    while !sh.stop.load(Ordering::Relaxed) {
-                        sh.beat(3);
-                        // One field in flight: compute the next only once the render thread
-                        // has taken the last (then take the newest frame).
-                        if !out.wait_empty(Duration::from_millis(200)) {
-                            continue;
-                        }
-                        let Some(f) = input.take(Duration::from_millis(200)) else {
-                            continue;
-                        };
-                        let live = sh.live();
-                        if live.paused {
-                            sh.set_state(PipelineState::Paused);
-                            continue;
-                        }
-                        let t = Instant::now();
-                        let view = model_view(&live);
-                        let outcome = match models.frame(&f.rgb, f.width, f.height, view) {
-                            Ok((field, info)) => {
-                                sh.people.store(info.people, Ordering::Relaxed);
-                                sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
-                                Ok(field)
-                            }
-                            Err(volcap_engine::model::FrameError::NoPerson) => {
-                                sh.people.store(0, Ordering::Relaxed);
-                                Err("no person in view".to_string())
-                            }
-                            Err(e) => Err(format!("model: {e}")),
-                        };
-                        if out.put((f, outcome)) {
-                            sh.stats[1].dropped.fetch_add(1, Ordering::Relaxed);
-                        }
-                    }
-                })
-                .expect("spawning the field thread"),
-        );
+        threads.push(field_stage::spawn(
+            shared.clone(),
+            models,
+            captured.clone(),
+            fielded.clone(),
+        ));
     }
 
     // Render: the model's field (from the field thread), the oracle field through the
@@ -902,27 +665,6 @@ pub fn start(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_slot_tells_its_producer_when_it_was_taken() {
-        let slot: Arc<Slot<u32>> = Arc::default();
-        assert!(slot.wait_empty(Duration::from_millis(1)), "empty at first");
-        assert!(!slot.put(1));
-        assert!(!slot.wait_empty(Duration::from_millis(20)), "not taken yet");
-        let s2 = slot.clone();
-        let consumer = std::thread::spawn(move || {
-            std::thread::sleep(Duration::from_millis(50));
-            s2.take(Duration::from_secs(1))
-        });
-        let t = Instant::now();
-        assert!(slot.wait_empty(Duration::from_secs(5)));
-        assert!(t.elapsed() < Duration::from_secs(2));
-        assert_eq!(consumer.join().unwrap(), Some(1));
-        // Latest wins: a put over an unconsumed item reports the drop.
-        slot.put(2);
-        assert!(slot.put(3));
-        assert_eq!(slot.take(Duration::from_millis(1)), Some(3));
-    }
 
     #[test]
     fn letterbox_keeps_aspect_and_centres() {

@@ -8,13 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{Proc, launch, root};
-
-static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn serial() -> std::sync::MutexGuard<'static, ()> {
-    SERIAL.lock().unwrap_or_else(|p| p.into_inner())
-}
+use common::{Proc, launch, request, root, serial, state, wait_for};
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("volcapd-hard-{name}-{}", std::process::id()));
@@ -35,52 +29,6 @@ fn sim_config(dir: &Path, resolution: usize, extra: &str) -> PathBuf {
     )
     .unwrap();
     p
-}
-
-/// Minimal HTTP/1.1 request on loopback: (status, head, body).
-fn request(addr: &str, method: &str, path: &str, extra: &str) -> (u16, String, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
-    write!(
-        s,
-        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: 0\r\n{extra}\r\n"
-    )
-    .unwrap();
-    let mut buf = Vec::new();
-    let _ = s.read_to_end(&mut buf);
-    let Some(split) = buf.windows(4).position(|w| w == b"\r\n\r\n") else {
-        return (0, String::new(), buf);
-    };
-    let head = String::from_utf8_lossy(&buf[..split]).to_string();
-    let status = head
-        .split_whitespace()
-        .nth(1)
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(0);
-    (status, head, buf[split + 4..].to_vec())
-}
-
-fn state(addr: &str) -> serde_json::Value {
-    let (st, _, body) = request(addr, "GET", "/state", "");
-    assert_eq!(st, 200, "{}", String::from_utf8_lossy(&body));
-    serde_json::from_slice(&body).unwrap()
-}
-
-fn wait_for(
-    addr: &str,
-    what: &str,
-    timeout: Duration,
-    f: impl Fn(&serde_json::Value) -> bool,
-) -> serde_json::Value {
-    let t = Instant::now();
-    loop {
-        let s = state(addr);
-        if f(&s) {
-            return s;
-        }
-        assert!(t.elapsed() < timeout, "timed out waiting for {what}: {s}");
-        std::thread::sleep(Duration::from_millis(200));
-    }
 }
 
 fn signal(p: &Proc, sig: &str) {

@@ -9,11 +9,12 @@ use volcap_sim::rays::{DEFAULT_STEP_M, ray_intervals};
 use volcap_sim::scene::Scene;
 use volcap_sim::{HumanAssets, Simulator};
 
-#[test]
-fn intervals_match_the_dense_oracle_along_rays() {
+/// A clothed subject in a procedural pose rendered at `size` pixels (frame 5), and its
+/// clothed occupancy oracle.
+fn clothed_subject(size: usize) -> (Simulator, volcap_sim::oracle::SceneField) {
     let assets = Arc::new(HumanAssets::embedded().unwrap());
     let text = volcap_sim::dataset::scene_text(
-        48,
+        size,
         "[[subject]]\nid = \"a\"\noutfit = \"female_casualsuit01\"\nhair = \"bob02\"\nshoes = \"shoes02\"\n",
         volcap_sim::pose::Style::ALL[1],
         7,
@@ -22,6 +23,12 @@ fn intervals_match_the_dense_oracle_along_rays() {
     let mut sim = Simulator::new(scene, assets).unwrap();
     sim.render(5).unwrap();
     let field = sim.oracle(0.005);
+    (sim, field)
+}
+
+#[test]
+fn intervals_match_the_dense_oracle_along_rays() {
+    let (mut sim, field) = clothed_subject(48);
     let (mut checked, mut inside_pts, mut wrong) = (0usize, 0usize, 0usize);
     let mut max_per_ray = 0;
     for yaw in [0.0f32, 90.0, 210.0] {
@@ -80,17 +87,7 @@ fn intervals_match_the_dense_oracle_along_rays() {
 /// surface), so the image and its depth supervision describe the same side of the body.
 #[test]
 fn the_nearest_interval_starts_at_the_rendered_surface() {
-    let assets = Arc::new(HumanAssets::embedded().unwrap());
-    let text = volcap_sim::dataset::scene_text(
-        64,
-        "[[subject]]\nid = \"a\"\noutfit = \"female_casualsuit01\"\nhair = \"bob02\"\nshoes = \"shoes02\"\n",
-        volcap_sim::pose::Style::ALL[1],
-        7,
-    );
-    let scene = Scene::parse(&text, Path::new("t.toml")).unwrap();
-    let mut sim = Simulator::new(scene, assets).unwrap();
-    sim.render(5).unwrap();
-    let field = sim.oracle(0.005);
+    let (mut sim, field) = clothed_subject(64);
     for yaw in [0.0f32, 90.0, 210.0] {
         sim.set_view_yaw(yaw);
         let f = sim.render(5).unwrap();

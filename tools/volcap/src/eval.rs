@@ -28,6 +28,10 @@ use volcap_sim::pose::Style;
 use volcap_sim::scene::Scene;
 use volcap_sim::sim::Simulator;
 
+mod turntable;
+pub use turntable::TURNTABLE_YAWS;
+use turntable::turntable;
+
 #[derive(Args, Debug, Clone)]
 pub struct EvalArgs {
     /// Human assets: a MakeHuman folder or a pack file (default: the embedded pack), so other
@@ -242,38 +246,6 @@ impl OccupancyField for OracleInCrop<'_> {
     }
 }
 
-/// The oracle (occupancy and colour) seen through a model field's render view: render NDC
-/// -> the field's crop NDC -> input NDC -> world. Renders the truth from the same views.
-struct OracleInView<'a> {
-    oracle: &'a volcap_sim::oracle::SceneField,
-    field: &'a volcap_engine::model::ModelField,
-}
-
-impl OracleInView<'_> {
-    fn moved(&self, points: &[Vec3]) -> Vec<Vec3> {
-        points
-            .iter()
-            .map(|p| self.field.crop.to_input(self.field.to_crop(*p)))
-            .collect()
-    }
-}
-
-impl OccupancyField for OracleInView<'_> {
-    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), volcap_engine::FieldError> {
-        self.oracle.occupancy(&self.moved(points), out)
-    }
-}
-
-impl volcap_engine::ColorField for OracleInView<'_> {
-    fn color(
-        &self,
-        points: &[Vec3],
-        out: &mut [[f32; 3]],
-    ) -> Result<(), volcap_engine::FieldError> {
-        self.oracle.color(&self.moved(points), out)
-    }
-}
-
 /// Map size and depth scale of the ground-truth Fourier fields (`truth-kK`), the trained
 /// heads' (tools/train/volcap_train/fourier.py).
 const TRUTH_MAP_SIZE: usize = 128;
@@ -282,64 +254,6 @@ const TRUTH_ZETA_SCALE: f32 = 2.0;
 /// `truth-kK` names the ground-truth Fourier field of order K (the family's upper bound).
 fn truth_order(name: &str) -> Option<usize> {
     name.strip_prefix("truth-k").and_then(|k| k.parse().ok())
-}
-
-/// Turntable yaws.
-pub const TURNTABLE_YAWS: [f32; 4] = [0.0, 90.0, 180.0, 270.0];
-
-/// A sheet of mesh-free renders (shaded, grey background) of one case: the model's field at
-/// yaw 0/90/180/270 above the oracle's from the same views.
-fn turntable(models: &Models, c: &Case, res: usize, path: &Path) -> anyhow::Result<()> {
-    use volcap_engine::render::{RenderOptions, Renderer};
-    let spec = GridSpec::from_resolution(res)?;
-    let s = c.size;
-    let mut info = volcap_engine::model::FrameInfo::default();
-    let (img, prob, crop) = models
-        .prepare(&c.rgb, s, s, &mut info)
-        .map_err(|e| anyhow!("the turntable image: {e}"))?;
-    let opts = RenderOptions {
-        background: [0.85, 0.85, 0.85, 1.0],
-        shade: true,
-        ..Default::default()
-    };
-    let n = spec.n() as u32;
-    let mut sheet = image::RgbaImage::new(n * TURNTABLE_YAWS.len() as u32, 2 * n);
-    let mut r = Renderer::new();
-    for (col, yaw) in TURNTABLE_YAWS.iter().enumerate() {
-        let view = ModelView {
-            yaw_deg: *yaw,
-            ..Default::default()
-        };
-        let field = models.encode(&img, &prob, crop, view)?;
-        let truth = OracleInView {
-            oracle: &c.oracle,
-            field: &field,
-        };
-        for (row, (occ, colors)) in [
-            (
-                &field as &dyn OccupancyField,
-                &field as &dyn volcap_engine::ColorField,
-            ),
-            (&truth, &truth),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            r.render(occ, colors, spec, &opts)?;
-            let tile = image::RgbaImage::from_raw(n, n, r.rgba().to_vec())
-                .ok_or_else(|| anyhow!("render buffer size"))?;
-            image::imageops::overlay(
-                &mut sheet,
-                &tile,
-                (col as u32 * n) as i64,
-                (row as u32 * n) as i64,
-            );
-        }
-    }
-    sheet
-        .save(path)
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
 }
 
 #[allow(clippy::too_many_arguments)]

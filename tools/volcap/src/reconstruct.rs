@@ -8,8 +8,8 @@
 //!   person's crop centre, shaded, transparent background.
 //!
 //! Inputs: PNG or JPEG; greyscale, greyscale + alpha, RGBA and 16-bit images are converted to
-//! RGB8 (alpha dropped). Refused with a message naming the file: unreadable or non-image
-//! files, and images over [`MAX_SIDE`] pixels a side or [`MAX_PIXELS`] pixels in all (the
+//! RGB8 (alpha dropped). Refused with a message naming the file: unreadable, non-regular or
+//! non-image files, files over [`MAX_FILE_BYTES`], and images over [`MAX_SIDE`] pixels a side or [`MAX_PIXELS`] pixels in all (the
 //! header is read first; nothing that large is decoded). A failed image does not stop the
 //! others; the exit status is non-zero when any failed.
 
@@ -29,8 +29,6 @@ use volcap_engine::render::{RenderOptions, Renderer};
 pub const MAX_SIDE: u32 = 8192;
 /// Largest image accepted, pixels in all (a 40 MP camera frame).
 pub const MAX_PIXELS: u64 = 40_000_000;
-/// Yaws of the renders, degrees.
-pub const YAWS: [f32; 4] = [0.0, 90.0, 180.0, 270.0];
 
 #[derive(Args, Debug, Clone)]
 pub struct ReconstructArgs {
@@ -77,21 +75,32 @@ struct ImageReport {
     files: Vec<String>,
 }
 
-/// Read an image as RGB8, refusing what is not an image or too large, by name.
+/// Largest image file read, bytes (a 40 MP PNG fits).
+pub const MAX_FILE_BYTES: u64 = 256 << 20;
+
+/// Read an image as RGB8, refusing what is not an image or too large, by name. The file is
+/// read once (a regular file, bounded: `volcap_sim::files::read_regular`); its header is
+/// checked against the size limits before anything is decoded.
 pub fn read_rgb(path: &Path) -> anyhow::Result<(Vec<u8>, u32, u32)> {
-    let meta =
-        std::fs::metadata(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    if !meta.is_file() {
-        bail!("{}: not a regular file", path.display());
-    }
-    let reader = image::ImageReader::open(path)
-        .with_context(|| format!("{}: cannot open", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let Some(format) = reader.format() else {
+    let bytes = volcap_sim::files::read_regular(path, MAX_FILE_BYTES)
+        .map_err(|e| anyhow!("{}: cannot read: {e}", path.display()))?;
+    // The format from the content, else from the name (as `ImageReader::open` does).
+    let by_name = image::ImageFormat::from_path(path).ok();
+    let reader = || -> anyhow::Result<_> {
+        let mut r = image::ImageReader::new(std::io::Cursor::new(bytes.as_slice()))
+            .with_guessed_format()
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        if r.format().is_none()
+            && let Some(f) = by_name
+        {
+            r.set_format(f);
+        }
+        Ok(r)
+    };
+    let Some(format) = reader()?.format() else {
         bail!("{}: not a PNG or JPEG image", path.display());
     };
-    let (w, h) = reader
+    let (w, h) = reader()?
         .into_dimensions()
         .map_err(|e| anyhow!("{}: not a readable {format:?} image: {e}", path.display()))?;
     if w == 0 || h == 0 {
@@ -104,14 +113,10 @@ pub fn read_rgb(path: &Path) -> anyhow::Result<(Vec<u8>, u32, u32)> {
             MAX_PIXELS / 1_000_000
         );
     }
-    let img = image::ImageReader::open(path)
-        .with_context(|| format!("{}: cannot open", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("{}: cannot read", path.display()))?
+    let img = reader()?
         .decode()
         .map_err(|e| anyhow!("{}: cannot decode: {e}", path.display()))?;
-    let rgb = img.to_rgb8();
-    Ok((rgb.into_raw(), w, h))
+    Ok((img.to_rgb8().into_raw(), w, h))
 }
 
 fn stem(path: &Path) -> String {
@@ -200,13 +205,20 @@ fn one(
     };
     let mut r = Renderer::new();
     let n = spec.n() as u32;
-    for yaw in YAWS {
+    for yaw in crate::eval::TURNTABLE_YAWS {
         let view = ModelView {
             yaw_deg: yaw,
             ..Default::default()
         };
-        let field = models.encode(&img, &mask, crop, view)?;
-        r.render(&field, &field, spec, &opts)?;
+        // The input view's field is the one meshed above; other views are encoded anew.
+        let turned;
+        let field = if view == ModelView::default() {
+            &field
+        } else {
+            turned = models.encode(&img, &mask, crop, view)?;
+            &turned
+        };
+        r.render(field, field, spec, &opts)?;
         let tile = image::RgbaImage::from_raw(n, n, r.rgba().to_vec())
             .ok_or_else(|| anyhow!("render buffer size"))?;
         let file = format!("{name}.yaw{:03}.png", yaw as u32);

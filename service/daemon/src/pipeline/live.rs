@@ -1,0 +1,102 @@
+//! The settings that can change while running, validated in one place.
+
+use crate::config::Config;
+
+/// What can be changed while running (HTTP view controls, D-Bus, config reload).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Live {
+    /// Orbit about the scene's look-at point, degrees.
+    pub yaw: f32,
+    pub pitch: f32,
+    /// Eye distance from the look-at point in metres; 0 keeps the camera's own.
+    pub distance: f32,
+    /// Grid points per axis (2^L + 1) = output size in pixels.
+    pub resolution: usize,
+    pub coarse_level: u32,
+    /// RGBA in [0, 1]; alpha 0 gives transparent PNG snapshots.
+    pub background: [f32; 4],
+    pub paused: bool,
+}
+
+impl Live {
+    pub fn from_config(cfg: &Config) -> Self {
+        Self {
+            yaw: cfg.render.yaw.rem_euclid(360.0),
+            pitch: cfg.render.pitch,
+            distance: cfg.render.distance,
+            resolution: cfg.render.resolution.0,
+            coarse_level: cfg.render.coarse_level,
+            background: cfg.render.background,
+            paused: false,
+        }
+    }
+
+    /// The one validation of every live setting, whoever sets it (config, HTTP, D-Bus).
+    pub fn check(&self) -> Result<(), LiveError> {
+        let bad = |field, msg: String| Err(LiveError { field, msg });
+        if !self.yaw.is_finite() {
+            return bad("yaw", format!("yaw {}: need a finite value", self.yaw));
+        }
+        if !self.pitch.is_finite() || self.pitch.abs() > 80.0 {
+            return bad(
+                "pitch",
+                format!(
+                    "yaw {} / pitch {}: need finite values, |pitch| <= 80",
+                    self.yaw, self.pitch
+                ),
+            );
+        }
+        if !(self.distance == 0.0 || (0.5..=10.0).contains(&self.distance)) {
+            return bad(
+                "distance",
+                format!(
+                    "distance {}: 0 (the camera's own) or 0.5..=10 metres",
+                    self.distance
+                ),
+            );
+        }
+        if !crate::config::GRID_RESOLUTIONS.contains(&self.resolution) {
+            return bad(
+                "resolution",
+                format!(
+                    "resolution {}: one of 33, 65, 129, 257, 513 (levels 5..=9)",
+                    self.resolution
+                ),
+            );
+        }
+        let l = (self.resolution - 1).trailing_zeros();
+        if self.coarse_level < 1 || self.coarse_level >= l {
+            return bad(
+                "coarse_level",
+                format!(
+                    "{} must be in 1..{l} for resolution {}",
+                    self.coarse_level, self.resolution
+                ),
+            );
+        }
+        if self.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
+            return bad("background", "values must be in [0, 1]".into());
+        }
+        Ok(())
+    }
+
+    /// Change the grid resolution, bringing the coarse level into range for it.
+    pub fn set_resolution(&mut self, resolution: usize) {
+        self.resolution = resolution;
+        let levels = (resolution.max(2) - 1).trailing_zeros();
+        self.coarse_level = self.coarse_level.min(levels.saturating_sub(1));
+    }
+}
+
+/// A live setting out of range: which one (the `render.` key in the config) and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveError {
+    pub field: &'static str,
+    pub msg: String,
+}
+
+impl std::fmt::Display for LiveError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.msg)
+    }
+}

@@ -1,0 +1,134 @@
+//! The latest-wins slot that joins pipeline stages, and the rolling per-stage timings.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+/// A one-item slot: `put` replaces what is there (and reports the overwrite), `take` waits.
+pub struct Slot<T> {
+    item: Mutex<Option<T>>,
+    ready: Condvar,
+    emptied: Condvar,
+}
+
+impl<T> Default for Slot<T> {
+    fn default() -> Self {
+        Self {
+            item: Mutex::new(None),
+            ready: Condvar::new(),
+            emptied: Condvar::new(),
+        }
+    }
+}
+
+impl<T> Slot<T> {
+    /// Put `v`; returns true when an unconsumed item was overwritten (a drop).
+    pub fn put(&self, v: T) -> bool {
+        let mut g = self.item.lock().unwrap_or_else(|p| p.into_inner());
+        let dropped = g.replace(v).is_some();
+        self.ready.notify_one();
+        dropped
+    }
+
+    /// Take the latest item, waiting up to `timeout`.
+    pub fn take(&self, timeout: Duration) -> Option<T> {
+        let g = self.item.lock().unwrap_or_else(|p| p.into_inner());
+        let (mut g, _) = self
+            .ready
+            .wait_timeout_while(g, timeout, |v| v.is_none())
+            .unwrap_or_else(|p| p.into_inner());
+        let v = g.take();
+        if v.is_some() {
+            self.emptied.notify_all();
+        }
+        v
+    }
+
+    /// Wait up to `timeout` until the slot is empty (its item taken); true when it is. A
+    /// producer that waits here before computing the next item works only as fast as its
+    /// consumer takes (no work thrown away on a bottleneck further down).
+    pub fn wait_empty(&self, timeout: Duration) -> bool {
+        let g = self.item.lock().unwrap_or_else(|p| p.into_inner());
+        let (g, _) = self
+            .emptied
+            .wait_timeout_while(g, timeout, |v| v.is_some())
+            .unwrap_or_else(|p| p.into_inner());
+        g.is_none()
+    }
+}
+
+/// Rolling per-stage timings: the last 256 (when, ms) samples.
+#[derive(Default)]
+pub struct StageStats {
+    samples: Mutex<std::collections::VecDeque<(Instant, f64)>>,
+    pub frames: AtomicU64,
+    pub dropped: AtomicU64,
+}
+
+impl StageStats {
+    pub fn record(&self, ms: f64) {
+        let mut s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
+        if s.len() >= 256 {
+            s.pop_front();
+        }
+        s.push_back((Instant::now(), ms));
+        self.frames.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Frames per second over the last 5 s (0 when none).
+    pub fn recent_fps(&self) -> f64 {
+        let s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
+        let window = Duration::from_secs(5);
+        // Samples are in time order: the recent ones are a suffix.
+        let recent = s.iter().skip_while(|(t, _)| t.elapsed() > window);
+        let (n, first) = recent.fold((0usize, None), |(n, f), (t, _)| (n + 1, f.or(Some(*t))));
+        match first {
+            Some(first) if n > 1 => (n - 1) as f64 / first.elapsed().as_secs_f64().max(1e-3),
+            _ => 0.0,
+        }
+    }
+
+    /// (p50, p99) in ms over the last 256 frames.
+    pub fn percentiles(&self) -> (f64, f64) {
+        let mut v: Vec<f64> = self
+            .samples
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .map(|(_, ms)| *ms)
+            .collect();
+        if v.is_empty() {
+            return (0.0, 0.0);
+        }
+        v.sort_by(f64::total_cmp);
+        let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+        (q(0.5), q(0.99))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    #[test]
+    fn a_slot_tells_its_producer_when_it_was_taken() {
+        let slot: Arc<Slot<u32>> = Arc::default();
+        assert!(slot.wait_empty(Duration::from_millis(1)), "empty at first");
+        assert!(!slot.put(1));
+        assert!(!slot.wait_empty(Duration::from_millis(20)), "not taken yet");
+        let s2 = slot.clone();
+        let consumer = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(50));
+            s2.take(Duration::from_secs(1))
+        });
+        let t = Instant::now();
+        assert!(slot.wait_empty(Duration::from_secs(5)));
+        assert!(t.elapsed() < Duration::from_secs(2));
+        assert_eq!(consumer.join().unwrap(), Some(1));
+        // Latest wins: a put over an unconsumed item reports the drop.
+        slot.put(2);
+        assert!(slot.put(3));
+        assert_eq!(slot.take(Duration::from_millis(1)), Some(3));
+    }
+}
