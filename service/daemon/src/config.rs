@@ -293,8 +293,10 @@ pub struct ComputeConfig {
     #[serde(default)]
     pub backend: ComputeBackend,
     /// Threads that evaluate the field for the render stage (each batch of points split
-    /// across them; the image does not change), [`THREADS`]. The other pipeline stages have
-    /// one thread each.
+    /// across them; the image does not change) and that the field stage's networks spread
+    /// their matrix products over (tract's pool), [`THREADS`]. The other pipeline stages
+    /// have one thread each. More than 1 pays only where a stage leaves a core idle
+    /// (`volcap bench pipeline` measures it).
     #[serde(default = "d_threads")]
     pub threads: usize,
 }

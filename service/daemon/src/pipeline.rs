@@ -111,6 +111,9 @@ pub struct Shared {
     /// segmentation, the largest one rendered; oracle mode: the simulator's count);
     /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
     pub people: AtomicUsize,
+    /// Occupancy-field evaluations of every frame rendered so far (localization, final
+    /// level, normals), for the pipeline benchmark.
+    pub evaluations: AtomicU64,
 }
 
 pub const THREADS: [&str; 4] = ["capture", "render", "encode", "field"];
@@ -148,6 +151,7 @@ impl Shared {
             camera_swap: Mutex::new(None),
             beats: Default::default(),
             people: AtomicUsize::new(usize::MAX),
+            evaluations: AtomicU64::new(0),
         }
     }
 
@@ -277,9 +281,15 @@ fn render_field(
         background: live.background,
         shade: false,
     };
-    if let Err(e) = renderer.render(field, colors, spec, &opts) {
-        sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
-        return None;
+    match renderer.render(field, colors, spec, &opts) {
+        Ok(st) => {
+            let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
+            sh.evaluations.fetch_add(n, Ordering::Relaxed);
+        }
+        Err(e) => {
+            sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
+            return None;
+        }
     }
     sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
     Some(renderer.rgba().to_vec())
@@ -455,6 +465,7 @@ pub fn start(
             models,
             captured.clone(),
             fielded.clone(),
+            cfg.compute.threads,
         ));
     }
 

@@ -57,6 +57,8 @@ pub struct Evaluator<'f> {
     pts: Vec<Vec3>,
     out: Vec<f32>,
     threads: usize,
+    /// Wall time spent inside the field (what is left of a method's time is bookkeeping).
+    field_time: std::time::Duration,
 }
 
 /// Smallest batch part worth a thread of its own (below it, one thread evaluates).
@@ -107,6 +109,7 @@ impl<'f> Evaluator<'f> {
             pts: Vec::with_capacity(BATCH),
             out: vec![0.0; BATCH],
             threads: 1,
+            field_time: std::time::Duration::ZERO,
         }
     }
 
@@ -119,6 +122,11 @@ impl<'f> Evaluator<'f> {
     /// Evaluations so far.
     pub fn count(&self) -> u64 {
         self.count
+    }
+
+    /// Wall time spent in the field's evaluations so far.
+    pub fn field_time(&self) -> std::time::Duration {
+        self.field_time
     }
 
     fn check(
@@ -158,7 +166,10 @@ impl<'f> Evaluator<'f> {
             self.pts
                 .extend(chunk.iter().map(|&l| spec.world(spec.unlinear(l as usize))));
             let out = &mut self.out[..chunk.len()];
-            occupancy_split(self.field, &self.pts, out, self.threads)?;
+            let t = std::time::Instant::now();
+            let r = occupancy_split(self.field, &self.pts, out, self.threads);
+            self.field_time += t.elapsed();
+            r?;
             self.count += chunk.len() as u64;
             let out = &self.out[..chunk.len()];
             self.check(out, Some(spec), chunk)?;
@@ -180,7 +191,10 @@ impl<'f> Evaluator<'f> {
         for (pc, oc) in points.chunks(BATCH).zip(out.chunks_mut(BATCH)) {
             self.pts.clear();
             self.pts.extend_from_slice(pc);
-            occupancy_split(self.field, pc, oc, self.threads)?;
+            let t = std::time::Instant::now();
+            let r = occupancy_split(self.field, pc, oc, self.threads);
+            self.field_time += t.elapsed();
+            r?;
             self.count += pc.len() as u64;
             self.check(oc, None, &[])?;
         }

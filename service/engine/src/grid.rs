@@ -246,6 +246,68 @@ pub struct Grid {
     spec: GridSpec,
     pub values: Vec<f32>,
     pub evaluated: BitSet,
+    /// A box holding every unevaluated point whose value may be non-zero (`None`: unknown,
+    /// anywhere). Kept by the sparse methods (see [`Grid::reset_sparse`]).
+    written: Option<IndexBox>,
+}
+
+impl Default for IndexBox {
+    fn default() -> Self {
+        Self::EMPTY
+    }
+}
+
+/// An axis-aligned box of integer grid indices, bounds inclusive; empty when any `lo > hi`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct IndexBox {
+    pub lo: [usize; 3],
+    pub hi: [usize; 3],
+}
+
+impl IndexBox {
+    pub const EMPTY: IndexBox = IndexBox {
+        lo: [usize::MAX; 3],
+        hi: [0; 3],
+    };
+
+    pub fn is_empty(&self) -> bool {
+        (0..3).any(|a| self.lo[a] > self.hi[a])
+    }
+
+    /// Grow to hold `p`.
+    #[inline]
+    pub fn add(&mut self, p: [usize; 3]) {
+        for (a, v) in p.into_iter().enumerate() {
+            self.lo[a] = self.lo[a].min(v);
+            self.hi[a] = self.hi[a].max(v);
+        }
+    }
+
+    pub fn union(&self, o: &IndexBox) -> IndexBox {
+        if self.is_empty() {
+            return *o;
+        }
+        if o.is_empty() {
+            return *self;
+        }
+        IndexBox {
+            lo: std::array::from_fn(|a| self.lo[a].min(o.lo[a])),
+            hi: std::array::from_fn(|a| self.hi[a].max(o.hi[a])),
+        }
+    }
+
+    /// Grown by `pad` on every side, then outward to multiples of `align`, within `0..n`.
+    pub fn padded(&self, pad: usize, align: usize, n: usize) -> IndexBox {
+        if self.is_empty() {
+            return *self;
+        }
+        IndexBox {
+            lo: self.lo.map(|v| v.saturating_sub(pad) / align * align),
+            hi: self
+                .hi
+                .map(|v| ((v + pad).div_ceil(align) * align).min(n - 1)),
+        }
+    }
 }
 
 impl Grid {
@@ -254,15 +316,55 @@ impl Grid {
             spec,
             values: vec![0.0; spec.len()],
             evaluated: BitSet::new(spec.len()),
+            written: Some(IndexBox::EMPTY),
         }
     }
 
     /// Re-target the grid to `spec`, clearing `evaluated`. Keeps allocations; values are
-    /// left as they are (every method writes every value).
+    /// left as they are (the method then writes every value).
     pub fn reset(&mut self, spec: GridSpec) {
         self.spec = spec;
         self.values.resize(spec.len(), 0.0);
         self.evaluated.reset(spec.len());
+        self.written = None;
+    }
+
+    /// Re-target the grid to `spec` with every value 0.0 and nothing evaluated, at the cost
+    /// of what the previous frame wrote (its evaluated points and its written box) when the
+    /// grid was last filled by a sparse method, of the whole volume otherwise. A sparse
+    /// method then writes values only where they are non-zero and reports where
+    /// ([`Grid::mark_written`]).
+    pub fn reset_sparse(&mut self, spec: GridSpec) {
+        match self.written {
+            Some(b) if spec == self.spec && self.values.len() == spec.len() => {
+                for i in self.evaluated.iter_ones() {
+                    self.values[i] = 0.0;
+                }
+                if !b.is_empty() {
+                    let n = spec.n();
+                    for k in b.lo[2]..=b.hi[2] {
+                        for j in b.lo[1]..=b.hi[1] {
+                            let row = n * (j + n * k);
+                            self.values[row + b.lo[0]..=row + b.hi[0]].fill(0.0);
+                        }
+                    }
+                }
+            }
+            _ => {
+                self.values.clear();
+                self.values.resize(spec.len(), 0.0);
+            }
+        }
+        self.spec = spec;
+        self.evaluated.reset(spec.len());
+        self.written = Some(IndexBox::EMPTY);
+    }
+
+    /// Record that unevaluated values inside `b` may have been written (sparse methods).
+    pub fn mark_written(&mut self, b: IndexBox) {
+        if let Some(w) = &mut self.written {
+            *w = w.union(&b);
+        }
     }
 
     pub fn spec(&self) -> GridSpec {

@@ -20,7 +20,7 @@
 //!    normals from central differences of the occupancy.
 
 use crate::field::{ColorField, Evaluator, FieldError, OccupancyField};
-use crate::grid::{Grid, GridSpec, is_inside};
+use crate::grid::{Grid, GridSpec, IndexBox, is_inside};
 use crate::localize::{Hierarchical, HierarchicalMode, LocalizeError, check_coarse};
 use glam::Vec3;
 
@@ -81,20 +81,26 @@ pub struct Renderer {
     size: usize,
 }
 
-/// Per-column first inside node from the front, or -1. Scans planes front to back so memory
-/// is read in order.
-fn first_hits(grid: &Grid, out: &mut Vec<i32>) {
+/// Per-column first inside node from the front, or -1, given a box `b` that holds every
+/// inside node. Scans the box's planes front to back, row by row, so memory is read in order.
+fn first_hits(grid: &Grid, b: IndexBox, out: &mut Vec<i32>) {
     let n = grid.spec().n();
     let plane = n * n;
     out.clear();
     out.resize(plane, -1);
-    let mut open = plane;
-    for k in (0..n).rev() {
+    if b.is_empty() {
+        return;
+    }
+    let mut open = (b.hi[0] - b.lo[0] + 1) * (b.hi[1] - b.lo[1] + 1);
+    for k in (b.lo[2]..=b.hi[2]).rev() {
         let base = k * plane;
-        for (c, h) in out.iter_mut().enumerate() {
-            if *h < 0 && is_inside(grid.values[base + c]) {
-                *h = k as i32;
-                open -= 1;
+        for j in b.lo[1]..=b.hi[1] {
+            let r = j * n;
+            for (i, h) in out[r + b.lo[0]..=r + b.hi[0]].iter_mut().enumerate() {
+                if *h < 0 && is_inside(grid.values[base + r + b.lo[0] + i]) {
+                    *h = k as i32;
+                    open -= 1;
+                }
             }
         }
         if open == 0 {
@@ -154,7 +160,7 @@ impl Renderer {
             .ok_or(crate::grid::GridError::BadResolution(spec.n()))?;
         let coarse = check_coarse(fine, opts.coarse_level)?;
         let grid = self.grid.get_or_insert_with(|| Grid::new(spec));
-        grid.reset(spec);
+        grid.reset_sparse(spec);
         let n = spec.n();
         let plane = n * n;
         let mut stats = RenderStats::default();
@@ -167,7 +173,7 @@ impl Renderer {
 
         // 2. Upsample to L, coarse hits per pixel.
         self.hier.upsample(grid, big_l);
-        first_hits(grid, &mut self.coarse_hit);
+        first_hits(grid, self.hier.inside_box(), &mut self.coarse_hit);
 
         // 3. Evaluate the candidates in front of (or at) the coarse hit.
         self.hier.dilate(grid, big_l, |_| true);
@@ -378,9 +384,41 @@ mod tests {
                 r.render(&scene, &scene, spec, &RenderOptions::default())
                     .unwrap();
                 let mut full = Vec::new();
-                first_hits(r.grid.as_ref().unwrap(), &mut full);
+                let n = spec.n();
+                let all = IndexBox {
+                    lo: [0; 3],
+                    hi: [n - 1; 3],
+                };
+                first_hits(r.grid.as_ref().unwrap(), all, &mut full);
                 assert_eq!(r.hit, full, "{name} at level {level}");
             }
         }
+    }
+
+    /// A renderer that drew another scene, at another resolution or after a dense fill of its
+    /// grid draws exactly what a fresh one draws: nothing of an earlier frame survives the
+    /// sparse reset.
+    #[test]
+    fn reused_renderer_equals_a_fresh_one() {
+        let opts = RenderOptions::default();
+        let a = AnalyticScene::by_name("two-bodies").unwrap();
+        let b = AnalyticScene::by_name("capsule-human").unwrap();
+        let (s6, s7) = (GridSpec::new(6).unwrap(), GridSpec::new(7).unwrap());
+        let mut fresh = Renderer::new();
+        fresh.render(&b, &b, s7, &opts).unwrap();
+        let mut reused = Renderer::new();
+        reused.render(&a, &a, s7, &opts).unwrap();
+        reused.render(&a, &a, s6, &opts).unwrap();
+        reused.render(&b, &b, s7, &opts).unwrap();
+        assert_eq!(reused.rgba(), fresh.rgba());
+        assert_eq!(reused.hits(), fresh.hits());
+        assert_eq!(reused.coarse_hits(), fresh.coarse_hits());
+        // A grid left full of ones by a dense method, then rendered into.
+        if let Some(g) = reused.grid.as_mut() {
+            g.reset(s7);
+            g.values.fill(1.0);
+        }
+        reused.render(&b, &b, s7, &opts).unwrap();
+        assert_eq!(reused.rgba(), fresh.rgba());
     }
 }

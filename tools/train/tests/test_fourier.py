@@ -125,3 +125,17 @@ def test_centroid_of_a_box_is_its_centre():
     assert torch.allclose(d, (lo + hi).double() / 2, atol=0.02), d
     empty, ok = FO.centroid(torch.zeros(1, 2 * k + 1), k, dim=-1)
     assert not ok.any() and empty.item() == 0.0
+
+
+def test_first_moment_converges_to_the_box_integral():
+    # int z 1[lo, hi] dz = (hi^2 - lo^2) / 2; the series' moment converges to it as K grows.
+    lo, hi = torch.tensor([-0.3, 0.1, -0.9]).double(), torch.tensor([0.1, 0.5, -0.5]).double()
+    want = (hi**2 - lo**2) / 2
+    errs = []
+    for k in (15, 255):
+        got = FO.first_moment(FO.interval_coeffs(lo, hi, k), k, dim=-1)
+        errs.append((got - want).abs().max().item())
+    assert errs[1] < 2e-3 and errs[1] < errs[0], errs
+    # A box symmetric about z = 0 has no first moment at any order.
+    sym = FO.interval_coeffs(torch.tensor([-0.4]).double(), torch.tensor([0.4]).double(), 15)
+    assert FO.first_moment(sym, 15, dim=-1).abs().item() < 1e-12

@@ -79,14 +79,21 @@ def ray_coeff_maps(offsets: torch.Tensor, z: torch.Tensor, size: int, s: float, 
     return out.T.reshape(channels(k), size, size).float()
 
 
+def first_moment(coeff: torch.Tensor, k: int, dim: int = 1) -> torch.Tensor:
+    """int_{-1}^{1} z f(z) dz of each ray's series along `dim` (only the sine terms contribute:
+    int z sin(k pi z) = 2 (-1)^(k+1) / (k pi)); its sign says whether the ray's occupancy lies
+    in front of or behind the crop's z = 0 plane."""
+    c = coeff.movedim(dim, -1)
+    kk = torch.arange(1, k + 1, dtype=c.dtype, device=c.device)
+    w = 2.0 * ((-1.0) ** (kk + 1)) / (kk * math.pi)
+    return (c[..., 2 : 2 * k + 1 : 2] * w).sum(-1)
+
+
 def centroid(coeff: torch.Tensor, k: int, dim: int = 1, eps: float = 1e-3):
     """Depth centre of the occupancy along each ray, int z f / int f over [-1, 1], from its
     series along `dim` (int z cos = 0, int z sin(k pi z) = 2 (-1)^(k+1) / (k pi), int f =
     2 c0); and a mask of the rays with at least `eps` of occupancy (c0 > eps)."""
-    c = coeff.movedim(dim, -1)
-    kk = torch.arange(1, k + 1, dtype=c.dtype, device=c.device)
-    w = ((-1.0) ** (kk + 1)) / (kk * math.pi)
-    num = (c[..., 2 : 2 * k + 1 : 2] * w).sum(-1)
-    c0 = c[..., 0]
+    num = 0.5 * first_moment(coeff, k, dim)
+    c0 = coeff.movedim(dim, -1)[..., 0]
     ok = c0 > eps
     return torch.where(ok, num / c0.clamp(min=eps), torch.zeros_like(c0)).clamp(-1.0, 1.0), ok

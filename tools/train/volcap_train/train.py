@@ -387,6 +387,11 @@ def train_fourier(args):
         pred, d = net(inputs(tr, items, None if args.no_aug else gen), with_centre=True)
         dense, bce, occ, lab = losses(pred, tr, items, pidx)
         loss = dense + args.point_weight * bce.mean()
+        if args.moment_weight > 0:
+            # Depth order: L1 on each ray's first moment int z f dz (linear in the sine terms),
+            # whose L2 share in the Parseval loss is small next to the ray length's.
+            t = tr["coeff"][items].float()
+            loss = loss + args.moment_weight * (FO.first_moment(pred, k) - FO.first_moment(t, k)).abs().mean()
         if d is not None:
             # The shift variants: the depth centre supervised directly (L1, zeta units) on
             # the rays that hold the body, so the phase starts near the right depth.
@@ -431,6 +436,7 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--point-weight", type=float, default=0.1)
     ap.add_argument("--centre-weight", type=float, default=1.0, help="Fourier shift variants: weight of the L1 loss on the ray's depth centre")
+    ap.add_argument("--moment-weight", type=float, default=0.0, help="Fourier: weight of the L1 loss on each ray's first depth moment (depth order)")
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) when --out has none")
     ap.add_argument("--ckpt-every", type=int, default=100)

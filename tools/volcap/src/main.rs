@@ -3,6 +3,7 @@
 mod bench;
 mod ctl;
 mod eval;
+mod pipeline_bench;
 mod plot;
 mod reconstruct;
 mod simcmd;
@@ -47,6 +48,50 @@ enum BenchCmd {
     /// Every surface-localization method on the same fields and grids: evaluations, time,
     /// IoU against dense, lost components, band bound. Writes a table and a plot.
     Localize(LocalizeArgs),
+    /// The daemon's whole pipeline in this process on a simulated scene, per resolution x
+    /// model x coarse level x threads: fps, latency, ms per stage, evaluations, speed-up over
+    /// one thread. Writes a table and a plot.
+    Pipeline(PipelineArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct PipelineArgs {
+    /// Scene whose frames are rendered once and replayed.
+    #[arg(long, default_value = "tests/scenes/front-walk.toml")]
+    pub scene: PathBuf,
+    /// Grid resolutions, each 2^L + 1.
+    #[arg(long, value_delimiter = ',', default_value = "65,129,257")]
+    pub res: Vec<usize>,
+    /// Models (NAME or NAME@int8, comma-separated; models/shape-NAME.*).
+    #[arg(long = "model", value_delimiter = ',', default_value = "fourier")]
+    pub models: Vec<String>,
+    /// Coarsest localization levels (comma-separated).
+    #[arg(long = "coarse-level", value_delimiter = ',', default_value = "3")]
+    pub coarse_levels: Vec<u32>,
+    /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
+    #[arg(long, value_delimiter = ',', default_value = "1,2")]
+    pub threads: Vec<usize>,
+    /// Seconds measured per configuration.
+    #[arg(long, default_value_t = 8.0)]
+    pub seconds: f64,
+    /// Seconds run before measuring (model warm-up, buffers).
+    #[arg(long, default_value_t = 3.0)]
+    pub warmup: f64,
+    /// Rate of the replayed camera (above what the pipeline reaches, so it never caps it).
+    #[arg(long, default_value_t = 60.0)]
+    pub fps: f64,
+    /// Frames of the scene rendered and looped.
+    #[arg(long, default_value_t = 30)]
+    pub frames: usize,
+    /// Folder of the ONNX models.
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
+    /// JSON Lines on stdout (one object per row); files are then written only if --out is given.
+    #[arg(long)]
+    pub json: bool,
+    /// Folder for pipeline.md and pipeline.png (default docs/bench).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -110,6 +155,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let res = match cli.cmd {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
+        Cmd::Bench(BenchCmd::Pipeline(a)) => pipeline_bench::run(&a),
         Cmd::Eval(a) => eval::eval(&a),
         Cmd::Reconstruct(a) => reconstruct::reconstruct(&a),
         Cmd::Sim(c) => simcmd::run(c),

@@ -143,3 +143,104 @@ fn bad_arguments_are_named() {
         assert!(out.stdout.is_empty());
     }
 }
+
+fn repo_root() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// `bench pipeline` runs the daemon's pipeline in process: every configuration publishes
+/// frames, renders with field evaluations, times every compute stage, compares with its
+/// one-thread row, and the table and plot are written.
+#[test]
+fn pipeline_bench_measures_every_configuration() {
+    let dir = std::env::temp_dir().join(format!("volcap-bench-pipeline-{}", std::process::id()));
+    let out = volcap()
+        .current_dir(repo_root())
+        .args([
+            "bench",
+            "pipeline",
+            "--res",
+            "33,65",
+            "--threads",
+            "1,2",
+            "--seconds",
+            "1.5",
+            "--warmup",
+            "1",
+            "--frames",
+            "3",
+            "--json",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows: Vec<serde_json::Value> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(rows.len(), 4);
+    for r in &rows {
+        assert!(r["error"].is_null(), "{r}");
+        assert!(r["frames"].as_u64().unwrap() > 0, "{r}");
+        assert!(r["fps"].as_f64().unwrap() > 0.0, "{r}");
+        assert!(r["evaluations"].as_f64().unwrap() > 0.0, "{r}");
+        let stages = r["stage_p50_ms"].as_array().unwrap();
+        // The field stage (segmentation + encoder) and the render stage take time.
+        assert!(
+            stages[1].as_f64().unwrap() > 0.0 && stages[2].as_f64().unwrap() > 0.0,
+            "{r}"
+        );
+        let p50 = r["latency_p50_ms"].as_f64().unwrap();
+        assert!(
+            p50 > 0.0 && p50 <= r["latency_p99_ms"].as_f64().unwrap(),
+            "{r}"
+        );
+        let x1 = r["speedup_vs_1_thread"].as_f64().unwrap();
+        if r["threads"] == 1 {
+            assert_eq!(x1, 1.0);
+        } else {
+            assert!(x1 > 0.0 && x1.is_finite());
+        }
+    }
+    // A finer grid costs more evaluations per frame.
+    assert!(rows[2]["evaluations"].as_f64() > rows[0]["evaluations"].as_f64());
+    let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
+    assert_eq!(
+        md.lines().filter(|l| l.starts_with("| fourier |")).count(),
+        4
+    );
+    let png = std::fs::read(dir.join("pipeline.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Bad arguments are refused by name before anything runs.
+#[test]
+fn pipeline_bench_names_bad_arguments() {
+    for (args, want) in [
+        (vec!["--model", "nonesuch"], "nonesuch"),
+        (vec!["--model", "fourier@int4"], "int4"),
+        (vec!["--res", "100"], "100"),
+        (vec!["--threads", "0"], "compute.threads"),
+        (vec!["--scene", "no/such/scene.toml"], "no/such/scene.toml"),
+        (vec!["--seconds", "0"], "--seconds must be in"),
+        (vec!["--frames", "0"], "--frames 0"),
+    ] {
+        let out = volcap()
+            .current_dir(repo_root())
+            .args(["bench", "pipeline", "--warmup", "0"])
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+}

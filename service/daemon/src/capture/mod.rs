@@ -10,6 +10,7 @@ pub mod decode;
 #[cfg(any(feature = "depthai", feature = "depthai-typecheck"))]
 pub mod depthai;
 pub mod file;
+pub mod replay;
 pub mod sim;
 pub mod v4l2;
 

@@ -1,6 +1,8 @@
 //! The field stage of model mode: segmentation and encoders on a thread of their own, one
 //! field in flight (it computes the next field only once the render thread took the last,
-//! so a slower render throws no work away).
+//! so a slower render throws no work away). With `compute.threads` > 1 the networks' matrix
+//! products use that many threads (tract's pool), so the field stage can take the core the
+//! render stage leaves idle at lower resolutions.
 
 use super::{PipelineState, Shared, Slot};
 use crate::capture::Frame;
@@ -33,6 +35,7 @@ pub(super) fn spawn(
     models: Arc<Models>,
     input: Arc<Slot<Frame>>,
     out: Arc<Slot<(Frame, FieldOutcome)>>,
+    threads: usize,
 ) -> std::thread::JoinHandle<()> {
     std::thread::Builder::new()
         .name("field".into())
@@ -54,7 +57,9 @@ pub(super) fn spawn(
                 }
                 let t = Instant::now();
                 let view = model_view(&live);
-                let outcome = match models.frame(&f.rgb, f.width, f.height, view) {
+                let outcome = match volcap_engine::model::with_threads(threads, || {
+                    models.frame(&f.rgb, f.width, f.height, view)
+                }) {
                     Ok((field, info)) => {
                         sh.people.store(info.people, Ordering::Relaxed);
                         sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);

@@ -88,6 +88,24 @@ impl StageStats {
         }
     }
 
+    /// (p50, p99, samples) in ms of the samples recorded since `since` (of the last 256).
+    pub fn window(&self, since: Instant) -> (f64, f64, usize) {
+        let mut v: Vec<f64> = self
+            .samples
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .filter(|(t, _)| *t >= since)
+            .map(|(_, ms)| *ms)
+            .collect();
+        if v.is_empty() {
+            return (0.0, 0.0, 0);
+        }
+        v.sort_by(f64::total_cmp);
+        let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+        (q(0.5), q(0.99), v.len())
+    }
+
     /// (p50, p99) in ms over the last 256 frames.
     pub fn percentiles(&self) -> (f64, f64) {
         let mut v: Vec<f64> = self

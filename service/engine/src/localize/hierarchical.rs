@@ -15,10 +15,18 @@
 //! 4. Points never evaluated keep their interpolated value (0 or 1).
 //!
 //! Buffers (index lists, the queued bitset) are kept between frames.
+//!
+//! **Sparse upsampling.** A new point all of whose parents are outside gets 0, which is what
+//! a grid cleared by [`Grid::reset_sparse`] already holds; so step 1 visits only the box of
+//! the inside points grown by one fine stride (every new point with an inside parent lies in
+//! it, and every inside point lies in the box of its inside parents), and the grid records the
+//! box it wrote. The box of inside points is kept from level to level: the previous box plus
+//! every evaluated point that came out inside. Values, candidates and evaluations are those of
+//! a pass over the whole volume (the exactness tests compare against dense).
 
 use super::{bin, eval_level};
 use crate::field::{Evaluator, FieldError};
-use crate::grid::{BitSet, Grid, RING26, offset};
+use crate::grid::{BitSet, Grid, IndexBox, RING26, offset};
 
 /// Which variant of the hierarchical method to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,6 +50,8 @@ pub struct Hierarchical {
     next: Vec<u32>,
     next_pre: Vec<f32>,
     queued: BitSet,
+    /// A box holding every inside point of the levels done so far.
+    inside: IndexBox,
 }
 
 impl Hierarchical {
@@ -66,6 +76,7 @@ impl Hierarchical {
                 HierarchicalMode::Tight => self.candidates_only(grid),
             }
             ev.eval_grid(grid, &self.batch)?;
+            grow_inside(&mut self.inside, grid, &self.batch);
             if mode != HierarchicalMode::NoConflict {
                 rounds += self.conflict_loop(
                     ev,
@@ -80,7 +91,8 @@ impl Hierarchical {
         Ok(rounds)
     }
 
-    /// Reset buffers for `grid` and evaluate every point of the coarsest level.
+    /// Reset buffers for `grid` (which must come from [`Grid::reset_sparse`]) and evaluate
+    /// every point of the coarsest level.
     pub(crate) fn start(
         &mut self,
         ev: &mut Evaluator,
@@ -88,7 +100,16 @@ impl Hierarchical {
         coarse: u32,
     ) -> Result<(), FieldError> {
         self.queued.reset(grid.spec().len());
-        eval_level(ev, grid, coarse, &mut self.batch)
+        self.inside = IndexBox::EMPTY;
+        eval_level(ev, grid, coarse, &mut self.batch)?;
+        grow_inside(&mut self.inside, grid, &self.batch);
+        Ok(())
+    }
+
+    /// The box holding every inside point of the levels localized so far (after
+    /// [`Hierarchical::upsample`] to a level, of that level's too).
+    pub(crate) fn inside_box(&self) -> IndexBox {
+        self.inside
     }
 
     /// Step 1: write the upsampled binarized coarse field into every new level-`l` point and
@@ -98,32 +119,42 @@ impl Hierarchical {
         let n = spec.n();
         let s = spec.stride(l);
         let s2 = 2 * s;
+        self.cand.clear();
+        // Every new point with an inside parent, aligned to the coarse lattice so that the
+        // separable passes read only values they wrote (or zeros) at the box's edges.
+        let b = self.inside.padded(s, s2, n);
+        if b.is_empty() {
+            return;
+        }
+        grid.mark_written(b);
         let v = &mut grid.values;
         let cand = &mut self.cand;
-        cand.clear();
         let mut put = |idx: usize, m: f32, v: &mut Vec<f32>| {
             v[idx] = m;
             if m > 0.0 && m < 1.0 {
                 cand.push(idx as u32);
             }
         };
+        let (x0, x1) = (b.lo[0], b.hi[0]);
+        let (y0, y1) = (b.lo[1], b.hi[1]);
+        let (z0, z1) = (b.lo[2], b.hi[2]);
         // Along x, in rows of coarse points.
-        for k in (0..n).step_by(s2) {
-            for j in (0..n).step_by(s2) {
+        for k in (z0..=z1).step_by(s2) {
+            for j in (y0..=y1).step_by(s2) {
                 let row = n * (j + n * k);
-                for i in (s..n).step_by(s2) {
+                for i in (x0 + s..x1).step_by(s2) {
                     let m = 0.5 * (bin(v[row + i - s]) + bin(v[row + i + s]));
                     put(row + i, m, v);
                 }
             }
         }
         // Along y, in coarse planes: old points are binarized, x-upsampled points taken as is.
-        for k in (0..n).step_by(s2) {
-            for j in (s..n).step_by(s2) {
+        for k in (z0..=z1).step_by(s2) {
+            for j in (y0 + s..y1).step_by(s2) {
                 let r0 = n * (j - s + n * k);
                 let r1 = n * (j + s + n * k);
                 let r = n * (j + n * k);
-                for i in (0..n).step_by(s) {
+                for i in (x0..=x1).step_by(s) {
                     let m = if (i / s).is_multiple_of(2) {
                         0.5 * (bin(v[r0 + i]) + bin(v[r1 + i]))
                     } else {
@@ -135,13 +166,13 @@ impl Hierarchical {
         }
         // Along z, between coarse planes.
         let plane = n * n;
-        for k in (s..n).step_by(s2) {
-            for j in (0..n).step_by(s) {
+        for k in (z0 + s..z1).step_by(s2) {
+            for j in (y0..=y1).step_by(s) {
                 let even_j = (j / s).is_multiple_of(2);
                 let r0 = n * j + plane * (k - s);
                 let r1 = n * j + plane * (k + s);
                 let r = n * j + plane * k;
-                for i in (0..n).step_by(s) {
+                for i in (x0..=x1).step_by(s) {
                     let m = if even_j && (i / s).is_multiple_of(2) {
                         0.5 * (bin(v[r0 + i]) + bin(v[r1 + i]))
                     } else {
@@ -234,11 +265,22 @@ impl Hierarchical {
             }
             rounds += 1;
             ev.eval_grid(grid, &self.next)?;
+            grow_inside(&mut self.inside, grid, &self.next);
             if let Some(log) = log.as_deref_mut() {
                 log.extend_from_slice(&self.next);
             }
             std::mem::swap(&mut self.batch, &mut self.next);
             std::mem::swap(&mut self.pre, &mut self.next_pre);
+        }
+    }
+}
+
+/// Grow `b` by the points of `idxs` that are inside.
+pub(crate) fn grow_inside(b: &mut IndexBox, grid: &Grid, idxs: &[u32]) {
+    let spec = grid.spec();
+    for &q in idxs {
+        if crate::grid::is_inside(grid.values[q as usize]) {
+            b.add(spec.unlinear(q as usize));
         }
     }
 }

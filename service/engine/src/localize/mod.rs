@@ -165,6 +165,7 @@ pub struct Localizer {
     hier: Hierarchical,
     scratch: Scratch,
     threads: usize,
+    field_time: std::time::Duration,
 }
 
 /// Reusable scratch shared by the baseline methods.
@@ -188,6 +189,12 @@ impl Localizer {
         self.threads = threads.max(1);
     }
 
+    /// Wall time the last [`Localizer::run`] spent inside the field (the rest of its time is
+    /// the method's own bookkeeping).
+    pub fn last_field_time(&self) -> std::time::Duration {
+        self.field_time
+    }
+
     /// Localize the surface of `field` on `spec` with `method`, starting (for coarse-to-fine
     /// methods) at `coarse_level`, writing into `grid` (re-targeted to `spec`).
     pub fn run(
@@ -199,7 +206,13 @@ impl Localizer {
         grid: &mut Grid,
     ) -> Result<LocalizeStats, LocalizeError> {
         let coarse = check_coarse(spec, coarse_level)?;
-        grid.reset(spec);
+        match method {
+            // The hierarchical methods write only where values are non-zero.
+            Method::Hierarchical | Method::HierarchicalNoConflict | Method::HierarchicalTight => {
+                grid.reset_sparse(spec)
+            }
+            _ => grid.reset(spec),
+        }
         let mut ev = Evaluator::new(field).with_threads(self.threads);
         let mut stats = LocalizeStats::default();
         match method {
@@ -219,6 +232,7 @@ impl Localizer {
             }
         }
         stats.evaluations = ev.count();
+        self.field_time = ev.field_time();
         Ok(stats)
     }
 }

@@ -1,0 +1,372 @@
+//! `volcap bench pipeline`: the daemon's whole pipeline (capture -> segment + encode ->
+//! localize + render -> JPEG -> publish) run in this process for a few seconds per
+//! configuration (resolution x model x coarse level x threads), on a simulated scene's frames
+//! rendered once beforehand and replayed faster than the pipeline can take them (so the
+//! camera and the simulator cost nothing and never cap the rate). Writes a table and a plot:
+//! fps, end-to-end latency, ms per stage, field evaluations per frame, and the ratio to the
+//! single-threaded run of the same configuration measured in the same invocation.
+
+use crate::PipelineArgs;
+use anyhow::{Context, anyhow, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use plotters::prelude::*;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+use volcap_engine::model::{Models, Precision};
+use volcapd::capture::Camera;
+use volcapd::capture::replay::{ReplayCamera, Still};
+use volcapd::config::Config;
+use volcapd::pipeline::{self, PipelineState, Shared};
+
+/// One configuration's measurement.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub model: String,
+    pub resolution: usize,
+    pub coarse_level: u32,
+    pub threads: usize,
+    /// Frames published per second over the measured window.
+    pub fps: f64,
+    pub latency_p50_ms: f64,
+    pub latency_p99_ms: f64,
+    /// p50 ms per stage, in `volcapd::pipeline::STAGES` order (capture, field, render, encode).
+    pub stage_p50_ms: [f64; 4],
+    /// Occupancy evaluations per rendered frame.
+    pub evaluations: f64,
+    pub frames: u64,
+    pub seconds: f64,
+    /// fps over the fps of the same (model, resolution, coarse level) with one thread.
+    pub speedup_vs_1_thread: Option<f64>,
+    /// Why the run produced no frames, if it did not.
+    pub error: Option<String>,
+}
+
+fn model_spec(s: &str) -> anyhow::Result<(String, Precision)> {
+    match s.split_once('@') {
+        None => Ok((s.to_string(), Precision::F32)),
+        Some((n, "int8")) => Ok((n.to_string(), Precision::Int8)),
+        Some((_, p)) => bail!("--model {s}: unknown precision '{p}' (NAME or NAME@int8)"),
+    }
+}
+
+/// Render `n` frames of `scene` with the simulator (the frames the replay camera loops).
+fn frames(scene: &Path, n: usize) -> anyhow::Result<Vec<Still>> {
+    let assets = volcap_sim::HumanAssets::embedded().map_err(|e| anyhow!("{e}"))?;
+    let s = volcap_sim::Scene::load(scene).map_err(|e| anyhow!("{e}"))?;
+    let mut sim = volcap_sim::Simulator::new(s, Arc::new(assets)).map_err(|e| anyhow!("{e}"))?;
+    let pb = ProgressBar::new(n as u64).with_style(
+        ProgressStyle::with_template("frames {bar:30} {pos}/{len}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut out = Vec::with_capacity(n);
+    for i in 0..n {
+        let f = sim
+            .render(i as u64)
+            .map_err(|e| anyhow!("{}: frame {i}: {e}", scene.display()))?;
+        out.push(Still {
+            rgb: Arc::new(f.rgb),
+            width: f.width,
+            height: f.height,
+        });
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    Ok(out)
+}
+
+fn config(
+    scene: &Path,
+    models_dir: &Path,
+    name: &str,
+    prec: Precision,
+    res: usize,
+    coarse: u32,
+    threads: usize,
+) -> anyhow::Result<Config> {
+    let text = format!(
+        "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
+         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\n\
+         [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
+         [compute]\nthreads = {threads}\n[dbus]\nbus = \"none\"\n",
+        match prec {
+            Precision::F32 => "f32",
+            Precision::Int8 => "int8",
+        },
+    );
+    Config::parse(&text, Path::new("<volcap bench pipeline>")).map_err(|e| anyhow!("{e}"))
+}
+
+/// Run the pipeline on `cfg` for `warmup + seconds` and measure the last `seconds`.
+fn measure(
+    cfg: &Config,
+    models: Arc<Models>,
+    stills: Arc<Vec<Still>>,
+    fps: f64,
+    warmup: f64,
+    seconds: f64,
+) -> Row {
+    let (tx, _rx) = tokio::sync::watch::channel(None);
+    let shared = Arc::new(Shared::new(cfg, "replay".into(), tx));
+    let factory: pipeline::CameraFactory =
+        Box::new(move || Ok(Box::new(ReplayCamera::new(stills, fps)) as Box<dyn Camera>));
+    let threads = pipeline::start(cfg, factory, shared.clone(), Some(models));
+    std::thread::sleep(Duration::from_secs_f64(warmup));
+    let t0 = Instant::now();
+    let published0 = shared.e2e.frames.load(Ordering::Relaxed);
+    let rendered0 = shared.stats[2].frames.load(Ordering::Relaxed);
+    let evals0 = shared.evaluations.load(Ordering::Relaxed);
+    std::thread::sleep(Duration::from_secs_f64(seconds));
+    let wall = t0.elapsed().as_secs_f64();
+    let published = shared.e2e.frames.load(Ordering::Relaxed) - published0;
+    let rendered = shared.stats[2].frames.load(Ordering::Relaxed) - rendered0;
+    let evals = shared.evaluations.load(Ordering::Relaxed) - evals0;
+    let (l50, l99, _) = shared.e2e.window(t0);
+    let stage_p50_ms = std::array::from_fn(|i| shared.stats[i].window(t0).0);
+    let error = match &*shared.state.lock().unwrap_or_else(|p| p.into_inner()) {
+        PipelineState::Failed(r) | PipelineState::Degraded(r) => Some(r.clone()),
+        _ if published == 0 => Some("no frame published".into()),
+        _ => None,
+    };
+    shared.stop.store(true, Ordering::Relaxed);
+    for t in threads {
+        let _ = t.join();
+    }
+    Row {
+        model: cfg.model.name.clone()
+            + match cfg.model.precision {
+                volcapd::config::Precision::F32 => "",
+                volcapd::config::Precision::Int8 => "@int8",
+            },
+        resolution: cfg.render.resolution.0,
+        coarse_level: cfg.render.coarse_level,
+        threads: cfg.compute.threads,
+        fps: published as f64 / wall,
+        latency_p50_ms: l50,
+        latency_p99_ms: l99,
+        stage_p50_ms,
+        evaluations: evals as f64 / rendered.max(1) as f64,
+        frames: published,
+        seconds: wall,
+        speedup_vs_1_thread: None,
+        error,
+    }
+}
+
+pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
+    if !(a.seconds > 0.0 && a.seconds <= 600.0 && a.warmup >= 0.0 && a.warmup <= 600.0) {
+        bail!("--seconds must be in (0, 600] and --warmup in [0, 600]");
+    }
+    if a.frames == 0 || a.frames > 600 {
+        bail!("--frames {} must be in 1..=600", a.frames);
+    }
+    let scene = a
+        .scene
+        .canonicalize()
+        .with_context(|| format!("--scene {}", a.scene.display()))?;
+    let models_dir = a
+        .models_dir
+        .canonicalize()
+        .with_context(|| format!("--models-dir {}", a.models_dir.display()))?;
+    let mut configs = Vec::new();
+    for m in &a.models {
+        let (name, prec) = model_spec(m)?;
+        for &res in &a.res {
+            for &c in &a.coarse_levels {
+                for &t in &a.threads {
+                    configs.push((name.clone(), prec, res, c, t));
+                }
+            }
+        }
+    }
+    // Every configuration is checked before anything runs.
+    let cfgs: Vec<Config> = configs
+        .iter()
+        .map(|(n, p, r, c, t)| config(&scene, &models_dir, n, *p, *r, *c, *t))
+        .collect::<anyhow::Result<_>>()?;
+    // Every model is loaded before anything runs (a bad name fails at once).
+    let mut loaded: Vec<((String, Precision), Arc<Models>)> = Vec::new();
+    for (name, prec, ..) in &configs {
+        if !loaded.iter().any(|(k, _)| k.0 == *name && k.1 == *prec) {
+            let m = Models::load(&models_dir, name, *prec)
+                .map_err(|e| anyhow!("model {name} in {}: {e}", models_dir.display()))?;
+            loaded.push(((name.clone(), *prec), Arc::new(m)));
+        }
+    }
+    let stills = Arc::new(frames(&scene, a.frames)?);
+    let pb = ProgressBar::new(cfgs.len() as u64).with_style(
+        ProgressStyle::with_template("pipeline {bar:30} {pos}/{len} {msg} (eta {eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut rows = Vec::new();
+    for (cfg, (name, prec, ..)) in cfgs.iter().zip(&configs) {
+        pb.set_message(format!(
+            "{name} {} x{}",
+            cfg.render.resolution.0, cfg.compute.threads
+        ));
+        let Some((_, models)) = loaded.iter().find(|(k, _)| k.0 == *name && k.1 == *prec) else {
+            bail!("model {name} was not loaded");
+        };
+        rows.push(measure(
+            cfg,
+            models.clone(),
+            stills.clone(),
+            a.fps,
+            a.warmup,
+            a.seconds,
+        ));
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let base: Vec<(String, usize, u32, f64)> = rows
+        .iter()
+        .filter(|r| r.threads == 1 && r.error.is_none())
+        .map(|r| (r.model.clone(), r.resolution, r.coarse_level, r.fps))
+        .collect();
+    for r in &mut rows {
+        r.speedup_vs_1_thread = base
+            .iter()
+            .find(|b| b.0 == r.model && b.1 == r.resolution && b.2 == r.coarse_level)
+            .map(|b| r.fps / b.3.max(1e-9));
+    }
+    if a.json {
+        let mut out = std::io::stdout().lock();
+        for r in &rows {
+            writeln!(out, "{}", serde_json::to_string(r)?)?;
+        }
+    } else {
+        print!("{}", table(&rows));
+    }
+    if !a.json || a.out.is_some() {
+        let dir = a.out.clone().unwrap_or_else(|| PathBuf::from("docs/bench"));
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let md = dir.join("pipeline.md");
+        let cmd: Vec<String> = std::env::args().collect();
+        let text = format!(
+            "# The whole pipeline, in process\n\n`{}`\n\nScene `{}` ({} frames rendered once, replayed at {} fps); \
+             {} s measured after {} s of warm-up per row; {} cores. fps = frames published per second; \
+             latency = capture to publish; stages are p50 ms (the field stage segments and encodes \
+             frame N+1 while the render stage localizes and renders frame N); evaluations = occupancy \
+             evaluations per rendered frame; x1 = fps over the one-thread row of the same model, \
+             resolution and coarse level, measured in the same run.\n\n{}",
+            cmd.join(" "),
+            a.scene.display(),
+            a.frames,
+            a.fps,
+            a.seconds,
+            a.warmup,
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1),
+            table(&rows)
+        );
+        std::fs::write(&md, text).with_context(|| format!("writing {}", md.display()))?;
+        let png = dir.join("pipeline.png");
+        plot(&rows, &png)?;
+        eprintln!("wrote {} and {}", md.display(), png.display());
+    }
+    if rows.iter().all(|r| r.error.is_some()) {
+        bail!("no configuration published a frame");
+    }
+    Ok(())
+}
+
+fn table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| model | res | coarse | threads | fps | x1 | latency p50 / p99 ms | capture | field | render | encode | evaluations | note |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            r.model,
+            r.resolution,
+            r.coarse_level,
+            r.threads,
+            r.fps,
+            r.speedup_vs_1_thread
+                .map(|x| format!("{x:.2}"))
+                .unwrap_or_else(|| "-".into()),
+            r.latency_p50_ms,
+            r.latency_p99_ms,
+            r.stage_p50_ms[0],
+            r.stage_p50_ms[1],
+            r.stage_p50_ms[2],
+            r.stage_p50_ms[3],
+            r.evaluations,
+            r.error.as_deref().unwrap_or(""),
+        );
+    }
+    s
+}
+
+/// A plotted quantity: its title and how to read it from a row.
+type Metric = (&'static str, fn(&Row) -> f64);
+
+/// fps and p99 latency over resolution, one line per (model, coarse level, threads).
+fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
+    crate::plot::register_font();
+    let root = BitMapBackend::new(path, (1100, 460)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let (left, right) = root.split_horizontally(550);
+    let mut keys: Vec<(String, u32, usize)> = rows
+        .iter()
+        .map(|r| (r.model.clone(), r.coarse_level, r.threads))
+        .collect();
+    keys.sort();
+    keys.dedup();
+    let xmax = rows.iter().map(|r| r.resolution).max().unwrap_or(257) as f64 * 1.3;
+    let xmin = rows.iter().map(|r| r.resolution).min().unwrap_or(65) as f64 / 1.3;
+    let metric: [Metric; 2] = [
+        ("frames per second", |r| r.fps),
+        ("p99 latency, ms", |r| r.latency_p99_ms),
+    ];
+    for (area, (what, f)) in [&left, &right].into_iter().zip(metric) {
+        let ymax = rows.iter().map(f).fold(1.0, f64::max) * 1.15;
+        let mut chart = ChartBuilder::on(area)
+            .caption(what, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(50)
+            .build_cartesian_2d((xmin..xmax).log_scale(), 0.0..ymax)
+            .map_err(|e| anyhow!("{e}"))?;
+        chart
+            .configure_mesh()
+            .x_desc("grid resolution (points per axis)")
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+        for (i, k) in keys.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            let mut pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.error.is_none() && (r.model.clone(), r.coarse_level, r.threads) == *k)
+                .map(|r| (r.resolution as f64, f(r)))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(|e| anyhow!("{e}"))?
+                .label(format!("{} c{} x{}", k.0, k.1, k.2))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                });
+            chart
+                .draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))
+                .map_err(|e| anyhow!("{e}"))?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    root.present()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(())
+}
