@@ -252,7 +252,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
              latency = capture to publish; stages are p50 ms (the field stage segments and encodes \
              frame N+1 while the render stage localizes and renders frame N); evaluations = occupancy \
              evaluations per rendered frame; x1 = fps over the one-thread row of the same model, \
-             resolution and coarse level, measured in the same run.\n\n{}",
+             resolution and coarse level, measured in the same run. Each row is one run of a few seconds: on a \
+             shared 2-core machine repeated runs of the same row differ by up to about 10 %, so compare rows \
+             of one run.\n\n{}",
             cmd.join(" "),
             a.scene.display(),
             a.frames,
@@ -361,6 +363,7 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
         }
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()
