@@ -299,6 +299,21 @@ pub struct ComputeConfig {
     /// (`volcap bench pipeline` measures it).
     #[serde(default = "d_threads")]
     pub threads: usize,
+    /// Model mode: the largest render resolution at which the segmentation runs on a thread
+    /// of its own (a third compute stage: more frames per second where the render stage
+    /// leaves a core idle, one stage more of latency); 0 = never. Default 129
+    /// ([`DEFAULT_SEGMENT_THREAD_UP_TO`]; `volcap bench pipeline --segment-thread-up-to`).
+    #[serde(default = "d_segment_thread_up_to")]
+    pub segment_thread_up_to: usize,
+}
+
+/// Default of `compute.segment_thread_up_to`: measured on 2 cores, the split takes 129^3 from
+/// about 15 to 17-19 fps (latency p50 about 90 -> 150 ms) and would take 257^3 from 14 to 12
+/// fps (three compute threads for two cores), so it stops at 129.
+pub const DEFAULT_SEGMENT_THREAD_UP_TO: usize = 129;
+
+fn d_segment_thread_up_to() -> usize {
+    DEFAULT_SEGMENT_THREAD_UP_TO
 }
 
 impl Default for ComputeConfig {
@@ -306,6 +321,7 @@ impl Default for ComputeConfig {
         Self {
             backend: ComputeBackend::default(),
             threads: d_threads(),
+            segment_thread_up_to: d_segment_thread_up_to(),
         }
     }
 }
@@ -434,6 +450,13 @@ impl Config {
             " (seconds)",
         )?;
         in_range("compute.threads", self.compute.threads, &THREADS, "")?;
+        let split = self.compute.segment_thread_up_to;
+        if split != 0 && !GRID_RESOLUTIONS.contains(&split) {
+            return bad(
+                "compute.segment_thread_up_to",
+                format!("{split} must be 0 (never) or one of 33, 65, 129, 257, 513"),
+            );
+        }
         in_range(
             "http.write_timeout_s",
             self.http.write_timeout_s,
@@ -634,6 +657,23 @@ mod tests {
             e.contains("line 5") && e.contains("compute.threads") && e.contains("1..=64"),
             "{e}"
         );
+        let e = Config::parse(
+            &format!("{base}[compute]\nsegment_thread_up_to = 100\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("line 5") && e.contains("compute.segment_thread_up_to") && e.contains("100"),
+            "{e}"
+        );
+        for ok in [0, 65, 513] {
+            let c = Config::parse(
+                &format!("{base}[compute]\nsegment_thread_up_to = {ok}\n"),
+                Path::new("b.toml"),
+            )
+            .unwrap();
+            assert_eq!(c.compute.segment_thread_up_to, ok);
+        }
         let ok = Config::parse(
             &format!("{base}[http]\nheader_timeout_s = 300\n"),
             Path::new("b.toml"),

@@ -91,7 +91,7 @@ pub struct CameraStatus {
 
 /// Shared between the pipeline threads, the HTTP server, D-Bus and the watchdog.
 pub struct Shared {
-    pub stats: [StageStats; 4],
+    pub stats: [StageStats; 5],
     pub e2e: StageStats,
     pub state: Mutex<PipelineState>,
     pub camera: Mutex<CameraStatus>,
@@ -106,7 +106,7 @@ pub struct Shared {
     pub camera_swap: Mutex<Option<CameraFactory>>,
     /// One counter per pipeline thread, bumped every loop turn (idle turns included): a
     /// counter that stops moving is a stalled thread, and the watchdog stops its pings.
-    pub beats: [AtomicU64; 4],
+    pub beats: [AtomicU64; 5],
     /// People in view in the latest rendered frame (model mode: regions of the
     /// segmentation, the largest one rendered; oracle mode: the simulator's count);
     /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
@@ -116,12 +116,12 @@ pub struct Shared {
     pub evaluations: AtomicU64,
 }
 
-pub const THREADS: [&str; 4] = ["capture", "render", "encode", "field"];
+pub const THREADS: [&str; 5] = ["capture", "render", "encode", "field", "segment"];
 
-/// Whether pipeline thread `i` of [`THREADS`] runs in `mode` (the field stage has a thread
-/// of its own in model mode only).
+/// Whether pipeline thread `i` of [`THREADS`] runs in `mode` (the segment and field stages
+/// have threads of their own in model mode only).
 pub fn thread_runs(i: usize, mode: &str) -> bool {
-    THREADS[i] != "field" || mode == "model"
+    !matches!(THREADS[i], "field" | "segment") || mode == "model"
 }
 
 /// Frames skipped in a row (corrupt, truncated) before the state says so.
@@ -187,7 +187,18 @@ impl Shared {
     }
 }
 
-pub const STAGES: [&str; 4] = ["capture", "field", "render", "encode"];
+pub const STAGES: [&str; 5] = ["capture", "segment", "field", "render", "encode"];
+
+/// Indices of [`STAGES`] in `Shared::stats`.
+pub mod stage {
+    pub const CAPTURE: usize = 0;
+    /// Model mode: letterbox, segmentation, the most prominent person, the crop.
+    pub const SEGMENT: usize = 1;
+    /// Model mode: the shape and colour encoders; oracle mode: the ground-truth field.
+    pub const FIELD: usize = 2;
+    pub const RENDER: usize = 3;
+    pub const ENCODE: usize = 4;
+}
 
 /// Builds the camera on the capture thread (DepthAI handles cannot move between threads).
 pub type CameraFactory = Box<dyn FnOnce() -> Result<Box<dyn Camera>, String> + Send>;
@@ -291,7 +302,7 @@ fn render_field(
             return None;
         }
     }
-    sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
+    sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
     Some(renderer.rgba().to_vec())
 }
 
@@ -366,9 +377,9 @@ pub fn start(
                                     tracing::info!(source = %sup.describe(), "camera running");
                                     last_kind = "running";
                                 }
-                                sh.stats[0].record(f.at.elapsed().as_secs_f64() * 1e3);
+                                sh.stats[stage::CAPTURE].record(f.at.elapsed().as_secs_f64() * 1e3);
                                 if out.put(f) {
-                                    sh.stats[0].dropped.fetch_add(1, Ordering::Relaxed);
+                                    sh.stats[stage::CAPTURE].dropped.fetch_add(1, Ordering::Relaxed);
                                 }
                             }
                             Step::Skipped(s) => {
@@ -456,16 +467,28 @@ pub fn start(
         );
     }
 
-    // Model mode: segmentation and encoders on a thread of their own, so that frame N + 1 is
-    // segmented and encoded while frame N is localized and rendered (latest wins between).
+    // Model mode: segmentation and the encoders on threads of their own, so that frame N + 2
+    // is segmented and N + 1 encoded while frame N is localized and rendered (latest wins
+    // between).
     let fielded: Arc<Slot<(Frame, FieldOutcome)>> = Arc::default();
     if let (FieldMode::Model, Some(models)) = (cfg.field(), models.clone()) {
+        let segmented: Arc<Slot<(Frame, field_stage::Segmented)>> = Arc::default();
+        threads.push(field_stage::spawn_segment(
+            shared.clone(),
+            models.clone(),
+            captured.clone(),
+            segmented.clone(),
+            cfg.compute.threads,
+            cfg.compute.segment_thread_up_to,
+        ));
         threads.push(field_stage::spawn(
             shared.clone(),
             models,
             captured.clone(),
+            segmented,
             fielded.clone(),
             cfg.compute.threads,
+            cfg.compute.segment_thread_up_to,
         ));
     }
 
@@ -493,7 +516,9 @@ pub fn start(
                             size,
                             placeholder: true,
                         }) {
-                            sh.stats[2].dropped.fetch_add(1, Ordering::Relaxed);
+                            sh.stats[stage::RENDER]
+                                .dropped
+                                .fetch_add(1, Ordering::Relaxed);
                         }
                     };
                     while !sh.stop.load(Ordering::Relaxed) {
@@ -519,7 +544,7 @@ pub fn start(
                             FieldMode::Camera => {
                                 let t = Instant::now();
                                 let rgba = letterbox(&f.rgb, f.width, f.height, size);
-                                sh.stats[2].record(t.elapsed().as_secs_f64() * 1e3);
+                                sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
                                 rgba
                             }
                             FieldMode::Model => {
@@ -578,7 +603,7 @@ pub fn start(
                                     orbit(&truth.gt.camera, live.yaw, live.pitch, live.distance);
                                 let Some(truth) = f.truth else { continue };
                                 let field = Arc::new(truth.gt.into_field(voxel, view));
-                                sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
+                                sh.stats[stage::FIELD].record(t.elapsed().as_secs_f64() * 1e3);
                                 *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
                                     Some(field.clone());
                                 let Some(rgba) = render_field(
@@ -600,7 +625,9 @@ pub fn start(
                             size,
                             placeholder: false,
                         }) {
-                            sh.stats[2].dropped.fetch_add(1, Ordering::Relaxed);
+                            sh.stats[stage::RENDER]
+                                .dropped
+                                .fetch_add(1, Ordering::Relaxed);
                         }
                         // Running only while the camera is: a frame captured before the
                         // camera was lost must not paint over the lost state.
@@ -654,7 +681,7 @@ pub fn start(
                         let latency_ms = r.at.elapsed().as_secs_f64() * 1e3;
                         // Placeholders are not frames of the pipeline: not in its figures.
                         if !r.placeholder {
-                            sh.stats[3].record(t.elapsed().as_secs_f64() * 1e3);
+                            sh.stats[stage::ENCODE].record(t.elapsed().as_secs_f64() * 1e3);
                             sh.e2e.record(latency_ms);
                         }
                         sh.published.send_replace(Some(Arc::new(Published {

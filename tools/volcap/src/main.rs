@@ -68,6 +68,14 @@ pub struct PipelineArgs {
     /// Coarsest localization levels (comma-separated).
     #[arg(long = "coarse-level", value_delimiter = ',', default_value = "3")]
     pub coarse_levels: Vec<u32>,
+    /// `compute.segment_thread_up_to` values (comma-separated): the largest resolution at
+    /// which the segmentation has a thread of its own (0: never).
+    #[arg(
+        long = "segment-thread-up-to",
+        value_delimiter = ',',
+        default_value = "129"
+    )]
+    pub segment_split: Vec<usize>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,

@@ -21,7 +21,7 @@ use volcap_engine::model::{Models, Precision};
 use volcapd::capture::Camera;
 use volcapd::capture::replay::{ReplayCamera, Still};
 use volcapd::config::Config;
-use volcapd::pipeline::{self, PipelineState, Shared};
+use volcapd::pipeline::{self, PipelineState, Shared, stage};
 
 /// One configuration's measurement.
 #[derive(Debug, Clone, Serialize)]
@@ -30,12 +30,15 @@ pub struct Row {
     pub resolution: usize,
     pub coarse_level: u32,
     pub threads: usize,
+    /// `compute.segment_thread_up_to` of the run.
+    pub segment_thread_up_to: usize,
     /// Frames published per second over the measured window.
     pub fps: f64,
     pub latency_p50_ms: f64,
     pub latency_p99_ms: f64,
-    /// p50 ms per stage, in `volcapd::pipeline::STAGES` order (capture, field, render, encode).
-    pub stage_p50_ms: [f64; 4],
+    /// p50 ms per stage, in `volcapd::pipeline::STAGES` order (capture, segment, field,
+    /// render, encode).
+    pub stage_p50_ms: [f64; 5],
     /// Occupancy evaluations per rendered frame.
     pub evaluations: f64,
     pub frames: u64,
@@ -79,20 +82,16 @@ fn frames(scene: &Path, n: usize) -> anyhow::Result<Vec<Still>> {
     Ok(out)
 }
 
-fn config(
-    scene: &Path,
-    models_dir: &Path,
-    name: &str,
-    prec: Precision,
-    res: usize,
-    coarse: u32,
-    threads: usize,
-) -> anyhow::Result<Config> {
+/// One configuration: model, precision, resolution, coarse level, threads, segment split.
+type Setup = (String, Precision, usize, u32, usize, usize);
+
+fn config(scene: &Path, models_dir: &Path, setup: &Setup) -> anyhow::Result<Config> {
+    let (name, prec, res, coarse, threads, split) = setup;
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
-         [compute]\nthreads = {threads}\n[dbus]\nbus = \"none\"\n",
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\n[dbus]\nbus = \"none\"\n",
         match prec {
             Precision::F32 => "f32",
             Precision::Int8 => "int8",
@@ -118,12 +117,12 @@ fn measure(
     std::thread::sleep(Duration::from_secs_f64(warmup));
     let t0 = Instant::now();
     let published0 = shared.e2e.frames.load(Ordering::Relaxed);
-    let rendered0 = shared.stats[2].frames.load(Ordering::Relaxed);
+    let rendered0 = shared.stats[stage::RENDER].frames.load(Ordering::Relaxed);
     let evals0 = shared.evaluations.load(Ordering::Relaxed);
     std::thread::sleep(Duration::from_secs_f64(seconds));
     let wall = t0.elapsed().as_secs_f64();
     let published = shared.e2e.frames.load(Ordering::Relaxed) - published0;
-    let rendered = shared.stats[2].frames.load(Ordering::Relaxed) - rendered0;
+    let rendered = shared.stats[stage::RENDER].frames.load(Ordering::Relaxed) - rendered0;
     let evals = shared.evaluations.load(Ordering::Relaxed) - evals0;
     let (l50, l99, _) = shared.e2e.window(t0);
     let stage_p50_ms = std::array::from_fn(|i| shared.stats[i].window(t0).0);
@@ -145,6 +144,7 @@ fn measure(
         resolution: cfg.render.resolution.0,
         coarse_level: cfg.render.coarse_level,
         threads: cfg.compute.threads,
+        segment_thread_up_to: cfg.compute.segment_thread_up_to,
         fps: published as f64 / wall,
         latency_p50_ms: l50,
         latency_p99_ms: l99,
@@ -160,6 +160,13 @@ fn measure(
 pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     if !(a.seconds > 0.0 && a.seconds <= 600.0 && a.warmup >= 0.0 && a.warmup <= 600.0) {
         bail!("--seconds must be in (0, 600] and --warmup in [0, 600]");
+    }
+    if let Some(v) = a
+        .segment_split
+        .iter()
+        .find(|v| **v != 0 && ![33, 65, 129, 257, 513].contains(*v))
+    {
+        bail!("--segment-thread-up-to {v} must be 0 (never) or one of 33, 65, 129, 257, 513");
     }
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);
@@ -177,8 +184,10 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         let (name, prec) = model_spec(m)?;
         for &res in &a.res {
             for &c in &a.coarse_levels {
-                for &t in &a.threads {
-                    configs.push((name.clone(), prec, res, c, t));
+                for &split in &a.segment_split {
+                    for &t in &a.threads {
+                        configs.push((name.clone(), prec, res, c, t, split));
+                    }
                 }
             }
         }
@@ -186,7 +195,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     // Every configuration is checked before anything runs.
     let cfgs: Vec<Config> = configs
         .iter()
-        .map(|(n, p, r, c, t)| config(&scene, &models_dir, n, *p, *r, *c, *t))
+        .map(|s| config(&scene, &models_dir, s))
         .collect::<anyhow::Result<_>>()?;
     // Every model is loaded before anything runs (a bad name fails at once).
     let mut loaded: Vec<((String, Precision), Arc<Models>)> = Vec::new();
@@ -222,16 +231,24 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let base: Vec<(String, usize, u32, f64)> = rows
+    let base: Vec<(String, usize, u32, usize, f64)> = rows
         .iter()
         .filter(|r| r.threads == 1 && r.error.is_none())
-        .map(|r| (r.model.clone(), r.resolution, r.coarse_level, r.fps))
+        .map(|r| {
+            let k = (r.model.clone(), r.resolution, r.coarse_level);
+            (k.0, k.1, k.2, r.segment_thread_up_to, r.fps)
+        })
         .collect();
     for r in &mut rows {
         r.speedup_vs_1_thread = base
             .iter()
-            .find(|b| b.0 == r.model && b.1 == r.resolution && b.2 == r.coarse_level)
-            .map(|b| r.fps / b.3.max(1e-9));
+            .find(|b| {
+                b.0 == r.model
+                    && b.1 == r.resolution
+                    && b.2 == r.coarse_level
+                    && b.3 == r.segment_thread_up_to
+            })
+            .map(|b| r.fps / b.4.max(1e-9));
     }
     if a.json {
         let mut out = std::io::stdout().lock();
@@ -249,8 +266,8 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         let text = format!(
             "# The whole pipeline, in process\n\n`{}`\n\nScene `{}` ({} frames rendered once, replayed at {} fps); \
              {} s measured after {} s of warm-up per row; {} cores. fps = frames published per second; \
-             latency = capture to publish; stages are p50 ms (the field stage segments and encodes \
-             frame N+1 while the render stage localizes and renders frame N); evaluations = occupancy \
+             latency = capture to publish; stages are p50 ms (on threads of their own: frame N+2 is \
+             segmented while N+1 is encoded (field) and N localized and rendered); evaluations = occupancy \
              evaluations per rendered frame; x1 = fps over the one-thread row of the same model, \
              resolution and coarse level, measured in the same run. Each row is one run of a few seconds: on a \
              shared 2-core machine repeated runs of the same row differ by up to about 10 %, so compare rows \
@@ -279,17 +296,22 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
 
 fn table(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| model | res | coarse | threads | fps | x1 | latency p50 / p99 ms | capture | field | render | encode | evaluations | note |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| model | res | coarse | threads | segment thread | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            "| {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
             r.resolution,
             r.coarse_level,
             r.threads,
+            if r.resolution <= r.segment_thread_up_to {
+                "yes"
+            } else {
+                "no"
+            },
             r.fps,
             r.speedup_vs_1_thread
                 .map(|x| format!("{x:.2}"))
@@ -300,6 +322,7 @@ fn table(rows: &[Row]) -> String {
             r.stage_p50_ms[1],
             r.stage_p50_ms[2],
             r.stage_p50_ms[3],
+            r.stage_p50_ms[4],
             r.evaluations,
             r.error.as_deref().unwrap_or(""),
         );
@@ -316,9 +339,16 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
     let root = BitMapBackend::new(path, (1100, 460)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     let (left, right) = root.split_horizontally(550);
-    let mut keys: Vec<(String, u32, usize)> = rows
+    let mut keys: Vec<(String, u32, usize, usize)> = rows
         .iter()
-        .map(|r| (r.model.clone(), r.coarse_level, r.threads))
+        .map(|r| {
+            (
+                r.model.clone(),
+                r.coarse_level,
+                r.threads,
+                r.segment_thread_up_to,
+            )
+        })
         .collect();
     keys.sort();
     keys.dedup();
@@ -346,14 +376,22 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             let color = Palette99::pick(i).to_rgba();
             let mut pts: Vec<(f64, f64)> = rows
                 .iter()
-                .filter(|r| r.error.is_none() && (r.model.clone(), r.coarse_level, r.threads) == *k)
+                .filter(|r| {
+                    r.error.is_none()
+                        && (
+                            r.model.clone(),
+                            r.coarse_level,
+                            r.threads,
+                            r.segment_thread_up_to,
+                        ) == *k
+                })
                 .map(|r| (r.resolution as f64, f(r)))
                 .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             chart
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
                 .map_err(|e| anyhow!("{e}"))?
-                .label(format!("{} c{} x{}", k.0, k.1, k.2))
+                .label(format!("{} c{} x{} seg<={}", k.0, k.1, k.2, k.3))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
                 });

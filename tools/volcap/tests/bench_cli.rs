@@ -163,6 +163,8 @@ fn pipeline_bench_measures_every_configuration() {
             "33,65",
             "--threads",
             "1,2",
+            "--segment-thread-up-to",
+            "0,65",
             "--seconds",
             "1.5",
             "--warmup",
@@ -185,16 +187,18 @@ fn pipeline_bench_measures_every_configuration() {
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
-    assert_eq!(rows.len(), 4);
+    // res x split x threads, in that order.
+    assert_eq!(rows.len(), 8);
     for r in &rows {
         assert!(r["error"].is_null(), "{r}");
         assert!(r["frames"].as_u64().unwrap() > 0, "{r}");
         assert!(r["fps"].as_f64().unwrap() > 0.0, "{r}");
         assert!(r["evaluations"].as_f64().unwrap() > 0.0, "{r}");
         let stages = r["stage_p50_ms"].as_array().unwrap();
-        // The field stage (segmentation + encoder) and the render stage take time.
+        // The segmentation, the encoders and the render stage take time.
+        assert_eq!(stages.len(), 5, "{r}");
         assert!(
-            stages[1].as_f64().unwrap() > 0.0 && stages[2].as_f64().unwrap() > 0.0,
+            stages[1..4].iter().all(|v| v.as_f64().unwrap() > 0.0),
             "{r}"
         );
         let p50 = r["latency_p50_ms"].as_f64().unwrap();
@@ -210,11 +214,15 @@ fn pipeline_bench_measures_every_configuration() {
         }
     }
     // A finer grid costs more evaluations per frame.
-    assert!(rows[2]["evaluations"].as_f64() > rows[0]["evaluations"].as_f64());
+    assert!(rows[4]["evaluations"].as_f64() > rows[0]["evaluations"].as_f64());
+    // The segmentation runs on its own thread (split 65) or on the field thread (split 0):
+    // timed either way.
+    assert!(rows.iter().any(|r| r["segment_thread_up_to"] == 0));
+    assert!(rows.iter().any(|r| r["segment_thread_up_to"] == 65));
     let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
     assert_eq!(
         md.lines().filter(|l| l.starts_with("| fourier |")).count(),
-        4
+        8
     );
     let png = std::fs::read(dir.join("pipeline.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
@@ -231,6 +239,10 @@ fn pipeline_bench_names_bad_arguments() {
         (vec!["--threads", "0"], "compute.threads"),
         (vec!["--scene", "no/such/scene.toml"], "no/such/scene.toml"),
         (vec!["--seconds", "0"], "--seconds must be in"),
+        (
+            vec!["--segment-thread-up-to", "100"],
+            "--segment-thread-up-to 100",
+        ),
         (vec!["--frames", "0"], "--frames 0"),
     ] {
         let out = volcap()

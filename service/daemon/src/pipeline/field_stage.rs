@@ -1,15 +1,20 @@
-//! The field stage of model mode: segmentation and encoders on a thread of their own, one
-//! field in flight (it computes the next field only once the render thread took the last,
-//! so a slower render throws no work away). With `compute.threads` > 1 the networks' matrix
+//! The model mode's two network stages, each on a thread of its own with one item in
+//! flight (a stage works on the next frame only once the stage after it took the last, so
+//! a slower stage downstream throws no work away): **segment** (letterbox, segmentation, the
+//! most prominent person, the crop) and **field** (the shape and colour encoders). Frame N + 2
+//! is segmented while N + 1 is encoded and N is localized and rendered; above
+//! `compute.segment_thread_up_to` (default 129) the field thread segments too (two compute
+//! stages for two cores). With `compute.threads` > 1 the networks' matrix
 //! products use that many threads (tract's pool), so the field stage can take the core the
 //! render stage leaves idle at lower resolutions.
 
-use super::{PipelineState, Shared, Slot};
+use super::{PipelineState, Shared, Slot, stage};
 use crate::capture::Frame;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-use volcap_engine::model::{FrameError, ModelField, ModelView, Models};
+use volcap_engine::model::preprocess::Crop;
+use volcap_engine::model::{FrameError, FrameInfo, ModelField, ModelView, Models};
 
 /// What the field thread hands the render thread: the model's field of a frame, or why
 /// there is none (shown as a degraded state with a placeholder).
@@ -29,21 +34,56 @@ fn model_view(live: &super::Live) -> ModelView {
     }
 }
 
-/// Start the field thread: frames from `input`, fields (or why none) into `out`.
-pub(super) fn spawn(
+/// A frame's person, segmented and cropped (the letterboxed input, the person's mask and
+/// crop), or why there is none.
+pub type Segmented = Result<(Vec<f32>, Vec<f32>, Crop), String>;
+
+/// Segment one frame, recording the stage's time and the people count.
+fn segment(
+    sh: &Shared,
+    models: &Models,
+    f: &Frame,
+    threads: usize,
+) -> Result<(Vec<f32>, Vec<f32>, Crop), String> {
+    let t = Instant::now();
+    let mut info = FrameInfo::default();
+    match volcap_engine::model::with_threads(threads, || {
+        models.prepare(&f.rgb, f.width, f.height, &mut info)
+    }) {
+        Ok(p) => {
+            sh.people.store(info.people, Ordering::Relaxed);
+            sh.stats[stage::SEGMENT].record(t.elapsed().as_secs_f64() * 1e3);
+            Ok(p)
+        }
+        Err(FrameError::NoPerson) => {
+            sh.people.store(0, Ordering::Relaxed);
+            Err("no person in view".to_string())
+        }
+        Err(e) => Err(format!("model: {e}")),
+    }
+}
+
+/// Start the segment thread: frames from `input`, the person (or why none) into `out`; idle
+/// while the live resolution is above `split_up_to` (`compute.segment_thread_up_to`).
+pub(super) fn spawn_segment(
     sh: Arc<Shared>,
     models: Arc<Models>,
     input: Arc<Slot<Frame>>,
-    out: Arc<Slot<(Frame, FieldOutcome)>>,
+    out: Arc<Slot<(Frame, Segmented)>>,
     threads: usize,
+    split_up_to: usize,
 ) -> std::thread::JoinHandle<()> {
     std::thread::Builder::new()
-        .name("field".into())
+        .name("segment".into())
         .spawn(move || {
             while !sh.stop.load(Ordering::Relaxed) {
-                sh.beat(3);
-                // One field in flight: compute the next only once the render thread
-                // has taken the last (then take the newest frame).
+                sh.beat(4);
+                if sh.live().resolution > split_up_to {
+                    std::thread::sleep(Duration::from_millis(20));
+                    continue;
+                }
+                // One frame in flight: segment the next only once the field thread has
+                // taken the last (then take the newest frame).
                 if !out.wait_empty(Duration::from_millis(200)) {
                     continue;
                 }
@@ -55,24 +95,73 @@ pub(super) fn spawn(
                     sh.set_state(PipelineState::Paused);
                     continue;
                 }
-                let t = Instant::now();
-                let view = model_view(&live);
-                let outcome = match volcap_engine::model::with_threads(threads, || {
-                    models.frame(&f.rgb, f.width, f.height, view)
-                }) {
-                    Ok((field, info)) => {
-                        sh.people.store(info.people, Ordering::Relaxed);
-                        sh.stats[1].record(t.elapsed().as_secs_f64() * 1e3);
-                        Ok(field)
-                    }
-                    Err(FrameError::NoPerson) => {
-                        sh.people.store(0, Ordering::Relaxed);
-                        Err("no person in view".to_string())
-                    }
-                    Err(e) => Err(format!("model: {e}")),
+                let seg = segment(&sh, &models, &f, threads);
+                if out.put((f, seg)) {
+                    sh.stats[stage::SEGMENT]
+                        .dropped
+                        .fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        })
+        .expect("spawning the segment thread")
+}
+
+/// Start the field thread: segmented frames from `segmented` (or, above `split_up_to`,
+/// frames from `captured`, segmented here), fields (or why none) into `out`.
+pub(super) fn spawn(
+    sh: Arc<Shared>,
+    models: Arc<Models>,
+    captured: Arc<Slot<Frame>>,
+    segmented: Arc<Slot<(Frame, Segmented)>>,
+    out: Arc<Slot<(Frame, FieldOutcome)>>,
+    threads: usize,
+    split_up_to: usize,
+) -> std::thread::JoinHandle<()> {
+    std::thread::Builder::new()
+        .name("field".into())
+        .spawn(move || {
+            while !sh.stop.load(Ordering::Relaxed) {
+                sh.beat(3);
+                // One field in flight: compute the next only once the render thread
+                // has taken the last (then take the newest segmented frame).
+                if !out.wait_empty(Duration::from_millis(200)) {
+                    continue;
+                }
+                let (f, seg) = if sh.live().resolution <= split_up_to {
+                    let Some(s) = segmented.take(Duration::from_millis(200)) else {
+                        continue;
+                    };
+                    s
+                } else {
+                    // A frame segmented before the switch is older than the camera's newest.
+                    let _ = segmented.take(Duration::ZERO);
+                    let Some(f) = captured.take(Duration::from_millis(200)) else {
+                        continue;
+                    };
+                    let s = segment(&sh, &models, &f, threads);
+                    (f, s)
                 };
+                let live = sh.live();
+                if live.paused {
+                    sh.set_state(PipelineState::Paused);
+                    continue;
+                }
+                let view = model_view(&live);
+                let outcome = seg.and_then(|(img, mask, crop)| {
+                    let t = Instant::now();
+                    let r = volcap_engine::model::with_threads(threads, || {
+                        models.encode(&img, &mask, crop, view)
+                    })
+                    .map_err(|e| format!("model: {e}"));
+                    if r.is_ok() {
+                        sh.stats[stage::FIELD].record(t.elapsed().as_secs_f64() * 1e3);
+                    }
+                    r
+                });
                 if out.put((f, outcome)) {
-                    sh.stats[1].dropped.fetch_add(1, Ordering::Relaxed);
+                    sh.stats[stage::FIELD]
+                        .dropped
+                        .fetch_add(1, Ordering::Relaxed);
                 }
             }
         })
