@@ -545,3 +545,39 @@ fn models_with_nan_weights_are_refused_at_load() {
         std::fs::remove_dir_all(&dir).ok();
     }
 }
+
+/// The CBN MLPs run fused (matrixmultiply SGEMM, batch norm folded) and give tract's
+/// outputs, over more points than one chunk; int8 and plain MLPs stay on tract.
+#[test]
+fn cbn_mlps_run_fused_and_equal_tract() {
+    for name in shape_models() {
+        let nets = ShapeNets::load(&models_dir(), &name, Precision::F32).unwrap();
+        let cbn = !name.contains("plain");
+        assert_eq!(nets.fused.is_some(), cbn, "{name}");
+        let Some(fused) = &nets.fused else { continue };
+        let (c, zd) = (nets.channels, nets.z.dim());
+        let n = 5000;
+        let feat: Vec<f32> = (0..n * c)
+            .map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0)
+            .collect();
+        let z: Vec<f32> = (0..n * zd).map(|i| (i * 13 % 97) as f32 / 96.0).collect();
+        let want = nets.mlp.run(&[(&[n, c], &feat), (&[n, zd], &z)]).unwrap();
+        let mut got = vec![0.0f32; n];
+        fused.run(&feat, &z, &mut got);
+        let worst = want
+            .iter()
+            .zip(&got)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst < 1e-4, "{name}: fused vs tract {worst}");
+        assert!(got.iter().all(|v| (0.0..=1.0).contains(v)));
+        // The paper's compact MLP: 41k multiply-adds a point.
+        if name == "compact" {
+            assert_eq!(fused.macs_per_point(), 41_024);
+        }
+    }
+    if models_dir().join("shape-compact.mlp.int8.onnx").is_file() {
+        let q = ShapeNets::load(&models_dir(), "compact", Precision::Int8).unwrap();
+        assert!(q.fused.is_none());
+    }
+}

@@ -3,6 +3,7 @@
 mod bench;
 mod ctl;
 mod eval;
+mod mlp_bench;
 mod pipeline_bench;
 mod plot;
 mod reconstruct;
@@ -52,6 +53,24 @@ enum BenchCmd {
     /// model x coarse level x threads: fps, latency, ms per stage, evaluations, speed-up over
     /// one thread. Writes a table and a plot.
     Pipeline(PipelineArgs),
+    /// The point MLP's throughput (fused and on tract) against the machine's SGEMM peak.
+    Mlp(MlpArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct MlpArgs {
+    /// Shape model (models/shape-NAME.mlp.onnx, f32, CBN).
+    #[arg(long, default_value = "compact")]
+    pub model: String,
+    /// Points per run.
+    #[arg(long, default_value_t = 65536)]
+    pub points: usize,
+    /// Timed runs (median reported).
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
+    /// Folder of the ONNX models.
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -164,6 +183,7 @@ fn main() -> ExitCode {
     let res = match cli.cmd {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
         Cmd::Bench(BenchCmd::Pipeline(a)) => pipeline_bench::run(&a),
+        Cmd::Bench(BenchCmd::Mlp(a)) => mlp_bench::run(&a),
         Cmd::Eval(a) => eval::eval(&a),
         Cmd::Reconstruct(a) => reconstruct::reconstruct(&a),
         Cmd::Sim(c) => simcmd::run(c),

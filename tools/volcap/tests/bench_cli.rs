@@ -256,3 +256,37 @@ fn pipeline_bench_names_bad_arguments() {
         assert!(err.contains(want), "{args:?}: {err}");
     }
 }
+
+/// `bench mlp` puts the fused MLP and tract next to the SGEMM peak; a plain MLP (nothing
+/// fused) is refused by name.
+#[test]
+fn mlp_bench_reports_throughput_against_the_peak() {
+    let out = volcap()
+        .current_dir(repo_root())
+        .args(["bench", "mlp", "--points", "2000", "--runs", "1"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let rows: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| what"))
+        .collect();
+    assert_eq!(rows.len(), 3, "{text}");
+    for r in &rows {
+        let gflops: f64 = r.split('|').nth(3).unwrap().trim().parse().unwrap();
+        assert!(gflops > 0.0 && gflops.is_finite(), "{r}");
+    }
+    let out = volcap()
+        .current_dir(repo_root())
+        .args(["bench", "mlp", "--model", "compact-plain-z", "--runs", "1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("shape-compact-plain-z.mlp.onnx"), "{err}");
+}

@@ -15,6 +15,7 @@
 
 mod field;
 pub mod fourier;
+pub mod mlp;
 pub mod preprocess;
 pub mod sample;
 
@@ -304,6 +305,9 @@ impl ZEncoding {
 pub struct ShapeNets {
     pub encoder: Net,
     pub mlp: Net,
+    /// The same MLP as fused dense layers (f32 CBN files that agree with tract at load);
+    /// `query` uses it when present.
+    pub fused: Option<mlp::FusedCbnMlp>,
     pub channels: usize,
     pub z: ZEncoding,
 }
@@ -382,6 +386,27 @@ fn encoder(path: &Path, kind: &str) -> Result<(Net, usize), ModelError> {
     Ok((net, channels))
 }
 
+/// The fused MLP and tract agree (max |difference| <= 1e-4) on a probe batch of 257 points
+/// with pseudo-random features in [-2, 2] and depth codes in [0, 1].
+fn agrees(f: &mlp::FusedCbnMlp, net: &Net, c: usize, zd: usize) -> bool {
+    let n = 257;
+    let mut state = 0x9e37_79b9u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    };
+    let feat: Vec<f32> = (0..n * c).map(|_| 4.0 * next() - 2.0).collect();
+    let z: Vec<f32> = (0..n * zd).map(|_| next()).collect();
+    let Ok(want) = net.run(&[(&[n, c], &feat), (&[n, zd], &z)]) else {
+        return false;
+    };
+    let mut got = vec![0.0f32; n];
+    f.run(&feat, &z, &mut got);
+    want.len() == n && want.iter().zip(&got).all(|(a, b)| (a - b).abs() <= 1e-4)
+}
+
 impl ShapeNets {
     pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
         let sfx = precision.suffix();
@@ -419,9 +444,16 @@ impl ShapeNets {
             ],
             &[None, Some(1)],
         )?;
+        let fused = if precision == Precision::F32 {
+            mlp::FusedCbnMlp::from_onnx(&mpath)
+                .filter(|f| f.dims() == (channels, z.dim()) && agrees(f, &mlp, channels, z.dim()))
+        } else {
+            None
+        };
         Ok(ShapeNets {
             encoder,
             mlp,
+            fused,
             channels,
             z,
         })
@@ -468,6 +500,10 @@ impl ShapeNets {
                     z[i] = u.z.clamp(-1.0, 1.0);
                 }
             }
+        }
+        if let Some(fused) = &self.fused {
+            fused.run(&fv, &z, &mut out[..n]);
+            return Ok(());
         }
         let occ = self
             .mlp
