@@ -13,6 +13,7 @@
 //! `volcap_train.nets.CbnMlp` exports them) and agrees with tract on a probe batch at load;
 //! anything else (int8, the plain MLP) stays on tract.
 
+use super::Net;
 use std::collections::HashMap;
 use std::path::Path;
 use tract_onnx::pb::TensorProto;
@@ -250,4 +251,25 @@ impl FusedCbnMlp {
             }
         }
     }
+}
+
+/// The fused MLP and tract agree (max |difference| <= 1e-4) on a probe batch of 257 points
+/// with pseudo-random features in [-2, 2] and depth codes in [0, 1].
+pub(crate) fn agrees(f: &FusedCbnMlp, net: &Net, c: usize, zd: usize) -> bool {
+    let n = 257;
+    let mut state = 0x9e37_79b9u32;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        state as f32 / u32::MAX as f32
+    };
+    let feat: Vec<f32> = (0..n * c).map(|_| 4.0 * next() - 2.0).collect();
+    let z: Vec<f32> = (0..n * zd).map(|_| next()).collect();
+    let Ok(want) = net.run(&[(&[n, c], &feat), (&[n, zd], &z)]) else {
+        return false;
+    };
+    let mut got = vec![0.0f32; n];
+    f.run(&feat, &z, &mut got);
+    want.len() == n && want.iter().zip(&got).all(|(a, b)| (a - b).abs() <= 1e-4)
 }

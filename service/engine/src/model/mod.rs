@@ -16,6 +16,8 @@
 mod field;
 pub mod fourier;
 pub mod mlp;
+mod threads;
+pub use threads::with_threads;
 pub mod preprocess;
 pub mod sample;
 
@@ -386,27 +388,6 @@ fn encoder(path: &Path, kind: &str) -> Result<(Net, usize), ModelError> {
     Ok((net, channels))
 }
 
-/// The fused MLP and tract agree (max |difference| <= 1e-4) on a probe batch of 257 points
-/// with pseudo-random features in [-2, 2] and depth codes in [0, 1].
-fn agrees(f: &mlp::FusedCbnMlp, net: &Net, c: usize, zd: usize) -> bool {
-    let n = 257;
-    let mut state = 0x9e37_79b9u32;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 17;
-        state ^= state << 5;
-        state as f32 / u32::MAX as f32
-    };
-    let feat: Vec<f32> = (0..n * c).map(|_| 4.0 * next() - 2.0).collect();
-    let z: Vec<f32> = (0..n * zd).map(|_| next()).collect();
-    let Ok(want) = net.run(&[(&[n, c], &feat), (&[n, zd], &z)]) else {
-        return false;
-    };
-    let mut got = vec![0.0f32; n];
-    f.run(&feat, &z, &mut got);
-    want.len() == n && want.iter().zip(&got).all(|(a, b)| (a - b).abs() <= 1e-4)
-}
-
 impl ShapeNets {
     pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
         let sfx = precision.suffix();
@@ -445,8 +426,9 @@ impl ShapeNets {
             &[None, Some(1)],
         )?;
         let fused = if precision == Precision::F32 {
-            mlp::FusedCbnMlp::from_onnx(&mpath)
-                .filter(|f| f.dims() == (channels, z.dim()) && agrees(f, &mlp, channels, z.dim()))
+            mlp::FusedCbnMlp::from_onnx(&mpath).filter(|f| {
+                f.dims() == (channels, z.dim()) && mlp::agrees(f, &mlp, channels, z.dim())
+            })
         } else {
             None
         };
@@ -623,38 +605,6 @@ impl Default for ModelView {
 /// perspective 2.3 m image height, near/far 1.5 m from the subject): used only to make the
 /// view rotation metric.
 pub const NDC_HALF_EXTENT_M: Vec3 = Vec3::new(1.15, 1.15, 1.5);
-
-/// Run `f` with tract's matrix products (the networks' convolutions) spread over `threads`
-/// threads: a pool per thread count, made once and kept. With 1, or when no pool can be
-/// made, `f` runs on the calling thread alone. Results do not depend on it beyond float
-/// summation order.
-pub fn with_threads<R>(threads: usize, f: impl FnOnce() -> R) -> R {
-    use tract_linalg::multithread::{Executor, multithread_tract_scope};
-    static POOLS: std::sync::Mutex<Vec<(usize, Option<Executor>)>> =
-        std::sync::Mutex::new(Vec::new());
-    if threads <= 1 {
-        return f();
-    }
-    let exec = {
-        let mut pools = POOLS.lock().unwrap_or_else(|p| p.into_inner());
-        match pools.iter().find(|(n, _)| *n == threads) {
-            Some((_, e)) => e.clone(),
-            None => {
-                // tract panics when the pool cannot be built (no threads left): run alone.
-                let e = std::panic::catch_unwind(|| {
-                    Executor::multithread_with_name(threads, "volcap-tract")
-                })
-                .ok();
-                pools.push((threads, e.clone()));
-                e
-            }
-        }
-    };
-    match exec {
-        Some(e) => multithread_tract_scope(e, f),
-        None => f(),
-    }
-}
 
 impl Models {
     /// Load `seg.onnx`, `shape-NAME.*` and `color.*` (the shape files at `precision`) from `dir`.
