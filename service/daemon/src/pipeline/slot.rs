@@ -108,19 +108,17 @@ impl StageStats {
 
     /// (p50, p99) in ms over the last 256 frames.
     pub fn percentiles(&self) -> (f64, f64) {
-        let mut v: Vec<f64> = self
-            .samples
+        let (p50, p99, _) = self.window(self.samples_start());
+        (p50, p99)
+    }
+
+    /// When the oldest kept sample was taken (now, when there is none).
+    fn samples_start(&self) -> Instant {
+        self.samples
             .lock()
             .unwrap_or_else(|p| p.into_inner())
-            .iter()
-            .map(|(_, ms)| *ms)
-            .collect();
-        if v.is_empty() {
-            return (0.0, 0.0);
-        }
-        v.sort_by(f64::total_cmp);
-        let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
-        (q(0.5), q(0.99))
+            .front()
+            .map_or_else(Instant::now, |(t, _)| *t)
     }
 }
 

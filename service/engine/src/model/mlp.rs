@@ -203,13 +203,37 @@ impl FusedCbnMlp {
 
     /// Occupancy of `n` points: `feat` [n, f], `z` [n, zdim] -> `out` [n], in chunks of 4,096.
     pub fn run(&self, feat: &[f32], z: &[f32], out: &mut [f32]) {
+        let h = self.hidden;
+        let n = out.len();
+        let row = 2 * self.layers.len() * h;
+        const CHUNK: usize = 4096;
+        // Scratch kept per thread (evaluation threads call this at once), grown once.
+        thread_local! {
+            static SCRATCH: std::cell::RefCell<[Vec<f32>; 3]> = Default::default();
+        }
+        SCRATCH.with_borrow_mut(|[c, x, y]| {
+            for (v, len) in [(&mut *c, row), (&mut *x, h), (&mut *y, h)] {
+                if v.len() < CHUNK.min(n) * len {
+                    v.resize(CHUNK.min(n) * len, 0.0);
+                }
+            }
+            self.run_chunks(feat, z, out, c, x, y)
+        });
+    }
+
+    fn run_chunks(
+        &self,
+        feat: &[f32],
+        z: &[f32],
+        out: &mut [f32],
+        c: &mut [f32],
+        x: &mut Vec<f32>,
+        y: &mut Vec<f32>,
+    ) {
         let (f, zd, h) = (self.cond, self.zdim, self.hidden);
         let n = out.len();
         let row = 2 * self.layers.len() * h;
         const CHUNK: usize = 4096;
-        let mut c = vec![0.0f32; CHUNK.min(n) * row];
-        let mut x = vec![0.0f32; CHUNK.min(n) * h];
-        let mut y = vec![0.0f32; CHUNK.min(n) * h];
         for s in (0..n).step_by(CHUNK) {
             let m = CHUNK.min(n - s);
             let c = &mut c[..m * row];
@@ -235,7 +259,7 @@ impl FusedCbnMlp {
                         *v = (*g * *v + *be).max(0.0);
                     }
                 }
-                std::mem::swap(&mut x, &mut y);
+                std::mem::swap(x, y);
             }
             for (p, o) in out[s..s + m].iter_mut().enumerate() {
                 let hr = &x[p * h..(p + 1) * h];
