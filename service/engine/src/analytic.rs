@@ -36,6 +36,22 @@ enum Prim {
         c: DVec3,
         r: DVec3,
     },
+    /// A capsule with its axis and the reciprocal of its squared length (see
+    /// [`Prim::prepared`]).
+    CapsuleInv {
+        a: DVec3,
+        ba: DVec3,
+        inv_len2: f64,
+        r: f64,
+    },
+    /// An ellipsoid with reciprocal radii and their squares (see [`Prim::prepared`]).
+    EllipsoidInv {
+        c: DVec3,
+        inv: DVec3,
+        inv2: DVec3,
+        rmin: f64,
+        rmax: f64,
+    },
     Capsule {
         a: DVec3,
         b: DVec3,
@@ -53,25 +69,114 @@ enum Prim {
     },
 }
 
+/// A lower bound of a primitive's `sdf` from the distance `rho = |p - c|` to a centre, used to
+/// skip primitives that cannot hold the union's minimum (see [`AnalyticScene::sdf_culled`]):
+/// `sdf(p) > t` whenever `rho > a + b max(t, floor)`.
+/// - A primitive in the ball of radius `r` about `c` whose `sdf` is a Euclidean distance
+///   (negative inside) has `sdf >= rho - r`: `a = r`, `b = 1`, no floor.
+/// - Quilez's ellipsoid value `k0 (k0 - 1) / k1` with radii in `[rmin, rmax]`: `k0 / k1` lies in
+///   `[rmin, rmax]` and `k0 >= rho / rmax`, so where `rho > rmax` it is at least
+///   `(rho / rmax - 1) rmin > 0`: `a = rmax`, `b = rmax / rmin`, floor 0.
+#[derive(Debug, Clone, Copy)]
+struct Bound {
+    c: DVec3,
+    a: f64,
+    b: f64,
+    floor: f64,
+}
+
+impl Bound {
+    /// True when the bound proves `sdf(p) > t` (`rho2 = |p - c|^2`).
+    #[inline]
+    fn exceeds(&self, rho2: f64, t: f64) -> bool {
+        let reach = self.a + self.b * t.max(self.floor);
+        reach < 0.0 || rho2 > reach * reach
+    }
+}
+
 impl Prim {
+    fn bound(&self) -> Bound {
+        let ball = |c: DVec3, r: f64| Bound {
+            c,
+            a: r,
+            b: 1.0,
+            floor: f64::NEG_INFINITY,
+        };
+        match *self {
+            Prim::Sphere { c, r } => ball(c, r),
+            Prim::Ellipsoid { c, r } => Bound {
+                c,
+                a: r.max_element(),
+                b: r.max_element() / r.min_element(),
+                floor: 0.0,
+            },
+            Prim::EllipsoidInv { c, rmin, rmax, .. } => Bound {
+                c,
+                a: rmax,
+                b: rmax / rmin,
+                floor: 0.0,
+            },
+            Prim::Capsule { a, b, r } => ball(0.5 * (a + b), 0.5 * (b - a).length() + r),
+            Prim::CapsuleInv { a, ba, r, .. } => ball(a + 0.5 * ba, 0.5 * ba.length() + r),
+            Prim::Torus {
+                c, major, minor, ..
+            } => ball(c, major + minor),
+            Prim::Slab { c, half } => ball(c, half.length()),
+        }
+    }
+
+    /// The same primitive ready for repeated evaluation: reciprocals computed once (the raw
+    /// primitive's `sdf` goes through this, so values are equal bit for bit).
+    fn prepared(&self) -> Prim {
+        match *self {
+            Prim::Capsule { a, b, r } => Prim::CapsuleInv {
+                a,
+                ba: b - a,
+                inv_len2: 1.0 / (b - a).dot(b - a),
+                r,
+            },
+            Prim::Ellipsoid { c, r } => Prim::EllipsoidInv {
+                c,
+                inv: DVec3::ONE / r,
+                inv2: DVec3::ONE / (r * r),
+                rmin: r.min_element(),
+                rmax: r.max_element(),
+            },
+            p => p,
+        }
+    }
+
+    /// Signed distance (Quilez's bound for ellipsoids).
     fn sdf(&self, p: DVec3) -> f64 {
+        match self {
+            Prim::Ellipsoid { .. } | Prim::Capsule { .. } => self.prepared().sdf_prepared(p),
+            _ => self.sdf_prepared(p),
+        }
+    }
+
+    /// [`Prim::sdf`] of a primitive from [`Prim::prepared`] (raw ellipsoids and capsules are
+    /// prepared on the fly).
+    #[inline]
+    fn sdf_prepared(&self, p: DVec3) -> f64 {
         match *self {
             Prim::Sphere { c, r } => (p - c).length() - r,
-            Prim::Ellipsoid { c, r } => {
+            Prim::Ellipsoid { .. } | Prim::Capsule { .. } => self.prepared().sdf_prepared(p),
+            Prim::EllipsoidInv {
+                c, inv, inv2, rmin, ..
+            } => {
                 // Quilez's bound: exact zero set, close to Euclidean near the surface.
                 let q = p - c;
-                let k0 = (q / r).length();
-                let k1 = (q / (r * r)).length();
+                let k0 = (q * inv).length();
+                let k1 = (q * inv2).length();
                 if k1 == 0.0 {
-                    -r.min_element()
+                    -rmin
                 } else {
                     k0 * (k0 - 1.0) / k1
                 }
             }
-            Prim::Capsule { a, b, r } => {
+            Prim::CapsuleInv { a, ba, inv_len2, r } => {
                 let pa = p - a;
-                let ba = b - a;
-                let h = (pa.dot(ba) / ba.dot(ba)).clamp(0.0, 1.0);
+                let h = (pa.dot(ba) * inv_len2).clamp(0.0, 1.0);
                 (pa - ba * h).length() - r
             }
             Prim::Torus {
@@ -119,7 +224,15 @@ pub struct AnalyticScene {
     special: Special,
     width: f64,
     bodies: usize,
+    /// `parts[i].prim.bound()`.
+    bounds: Vec<Bound>,
+    /// `parts[i].prim.prepared()`.
+    prepared: Vec<Prim>,
 }
+
+/// Margin (NDC units) by which a bound must exceed the running minimum before a primitive is
+/// skipped: far above the f64 rounding of either side, so skipping never changes the minimum.
+const CULL_MARGIN: f64 = 1e-9;
 
 const SKIN: [f32; 3] = [0.87, 0.68, 0.55];
 const SHIRT: [f32; 3] = [0.20, 0.40, 0.75];
@@ -336,12 +449,16 @@ impl AnalyticScene {
             ),
             _ => return None,
         };
+        let bounds = parts.iter().map(|q| q.prim.bound()).collect();
+        let prepared = parts.iter().map(|q| q.prim.prepared()).collect();
         Some(Self {
             name,
             parts,
             special,
             width: DEFAULT_WIDTH,
             bodies,
+            bounds,
+            prepared,
         })
     }
 
@@ -377,8 +494,37 @@ impl AnalyticScene {
             .fold(f64::INFINITY, f64::min)
     }
 
+    /// [`AnalyticScene::sdf`], bit for bit, skipping every primitive whose bound proves it
+    /// cannot hold the minimum. `hint` is the part to try first (the last call's nearest part:
+    /// neighbouring points share it), updated on return.
+    pub fn sdf_culled(&self, p: DVec3, hint: &mut usize) -> f64 {
+        let first = (*hint).min(self.prepared.len().saturating_sub(1));
+        let Some(q) = self.prepared.get(first) else {
+            return f64::INFINITY;
+        };
+        let mut best = q.sdf_prepared(p);
+        if best.is_nan() {
+            best = f64::INFINITY;
+        }
+        for (i, (q, b)) in self.prepared.iter().zip(&self.bounds).enumerate() {
+            if i == first || b.exceeds((p - b.c).length_squared(), best + CULL_MARGIN) {
+                continue;
+            }
+            let d = q.sdf_prepared(p);
+            if d < best {
+                best = d;
+                *hint = i;
+            }
+        }
+        best
+    }
+
     /// Reference occupancy, f64.
     pub fn occupancy64(&self, p: DVec3) -> f64 {
+        self.occupancy_from(p, self.sdf(p))
+    }
+
+    fn occupancy_from(&self, p: DVec3, sdf: f64) -> f64 {
         match self.special {
             Special::FlatHalf if p.x < FLAT_X => 0.5,
             Special::Noise => {
@@ -392,7 +538,7 @@ impl AnalyticScene {
                     0.5 * sigmoid(-(r - NOISE_R) / self.width)
                 }
             }
-            _ => sigmoid(-self.sdf(p) / self.width),
+            _ => sigmoid(-sdf / self.width),
         }
     }
 
@@ -450,9 +596,12 @@ fn sigmoid(x: f64) -> f64 {
 }
 
 impl OccupancyField for AnalyticScene {
+    /// [`AnalyticScene::occupancy64`] rounded to f32 (the same values; the SDF is culled).
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        let mut hint = 0;
         for (o, p) in out.iter_mut().zip(points) {
-            *o = self.occupancy64(p.as_dvec3()) as f32;
+            let p = p.as_dvec3();
+            *o = self.occupancy_from(p, self.sdf_culled(p, &mut hint)) as f32;
         }
         Ok(())
     }
@@ -508,6 +657,56 @@ mod tests {
         assert!(h.sdf(DVec3::new(0.12, 0.68, 0.02)) < 0.0);
         // Arms away from the body: a point between the hand and the hip is outside.
         assert!(h.sdf(DVec3::new(0.30, -0.04, 0.0)) > 0.0);
+    }
+
+    #[test]
+    fn culled_sdf_and_field_equal_the_reference_bit_for_bit() {
+        // A lattice over the cube and beyond (points in every primitive's bound, on both sides
+        // of every surface, far away), then pseudo-random points, with the hint carried from
+        // point to point as the field carries it.
+        let mut pts: Vec<DVec3> = Vec::new();
+        let m = 48;
+        for k in 0..m {
+            for j in 0..m {
+                for i in 0..m {
+                    let c = |t: usize| -1.2 + 2.4 * t as f64 / (m - 1) as f64;
+                    pts.push(DVec3::new(c(i), c(j), c(k)));
+                }
+            }
+        }
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.4 - 1.2
+        };
+        for _ in 0..50_000 {
+            pts.push(DVec3::new(next(), next(), next()));
+        }
+        pts.push(DVec3::splat(f64::NAN));
+        pts.push(DVec3::splat(1e30));
+        for n in SCENES {
+            let s = AnalyticScene::by_name(n).unwrap();
+            let mut hint = 0;
+            for p in &pts {
+                let (a, b) = (s.sdf(*p), s.sdf_culled(*p, &mut hint));
+                assert!(
+                    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                    "{n} at {p:?}: {a} vs {b}"
+                );
+            }
+            let p32: Vec<Vec3> = pts.iter().map(|p| p.as_vec3()).collect();
+            let mut got = vec![0.0f32; p32.len()];
+            s.occupancy(&p32, &mut got).unwrap();
+            for (p, g) in p32.iter().zip(&got) {
+                let want = s.occupancy64(p.as_dvec3()) as f32;
+                assert!(
+                    want.to_bits() == g.to_bits() || (want.is_nan() && g.is_nan()),
+                    "{n} at {p:?}: {want} vs {g}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -53,6 +53,17 @@ pub enum GridError {
 pub struct GridSpec {
     level: u32,
     n: usize,
+    /// `u64::MAX / n + 1`: division by `n` as a multiplication ([`div_n`]).
+    n_magic: u64,
+}
+
+/// `(q / n, q % n)` for any u32 `q`, with `magic = u64::MAX / n + 1` (Lemire, Kaser and
+/// Kurz, "Faster remainder by direct computation", 2019: exact for every 32-bit numerator
+/// and divisor): two multiplications instead of a division.
+#[inline]
+fn div_n(q: u32, n: u32, magic: u64) -> (u32, u32) {
+    let d = ((magic as u128 * q as u128) >> 64) as u32;
+    (d, q - d * n)
 }
 
 impl GridSpec {
@@ -61,9 +72,11 @@ impl GridSpec {
         if level == 0 || level > MAX_LEVEL {
             return Err(GridError::BadResolution((1usize << level.min(31)) + 1));
         }
+        let n = (1usize << level) + 1;
         Ok(Self {
             level,
-            n: (1usize << level) + 1,
+            n,
+            n_magic: u64::MAX / n as u64 + 1,
         })
     }
 
@@ -121,8 +134,12 @@ impl GridSpec {
 
     #[inline]
     pub fn unlinear(&self, idx: usize) -> [usize; 3] {
-        let n = self.n;
-        [idx % n, (idx / n) % n, idx / (n * n)]
+        // In u32 (faster divisions): every grid has fewer than 2^32 points (1025^3 at most).
+        debug_assert!(idx < self.len());
+        let (n, q) = (self.n as u32, idx as u32);
+        let (r, i) = div_n(q, n, self.n_magic);
+        let (k, j) = div_n(r, n, self.n_magic);
+        [i as usize, j as usize, k as usize]
     }
 
     /// NDC coordinate of index `i` along any axis.
@@ -218,6 +235,22 @@ impl BitSet {
     /// The raw 64-bit words (bit `i` of the set is bit `i % 64` of word `i / 64`).
     pub fn iter_ones_words(&self) -> impl Iterator<Item = u64> + '_ {
         self.words.iter().copied()
+    }
+
+    /// Call `f` on the index of every set bit (ascending) and clear them all, writing only
+    /// the words that held a bit.
+    pub fn drain_ones(&mut self, mut f: impl FnMut(usize)) {
+        for (wi, w) in self.words.iter_mut().enumerate() {
+            let mut bits = *w;
+            if bits == 0 {
+                continue;
+            }
+            while bits != 0 {
+                f(wi * 64 + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
+            }
+            *w = 0;
+        }
     }
 
     /// Indices of the set bits, ascending.
@@ -336,10 +369,14 @@ impl Grid {
     /// ([`Grid::mark_written`]).
     pub fn reset_sparse(&mut self, spec: GridSpec) {
         match self.written {
-            Some(b) if spec == self.spec && self.values.len() == spec.len() => {
-                for i in self.evaluated.iter_ones() {
-                    self.values[i] = 0.0;
-                }
+            Some(b)
+                if spec == self.spec
+                    && self.values.len() == spec.len()
+                    && self.evaluated.len() == spec.len() =>
+            {
+                // Clears `evaluated` too, touching only its non-zero words.
+                let values = &mut self.values;
+                self.evaluated.drain_ones(|i| values[i] = 0.0);
                 if !b.is_empty() {
                     let n = spec.n();
                     for k in b.lo[2]..=b.hi[2] {
@@ -353,10 +390,10 @@ impl Grid {
             _ => {
                 self.values.clear();
                 self.values.resize(spec.len(), 0.0);
+                self.evaluated.reset(spec.len());
             }
         }
         self.spec = spec;
-        self.evaluated.reset(spec.len());
         self.written = Some(IndexBox::EMPTY);
     }
 
@@ -438,6 +475,41 @@ pub fn offset(idx: [usize; 3], off: [i32; 3], stride: usize, n: usize) -> Option
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn unlinear_by_multiplication_equals_division() {
+        for level in 1..=MAX_LEVEL {
+            let spec = GridSpec::new(level).unwrap();
+            let n = spec.n();
+            let len = spec.len();
+            // Every index of the small grids; the first, last and a stride of the large ones.
+            let step = (len / 200_000).max(1);
+            for idx in (0..len).step_by(step).chain([len - 1, len / 2 + 1]) {
+                assert_eq!(
+                    spec.unlinear(idx),
+                    [idx % n, (idx / n) % n, idx / (n * n)],
+                    "n {n} idx {idx}"
+                );
+            }
+        }
+        // The divisor trick holds for every u32 numerator (edges of the range).
+        for n in [3u32, 5, 9, 17, 33, 65, 129, 257, 513, 1025] {
+            let m = u64::MAX / n as u64 + 1;
+            for q in [
+                0u32,
+                1,
+                n - 1,
+                n,
+                n + 1,
+                u32::MAX - 1,
+                u32::MAX,
+                0x8000_0000,
+                123_456_789,
+            ] {
+                assert_eq!(div_n(q, n, m), (q / n, q % n), "{q} / {n}");
+            }
+        }
+    }
 
     #[test]
     fn resolution_forms() {

@@ -118,13 +118,13 @@ fn update_hits(grid: &Grid, hits: &mut [i32], evaluated: &[u32]) {
     let plane = n * n;
     let v = &grid.values;
     for &q in evaluated {
-        let (c, k) = (q as usize % plane, (q as usize / plane) as i32);
+        let (c, k) = col_k(q, plane);
         if k > hits[c] && is_inside(v[q as usize]) {
             hits[c] = k;
         }
     }
     for &q in evaluated {
-        let (c, k) = (q as usize % plane, (q as usize / plane) as i32);
+        let (c, k) = col_k(q, plane);
         if hits[c] == k && !is_inside(v[q as usize]) {
             let mut kk = k - 1;
             while kk >= 0 && !is_inside(v[c + kk as usize * plane]) {
@@ -133,6 +133,15 @@ fn update_hits(grid: &Grid, hits: &mut [i32], evaluated: &[u32]) {
             hits[c] = kk.max(-1);
         }
     }
+}
+
+/// Column (pixel, `i + n j`) and depth index `k` of the linear grid index `q` of a grid with
+/// `plane = n * n` (one u32 division: every grid index fits in u32).
+#[inline]
+fn col_k(q: u32, plane: usize) -> (usize, i32) {
+    let p = plane as u32;
+    let k = q / p;
+    ((q - k * p) as usize, k as i32)
 }
 
 impl Renderer {
@@ -180,8 +189,9 @@ impl Renderer {
         self.final_nodes.clear();
         self.culled.clear();
         for &q in &self.hier.batch {
-            let h = self.coarse_hit[q as usize % plane];
-            if h < 0 || (q as usize / plane) as i32 >= h {
+            let (c, k) = col_k(q, plane);
+            let h = self.coarse_hit[c];
+            if h < 0 || k >= h {
                 self.final_nodes.push(q);
             } else {
                 self.culled.push(q);
@@ -196,8 +206,9 @@ impl Renderer {
             // surface in front of the hit.
             let hits = &self.hit;
             let keep = |q: usize| {
-                let h = hits[q % plane];
-                h < 0 || (q / plane) as i32 >= h
+                let (c, k) = col_k(q as u32, plane);
+                let h = hits[c];
+                h < 0 || k >= h
             };
             self.hier.conflict_loop(
                 &mut ev,
@@ -215,8 +226,9 @@ impl Renderer {
             let hits = &self.hit;
             let final_nodes = &mut self.final_nodes;
             self.culled.retain(|&q| {
-                let h = hits[q as usize % plane];
-                let release = h < 0 || (q as usize / plane) as i32 >= h;
+                let (c, k) = col_k(q, plane);
+                let h = hits[c];
+                let release = h < 0 || k >= h;
                 if release {
                     final_nodes.push(q);
                 }

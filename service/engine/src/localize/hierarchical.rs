@@ -49,7 +49,12 @@ pub struct Hierarchical {
     pub(crate) pre: Vec<f32>,
     next: Vec<u32>,
     next_pre: Vec<f32>,
+    /// Every point evaluated or queued for evaluation this frame (a superset of the grid's
+    /// `evaluated`: the coarsest level is marked in [`Hierarchical::start`]), so one bit
+    /// answers "already handled".
     queued: BitSet,
+    /// The box [`Hierarchical::upsample`] wrote (every candidate lies in it).
+    cand_box: IndexBox,
     /// A box holding every inside point of the levels done so far.
     inside: IndexBox,
 }
@@ -102,6 +107,9 @@ impl Hierarchical {
         self.queued.reset(grid.spec().len());
         self.inside = IndexBox::EMPTY;
         eval_level(ev, grid, coarse, &mut self.batch)?;
+        for &q in &self.batch {
+            self.queued.set(q as usize);
+        }
         grow_inside(&mut self.inside, grid, &self.batch);
         Ok(())
     }
@@ -118,68 +126,56 @@ impl Hierarchical {
         let spec = grid.spec();
         let n = spec.n();
         let s = spec.stride(l);
+        // Strides are powers of two: an index `i` (a multiple of `s`) is on the coarse
+        // lattice when `i / s` is even, i.e. when `i & s == 0` (no division per point).
+        debug_assert!(s.is_power_of_two());
         let s2 = 2 * s;
         self.cand.clear();
         // Every new point with an inside parent, aligned to the coarse lattice so that the
         // separable passes read only values they wrote (or zeros) at the box's edges.
         let b = self.inside.padded(s, s2, n);
+        self.cand_box = b;
         if b.is_empty() {
             return;
         }
         grid.mark_written(b);
         let v = &mut grid.values;
         let cand = &mut self.cand;
-        let mut put = |idx: usize, m: f32, v: &mut Vec<f32>| {
-            v[idx] = m;
-            if m > 0.0 && m < 1.0 {
-                cand.push(idx as u32);
-            }
-        };
         let (x0, x1) = (b.lo[0], b.hi[0]);
         let (y0, y1) = (b.lo[1], b.hi[1]);
         let (z0, z1) = (b.lo[2], b.hi[2]);
-        // Along x, in rows of coarse points.
+        // Rows run from x0 to x1, both multiples of 2s (the box is aligned); a row position
+        // t = i - x0 has the parity of i. Each row is written whole, then scanned for
+        // candidates (the same points in the same order as one point at a time).
+        let len = x1 - x0 + 1;
+        // Along x, in rows of coarse points: the odd positions from their even neighbours.
         for k in (z0..=z1).step_by(s2) {
             for j in (y0..=y1).step_by(s2) {
-                let row = n * (j + n * k);
-                for i in (x0 + s..x1).step_by(s2) {
-                    let m = 0.5 * (bin(v[row + i - s]) + bin(v[row + i + s]));
-                    put(row + i, m, v);
+                let base = n * (j + n * k) + x0;
+                let r = &mut v[base..base + len];
+                for t in (s..len - 1).step_by(s2) {
+                    r[t] = 0.5 * (bin(r[t - s]) + bin(r[t + s]));
                 }
+                scan(r, s, s2, base, cand);
             }
         }
         // Along y, in coarse planes: old points are binarized, x-upsampled points taken as is.
         for k in (z0..=z1).step_by(s2) {
             for j in (y0 + s..y1).step_by(s2) {
-                let r0 = n * (j - s + n * k);
-                let r1 = n * (j + s + n * k);
-                let r = n * (j + n * k);
-                for i in (x0..=x1).step_by(s) {
-                    let m = if (i / s).is_multiple_of(2) {
-                        0.5 * (bin(v[r0 + i]) + bin(v[r1 + i]))
-                    } else {
-                        0.5 * (v[r0 + i] + v[r1 + i])
-                    };
-                    put(r + i, m, v);
-                }
+                let r = n * (j + n * k) + x0;
+                let (a, out, b) = rows3(v, r - s * n, r, r + s * n, len);
+                blend(out, a, b, s, true);
+                scan(out, 0, s, r, cand);
             }
         }
-        // Along z, between coarse planes.
+        // Along z, between coarse planes (rows of odd y hold no old points).
         let plane = n * n;
         for k in (z0 + s..z1).step_by(s2) {
             for j in (y0..=y1).step_by(s) {
-                let even_j = (j / s).is_multiple_of(2);
-                let r0 = n * j + plane * (k - s);
-                let r1 = n * j + plane * (k + s);
-                let r = n * j + plane * k;
-                for i in (x0..=x1).step_by(s) {
-                    let m = if even_j && (i / s).is_multiple_of(2) {
-                        0.5 * (bin(v[r0 + i]) + bin(v[r1 + i]))
-                    } else {
-                        0.5 * (v[r0 + i] + v[r1 + i])
-                    };
-                    put(r + i, m, v);
-                }
+                let r = n * j + plane * k + x0;
+                let (a, out, b) = rows3(v, r - s * plane, r, r + s * plane, len);
+                blend(out, a, b, s, j & s == 0);
+                scan(out, 0, s, r, cand);
             }
         }
     }
@@ -191,12 +187,33 @@ impl Hierarchical {
         let (n, s) = (spec.n(), spec.stride(l));
         self.batch.clear();
         self.pre.clear();
+        let b = self.cand_box;
+        if !b.is_empty() && (0..3).all(|a| b.lo[a] >= s && b.hi[a] + s < n) {
+            // Every candidate is at least a stride from the border: its ring is the same
+            // linear offsets everywhere (same order as below).
+            let ring: [isize; 27] = std::array::from_fn(|r| {
+                let o = RING26.get(r).copied().unwrap_or([0, 0, 0]);
+                let (n, s) = (n as isize, s as isize);
+                s * (o[0] as isize + n * (o[1] as isize + n * o[2] as isize))
+            });
+            for &c in &self.cand {
+                for d in ring {
+                    let ql = (c as isize + d) as usize;
+                    if !self.queued.get(ql) && keep(ql) {
+                        self.queued.set(ql);
+                        self.batch.push(ql as u32);
+                        self.pre.push(grid.values[ql]);
+                    }
+                }
+            }
+            return;
+        }
         for &c in &self.cand {
             let ci = spec.unlinear(c as usize);
             for off in RING26.iter().chain(std::iter::once(&[0, 0, 0])) {
                 if let Some(q) = offset(ci, *off, s, n) {
                     let ql = spec.linear(q);
-                    if !grid.evaluated.get(ql) && !self.queued.get(ql) && keep(ql) {
+                    if !self.queued.get(ql) && keep(ql) {
                         self.queued.set(ql);
                         self.batch.push(ql as u32);
                         self.pre.push(grid.values[ql]);
@@ -249,7 +266,7 @@ impl Hierarchical {
                         continue;
                     };
                     let ql = spec.linear(q);
-                    if grid.evaluated.get(ql) || self.queued.get(ql) || !keep(ql) {
+                    if self.queued.get(ql) || !keep(ql) {
                         continue;
                     }
                     let assumed = grid.values[ql];
@@ -271,6 +288,71 @@ impl Hierarchical {
             }
             std::mem::swap(&mut self.batch, &mut self.next);
             std::mem::swap(&mut self.pre, &mut self.next_pre);
+        }
+    }
+}
+
+/// Rows `a`, `o`, `b` of `len` values of `v` (`a + len <= o`, `o + len <= b`), `o` mutable.
+fn rows3(v: &mut [f32], a: usize, o: usize, b: usize, len: usize) -> (&[f32], &mut [f32], &[f32]) {
+    let (lo, hi) = v.split_at_mut(o);
+    let (out, rest) = hi.split_at_mut(len);
+    (&lo[a..a + len], out, &rest[b - o - len..b - o])
+}
+
+/// `out[t] = (a[t] + b[t]) / 2` at row positions `t = 0, s, 2s, ...`, with `a` and `b`
+/// binarized at the positions on the coarse lattice (multiples of `2s`) when `bin_even`.
+/// Rows of stride 1 run as contiguous slices (vectorized).
+fn blend(out: &mut [f32], a: &[f32], b: &[f32], s: usize, bin_even: bool) {
+    let len = out.len();
+    if s > 1 {
+        for t in (0..len).step_by(s) {
+            out[t] = if bin_even && t & s == 0 {
+                0.5 * (bin(a[t]) + bin(b[t]))
+            } else {
+                0.5 * (a[t] + b[t])
+            };
+        }
+    } else if bin_even {
+        let pairs = len / 2;
+        for ((o, a), b) in out[..2 * pairs]
+            .chunks_exact_mut(2)
+            .zip(a.chunks_exact(2))
+            .zip(b.chunks_exact(2))
+        {
+            o[0] = 0.5 * (bin(a[0]) + bin(b[0]));
+            o[1] = 0.5 * (a[1] + b[1]);
+        }
+        if len % 2 == 1 {
+            out[len - 1] = 0.5 * (bin(a[len - 1]) + bin(b[len - 1]));
+        }
+    } else {
+        for ((o, a), b) in out.iter_mut().zip(a).zip(b) {
+            *o = 0.5 * (a + b);
+        }
+    }
+}
+
+/// Push `base + t` for the row positions `t = first, first + step, ...` holding a fractional
+/// value (a boundary candidate).
+fn scan(row: &[f32], first: usize, step: usize, base: usize, cand: &mut Vec<u32>) {
+    let frac = |m: f32| (m > 0.0) & (m < 1.0);
+    if step == 1 && first == 0 {
+        // Most of a row is 0 or 1: test 16 values at once (vectorized), then look closer.
+        const W: usize = 16;
+        for (c, chunk) in row.chunks(W).enumerate() {
+            if chunk.iter().fold(false, |a, &m| a | frac(m)) {
+                for (t, &m) in chunk.iter().enumerate() {
+                    if frac(m) {
+                        cand.push((base + c * W + t) as u32);
+                    }
+                }
+            }
+        }
+        return;
+    }
+    for t in (first..row.len()).step_by(step) {
+        if frac(row[t]) {
+            cand.push((base + t) as u32);
         }
     }
 }
