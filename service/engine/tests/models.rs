@@ -157,6 +157,19 @@ fn fourier_models_match_pytorch_golden_vectors() {
     for name in &names {
         let g = Golden::load(&format!("shape-{name}"));
         let net = FourierNet::load(&models_dir(), name, Precision::F32).unwrap();
+        // The depth frame the file declares is the one its run trained in (runs before the
+        // `--depth-frame` option: camera).
+        let text = std::fs::read_to_string(models_dir().join("models.json")).unwrap();
+        let cards: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let trained = cards[format!("shape-{name}")]["budget"]["args"]["depth_frame"]
+            .as_str()
+            .unwrap_or("camera")
+            .to_string();
+        assert_eq!(
+            net.depth_frame.name(),
+            trained,
+            "{name}: volcap.depth_frame"
+        );
         let (x, _) = golden_input(&g);
         let maps = net.maps(&x).unwrap();
         let c = 2 * net.k + 1;

@@ -37,6 +37,20 @@ impl RayIntervals {
         &self.z[self.offsets[p] as usize..self.offsets[p + 1] as usize]
     }
 
+    /// The mean depth (render-view NDC z) of everything the rays hold: the sum over pixels of
+    /// `int z dz` over the sum of `int dz`; `None` when no ray holds anything. The training
+    /// side's `fourier.body_depth_centre` is the same mean over the crop's maps (the frame of
+    /// `volcap.depth_frame = body` models).
+    pub fn mean_depth(&self) -> Option<f32> {
+        let (mut num, mut den) = (0.0f64, 0.0f64);
+        for [lo, hi] in &self.z {
+            let (lo, hi) = (*lo as f64, *hi as f64);
+            num += 0.5 * (hi * hi - lo * lo);
+            den += hi - lo;
+        }
+        (den > 0.0).then(|| (num / den) as f32)
+    }
+
     /// The most intervals on one ray.
     pub fn max_per_ray(&self) -> usize {
         self.offsets
@@ -210,6 +224,27 @@ pub fn fourier_maps(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mean_depth_weights_each_interval_by_its_length() {
+        // 2x1 pixels: [-0.5, -0.1] and [0.2, 0.4] on the first ray, nothing on the second.
+        let r = RayIntervals {
+            width: 2,
+            height: 1,
+            offsets: vec![0, 2, 2],
+            z: vec![[-0.5, -0.1], [0.2, 0.4]],
+        };
+        let want = (0.5 * (0.01 - 0.25) + 0.5 * (0.16 - 0.04)) / (0.4 + 0.2);
+        let got = r.mean_depth().unwrap() as f64;
+        assert!((got - want).abs() < 1e-6, "{got} vs {want}");
+        let empty = RayIntervals {
+            width: 1,
+            height: 1,
+            offsets: vec![0, 0],
+            z: vec![],
+        };
+        assert_eq!(empty.mean_depth(), None);
+    }
 
     #[test]
     fn clip_line_hits_and_misses() {

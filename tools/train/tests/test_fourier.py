@@ -139,3 +139,30 @@ def test_first_moment_converges_to_the_box_integral():
     # A box symmetric about z = 0 has no first moment at any order.
     sym = FO.interval_coeffs(torch.tensor([-0.4]).double(), torch.tensor([0.4]).double(), 15)
     assert FO.first_moment(sym, 15, dim=-1).abs().item() < 1e-12
+
+
+def test_centring_moves_each_image_to_zero_mean_depth_and_keeps_the_labels():
+    # Two images of 2x3 rays: boxes at different depths (image 0 mostly in front, image 1
+    # behind, one empty ray), K = 31 so the series is close to the boxes.
+    k = 31
+    lo = torch.tensor([[[0.1, 0.2, 0.0], [0.3, -0.1, 0.15]], [[-0.6, -0.5, -0.4], [-0.55, 0.0, -0.45]]])
+    hi = lo + torch.tensor([[[0.3, 0.2, 0.0], [0.25, 0.4, 0.2]], [[0.3, 0.25, 0.2], [0.35, 0.0, 0.3]]])
+    coeff = FO.interval_coeffs(lo, hi, k).permute(0, 3, 1, 2).contiguous()
+    # The exact mean depth of each image: sum of (hi^2 - lo^2) / 2 over sum of (hi - lo).
+    want = ((hi**2 - lo**2) / 2).sum((1, 2)) / (hi - lo).sum((1, 2))
+    got = FO.body_depth_centre(coeff, k)
+    assert torch.allclose(got, want, atol=1e-3), (got, want)
+    # Points (crop NDC: zeta = 2 z) at ray (0, 0) of each image, labelled by the original boxes.
+    zeta = torch.linspace(-0.9, 0.9, 37)
+    pts = torch.zeros(2, len(zeta), 3)
+    pts[..., 2] = zeta / FO.ZETA_SCALE
+    before = torch.stack([FO.decode(coeff[b, :, 0, 0].expand(len(zeta), -1), zeta, k) for b in range(2)])
+    moved = coeff.clone()
+    shifts = FO.centre_depth(moved, pts, k)
+    assert torch.allclose(shifts, got)
+    assert FO.body_depth_centre(moved, k).abs().max() < 1e-3  # the truncated series wraps a little
+    after = torch.stack([FO.decode(moved[b, :, 0, 0].expand(len(zeta), -1), pts[b, :, 2] * FO.ZETA_SCALE, k) for b in range(2)])
+    # The same occupancy at the moved points (away from the period's wrap at |zeta| = 1).
+    keep = (pts[..., 2] * FO.ZETA_SCALE).abs() < 0.95
+    assert (after - before)[keep].abs().max() < 1e-4
+    assert torch.isfinite(moved).all()

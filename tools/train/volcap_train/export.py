@@ -310,7 +310,9 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     k = net.k
     base = f"shape-{name}"
     size = 128
-    meta = {"kind": "shape-fourier", "variant": variant, "input_size": 256, "fourier_k": k, "coeff_size": size, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": name}
+    meta = {"kind": "shape-fourier", "variant": variant, "input_size": 256, "fourier_k": k, "coeff_size": size, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": name,
+            # Where the person sits along depth (train --depth-frame; runs before it: camera).
+            "depth_frame": budget.get("args", {}).get("depth_frame", "camera")}
     path = out / f"{base}.fourier.onnx"
     export(net, (x,), ["image"], ["coeff"], path, meta, False)
     files = [path.name]
@@ -357,6 +359,11 @@ def export_overfit(run: Path, data: Path, out: Path):
 def write_card(out: Path, name: str, c: dict, data: Path):
     b = c.get("budget", {})
     a = b.get("args", {})
+    frame = (
+        "body (each image's mean occupied depth moved to the crop's z = 0 before training: the person is placed there)"
+        if a.get("depth_frame") == "body"
+        else "camera (depth as the training camera saw it)"
+    )
     lines = [
         f"# Model card: {name}",
         "",
@@ -369,6 +376,7 @@ def write_card(out: Path, name: str, c: dict, data: Path):
         f"| task | {a.get('task', name)} |",
         f"| variant | {c.get('variant', '-')} |",
         f"| family | {c.get('family', 'mlp')}{' (K = ' + str(c['fourier_k']) + ', coefficient maps 128x128, zeta = 2 * crop-NDC z)' if c.get('fourier_k') else ''} |",
+        *([f"| depth frame | {frame} |"] if c.get("fourier_k") else []),
         f"| loss | {'dense: Parseval L2 of each pixel ray (every crop pixel), + ' + a.get('point_weight', '0.1') + ' x BCE of tau (occ - 0.5) on labelled points' if c.get('fourier_k') else 'BCE on labelled points'} |",
         f"| parameters | {c['params']:,} |",
         f"| GMACs per frame (encoder) | {c['gmacs_frame']:.3f} |",

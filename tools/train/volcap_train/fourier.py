@@ -97,3 +97,34 @@ def centroid(coeff: torch.Tensor, k: int, dim: int = 1, eps: float = 1e-3):
     c0 = coeff.movedim(dim, -1)[..., 0]
     ok = c0 > eps
     return torch.where(ok, num / c0.clamp(min=eps), torch.zeros_like(c0)).clamp(-1.0, 1.0), ok
+
+
+def body_depth_centre(coeff: torch.Tensor, k: int) -> torch.Tensor:
+    """Per image of coefficient maps [B, 2K+1, H, W]: the mean depth (zeta) of all its
+    occupancy, sum over pixels of int z f dz over the sum of int f dz (each ray weighted by
+    its length; 0 for an image without occupancy)."""
+    num = 0.5 * first_moment(coeff, k, 1).sum((1, 2))
+    den = coeff[:, 0].sum((1, 2))
+    return torch.where(den > 1e-6, num / den.clamp(min=1e-6), torch.zeros_like(den))
+
+
+def centre_depth(coeff: torch.Tensor, points: torch.Tensor, k: int, chunk: int = 64) -> torch.Tensor:
+    """Move every image's occupancy along depth so that its mean depth
+    (`body_depth_centre`) is at zeta = 0, in place: the coefficient maps rotated by the shift
+    (the series of f(z + delta)) and the labelled points' crop z moved alike. Returns the
+    shifts (zeta) [B].
+
+    Why: under the weak-perspective crop, a person's depth relative to the crop's z = 0
+    plane is where the camera happened to stand (the simulator's subjects are off the orbit
+    centre; opposite views get opposite offsets), which no image shows. Only depth relative
+    to the body is learnable; the engine places the body's mean depth at z = 0."""
+    from .nets import shift_series
+
+    shifts = []
+    for s in range(0, coeff.shape[0], chunk):
+        c = coeff[s : s + chunk].float()
+        d = body_depth_centre(c, k)
+        coeff[s : s + chunk] = shift_series(c, -d.view(-1, 1, 1, 1), k).to(coeff.dtype)
+        points[s : s + chunk, :, 2] -= (d / ZETA_SCALE).view(-1, 1).to(points.dtype)
+        shifts.append(d)
+    return torch.cat(shifts) if shifts else torch.zeros(0)

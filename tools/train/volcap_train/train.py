@@ -342,6 +342,10 @@ def train_fourier(args):
     k, width, shift = fourier_variant(args.variant)
     tr = fourier_cached(args.data, "train", k)
     va = fourier_cached(args.data, "val", k)
+    if args.depth_frame == "body":
+        # Depth relative to the body (FO.centre_depth): where the camera stood is not learnable.
+        for d in (tr, va):
+            FO.centre_depth(d["coeff"], d["points"], k)
     net = FourierNet(k, width, shift)
     ohem = OhemState(len(tr["rgb"]), tr["points"].shape[1], args.ohem)
     opt = torch.optim.Adam(net.parameters(), lr=args.lr)
@@ -437,6 +441,7 @@ def main(argv=None):
     ap.add_argument("--point-weight", type=float, default=0.1)
     ap.add_argument("--centre-weight", type=float, default=1.0, help="Fourier shift variants: weight of the L1 loss on the ray's depth centre")
     ap.add_argument("--moment-weight", type=float, default=0.0, help="Fourier: weight of the L1 loss on each ray's first depth moment (depth order)")
+    ap.add_argument("--depth-frame", default="body", choices=["body", "camera"], help="Fourier: targets with each image's mean depth at z = 0 (body, fourier.centre_depth) or as the camera saw them (camera: runs before 2026-11-23 evening)")
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) when --out has none")
     ap.add_argument("--ckpt-every", type=int, default=100)

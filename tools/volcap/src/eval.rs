@@ -23,7 +23,7 @@ use volcap_engine::grid::{Grid, GridSpec};
 use volcap_engine::localize::{Localizer, Method, default_coarse};
 use volcap_engine::mesh::{Mesh, marching_cubes};
 use volcap_engine::metrics::{chamfer, iou_bits, point_to_surface, sample_surface};
-use volcap_engine::model::{FrameError, ModelView, Models, Precision};
+use volcap_engine::model::{DepthFrame, FrameError, ModelView, Models, Precision, ShapeModel};
 use volcap_sim::pose::Style;
 use volcap_sim::scene::Scene;
 use volcap_sim::sim::Simulator;
@@ -81,6 +81,40 @@ pub struct EvalArgs {
     /// Folder for eval.md, eval.json and eval.png.
     #[arg(long, default_value = "docs/eval")]
     pub out: PathBuf,
+    /// Depth frame of the comparison: `auto` (each model's own, `volcap.depth_frame`: a
+    /// `body` model places the person's mean depth at the crop's z = 0, so the truth is moved
+    /// there too; everything else, the ground-truth rows included, as the camera saw it),
+    /// or `body` / `camera` for every model.
+    #[arg(long, value_enum, default_value_t = FrameArg::Auto)]
+    pub depth_frame: FrameArg,
+}
+
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameArg {
+    Auto,
+    Body,
+    Camera,
+}
+
+/// The depth frame a model is compared in (ground-truth rows: always the camera's).
+fn frame_of(arg: FrameArg, models: &Models, truth_k: Option<usize>) -> DepthFrame {
+    match (arg, truth_k, &models.shape) {
+        (_, Some(_), _) | (FrameArg::Camera, _, _) => DepthFrame::Camera,
+        (FrameArg::Body, _, _) => DepthFrame::Body,
+        (FrameArg::Auto, None, ShapeModel::Fourier(f)) => f.depth_frame,
+        (FrameArg::Auto, None, ShapeModel::Mlp(_)) => DepthFrame::Camera,
+    }
+}
+
+/// Input-NDC depth by which the truth is moved into `frame`: the truth's mean occupied depth
+/// (`RayIntervals::mean_depth`, the trainer's `fourier.body_depth_centre`) for `body`, 0 for
+/// `camera`. Under a weak-perspective crop the image does not show where the camera stood
+/// along depth; a body-frame model is judged on everything else.
+fn depth_shift(frame: DepthFrame, c: &Case) -> f32 {
+    match frame {
+        DepthFrame::Camera => 0.0,
+        DepthFrame::Body => c.rays.mean_depth().unwrap_or(0.0),
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -107,6 +141,8 @@ pub struct ModelRow {
     pub model: String,
     /// "mlp" (encoder + point MLP) or "fourier".
     pub family: String,
+    /// The depth frame of the comparison: "camera" or "body" (see `--depth-frame`).
+    pub depth_frame: String,
     pub images: usize,
     pub failed: usize,
     pub chamfer_cm: f64,
@@ -237,11 +273,16 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
 struct OracleInCrop<'a> {
     oracle: &'a volcap_sim::oracle::SceneField,
     crop: volcap_engine::model::preprocess::Crop,
+    /// Input-NDC depth added before the lookup ([`depth_shift`]).
+    dz: f32,
 }
 
 impl OccupancyField for OracleInCrop<'_> {
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), volcap_engine::FieldError> {
-        let moved: Vec<Vec3> = points.iter().map(|p| self.crop.to_input(*p)).collect();
+        let moved: Vec<Vec3> = points
+            .iter()
+            .map(|p| self.crop.to_input(*p) + Vec3::Z * self.dz)
+            .collect();
         self.oracle.occupancy(&moved, out)
     }
 }
@@ -267,6 +308,7 @@ fn run_case(
     truth: &mut Grid,
     gt_mask: bool,
     truth_k: Option<usize>,
+    dz: f32,
 ) -> anyhow::Result<ImageRow> {
     let mut row = ImageRow {
         model: label.into(),
@@ -347,6 +389,7 @@ fn run_case(
         &OracleInCrop {
             oracle: &c.oracle,
             crop,
+            dz,
         },
         spec,
         default_coarse(spec),
@@ -362,7 +405,7 @@ fn run_case(
     }
     let cam = c.oracle.camera.projector();
     for v in &mut mesh.vertices {
-        *v = cam.ndc_to_world(crop.to_input(*v));
+        *v = cam.ndc_to_world(crop.to_input(*v) + Vec3::Z * dz);
     }
     let pred = sample_surface(&mesh, 10_000, 1);
     let gt = sample_surface(&c.gt_mesh, 10_000, 2);
@@ -418,16 +461,26 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             *prec,
         )?;
         pb.set_message(label.clone());
+        let frame = frame_of(a.depth_frame, &models, truth_k);
         if let Some(c) = cases.first().filter(|_| a.turntable && truth_k.is_none()) {
             std::fs::create_dir_all(&a.out).with_context(|| format!("{}", a.out.display()))?;
             let path = a.out.join(format!("turntable-{label}.png"));
-            turntable(&models, c, a.turntable_res, &path)
+            turntable(&models, c, a.turntable_res, depth_shift(frame, c), &path)
                 .with_context(|| format!("turntable of {label}"))?;
         }
         let start = images.len();
         for c in &cases {
             let row = run_case(
-                &models, &label, c, spec, &mut loc, &mut grid, &mut truth, a.gt_mask, truth_k,
+                &models,
+                &label,
+                c,
+                spec,
+                &mut loc,
+                &mut grid,
+                &mut truth,
+                a.gt_mask,
+                truth_k,
+                depth_shift(frame, c),
             )
             .with_context(|| format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw))?;
             if a.json {
@@ -449,6 +502,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         let (g, mp, p) = card(&a.models_dir, name);
         let m = ModelRow {
             model: label.clone(),
+            depth_frame: frame.name().to_string(),
             family: if truth_k.is_some() {
                 "fourier (ground truth)".to_string()
             } else {
@@ -503,7 +557,10 @@ fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) -> String {
          Pipeline: segmentation -> crop -> shape encoder -> hierarchical localization at {}^3 -> marching cubes.\n\
          Chamfer / P2S in cm against the ground-truth clothed mesh (10k surface samples each); IoU against the\n\
          simulator's occupancy oracle on the same grid; mask IoU of the segmentation; worst-10 = mean of the 10\n\
-         worst images (a failed image counts as infinitely far). Times are per frame on this machine.\n",
+         worst images (a failed image counts as infinitely far). Times are per frame on this machine.\n\n\
+         Depth frame: `camera` compares depth as the camera saw it; `body` first moves the truth so that\n\
+         its mean occupied depth is at the crop's z = 0, where a body-frame model places the person (a\n\
+         weak-perspective crop does not show where the camera stood along depth).\n",
         a.subjects.join(","),
         a.poses,
         a.views,
@@ -526,9 +583,10 @@ fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) -> String {
     for m in summary {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {:.0} | {:.1} | {:.1} | {:.0} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} | {}/{} |",
+            "| {} | {}, {} frame | {} | {} | {} | {:.0} | {:.1} | {:.1} | {:.0} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} | {}/{} |",
             m.model,
             m.family,
+            m.depth_frame,
             m.params
                 .map(|p| p.to_string())
                 .unwrap_or_else(|| "-".into()),

@@ -157,6 +157,27 @@ impl FourierMaps {
     }
 }
 
+/// Where a Fourier head puts the person along depth (ONNX metadata `volcap.depth_frame`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DepthFrame {
+    /// Trained on depth as the training camera saw it (the crop's z = 0 is the middle of the
+    /// camera's near/far range): files without the key.
+    Camera,
+    /// Trained with each image's mean occupied depth moved to z = 0 (what a single
+    /// weak-perspective image can tell): the reconstruction is placed with the person's mean
+    /// depth at the crop's z = 0.
+    Body,
+}
+
+impl DepthFrame {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Camera => "camera",
+            Self::Body => "body",
+        }
+    }
+}
+
 /// The Fourier occupancy head: one image-to-image network giving the 2K+1 coefficient maps
 /// of the occupancy along every crop pixel's ray ([`fourier`]).
 pub struct FourierNet {
@@ -167,6 +188,7 @@ pub struct FourierNet {
     pub size: usize,
     /// `zeta = zeta_scale * crop-NDC z`.
     pub zeta_scale: f32,
+    pub depth_frame: DepthFrame,
 }
 
 impl FourierNet {
@@ -189,6 +211,18 @@ impl FourierNet {
                 expected: "a positive number".into(),
                 found: format!("{:?}", meta.get("volcap.zeta_scale")),
             })?;
+        let depth_frame = match meta.get("volcap.depth_frame").map(String::as_str) {
+            None | Some("camera") => DepthFrame::Camera,
+            Some("body") => DepthFrame::Body,
+            Some(other) => {
+                return Err(ModelError::Mismatch {
+                    path: path.display().to_string(),
+                    what: "metadata volcap.depth_frame".into(),
+                    expected: "\"body\" or \"camera\"".into(),
+                    found: format!("{other:?}"),
+                });
+            }
+        };
         let net = Net::load(
             &path,
             "shape-fourier",
@@ -203,6 +237,7 @@ impl FourierNet {
             k,
             size,
             zeta_scale,
+            depth_frame,
         })
     }
 

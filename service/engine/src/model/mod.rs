@@ -24,7 +24,7 @@ pub mod sample;
 use crate::field::FieldError;
 use crate::softz::{SOFTZ_BINS, soft_z};
 pub use field::{ModelField, ShapeState};
-pub use fourier::FourierNet;
+pub use fourier::{DepthFrame, FourierNet};
 
 use glam::Vec3;
 use preprocess::{Crop, INPUT_SIZE};

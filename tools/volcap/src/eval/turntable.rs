@@ -14,13 +14,16 @@ use volcap_engine::model::{ModelView, Models};
 struct OracleInView<'a> {
     oracle: &'a volcap_sim::oracle::SceneField,
     field: &'a volcap_engine::model::ModelField,
+    /// Input-NDC depth added before the lookup (the truth moved into the model's depth
+    /// frame; see `eval::depth_shift`).
+    dz: f32,
 }
 
 impl OracleInView<'_> {
     fn moved(&self, points: &[Vec3]) -> Vec<Vec3> {
         points
             .iter()
-            .map(|p| self.field.crop.to_input(self.field.to_crop(*p)))
+            .map(|p| self.field.crop.to_input(self.field.to_crop(*p)) + Vec3::Z * self.dz)
             .collect()
     }
 }
@@ -45,8 +48,15 @@ impl volcap_engine::ColorField for OracleInView<'_> {
 pub const TURNTABLE_YAWS: [f32; 4] = [0.0, 90.0, 180.0, 270.0];
 
 /// A sheet of mesh-free renders (shaded, grey background) of one case: the model's field at
-/// yaw 0/90/180/270 above the oracle's from the same views.
-pub(super) fn turntable(models: &Models, c: &Case, res: usize, path: &Path) -> anyhow::Result<()> {
+/// yaw 0/90/180/270 above the oracle's from the same views (the oracle moved by `dz` in
+/// input-NDC depth: the model's depth frame).
+pub(super) fn turntable(
+    models: &Models,
+    c: &Case,
+    res: usize,
+    dz: f32,
+    path: &Path,
+) -> anyhow::Result<()> {
     use volcap_engine::render::{RenderOptions, Renderer};
     let spec = GridSpec::from_resolution(res)?;
     let s = c.size;
@@ -71,6 +81,7 @@ pub(super) fn turntable(models: &Models, c: &Case, res: usize, path: &Path) -> a
         let truth = OracleInView {
             oracle: &c.oracle,
             field: &field,
+            dz,
         };
         for (row, (occ, colors)) in [
             (
