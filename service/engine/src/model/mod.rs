@@ -15,6 +15,9 @@
 
 mod field;
 pub mod fourier;
+mod net;
+pub use net::{InputSpec, Net};
+pub(crate) use net::{meta_of, meta_usize};
 pub mod mlp;
 mod threads;
 pub use threads::with_threads;
@@ -28,10 +31,8 @@ pub use fourier::{DepthFrame, FourierNet};
 
 use glam::Vec3;
 use preprocess::{Crop, INPUT_SIZE};
-use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
-use tract_onnx::prelude::*;
 
 /// Feature map side produced by the encoders.
 pub const FEATURE_SIZE: usize = 64;
@@ -80,213 +81,6 @@ impl Precision {
     }
 }
 
-type Plan = Arc<TypedRunnableModel>;
-
-/// One ONNX network, shape-checked at load.
-pub struct Net {
-    path: PathBuf,
-    plan: Plan,
-    meta: HashMap<String, String>,
-}
-
-/// An input of a network: name and shape, `None` for the dynamic batch dimension.
-pub struct InputSpec<'a> {
-    pub name: &'a str,
-    pub shape: &'a [Option<usize>],
-}
-
-impl Net {
-    /// Load `path`, check `volcap.kind == kind`, the inputs (names, shapes; `None` is the
-    /// dynamic batch dimension) and the output's shape.
-    pub fn load(
-        path: &Path,
-        kind: &str,
-        inputs: &[InputSpec],
-        output: &[Option<usize>],
-    ) -> Result<Net, ModelError> {
-        let p = path.display().to_string();
-        let file = |msg: String| ModelError::File {
-            path: p.clone(),
-            msg,
-        };
-        let mismatch = |what: &str, expected: String, found: String| ModelError::Mismatch {
-            path: p.clone(),
-            what: what.into(),
-            expected,
-            found,
-        };
-        if !path.is_file() {
-            return Err(file(
-                "model file not found (models are committed under models/; train with tools/train/train_all.sh)".into(),
-            ));
-        }
-        let onnx = tract_onnx::onnx();
-        let proto = onnx
-            .proto_model_for_path(path)
-            .map_err(|e| file(format!("not a readable ONNX model: {e}")))?;
-        let meta: HashMap<String, String> = proto
-            .metadata_props
-            .iter()
-            .map(|e| (e.key.clone(), e.value.clone()))
-            .collect();
-        let found_kind = meta.get("volcap.kind").cloned().unwrap_or_default();
-        if found_kind != kind {
-            return Err(mismatch(
-                "metadata volcap.kind",
-                kind.into(),
-                format!("{found_kind:?}"),
-            ));
-        }
-        let graph = proto
-            .graph
-            .as_ref()
-            .ok_or_else(|| file("no graph".into()))?;
-        // Weights that are NaN or infinite make any output meaningless, and saturating
-        // activations (sigmoid, hard-swish) can hide them from an output check: refuse them.
-        for t in &graph.initializer {
-            let bad = if t.data_type == 1 {
-                if t.raw_data.is_empty() {
-                    t.float_data.iter().find(|v| !v.is_finite()).copied()
-                } else {
-                    t.raw_data
-                        .chunks_exact(4)
-                        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                        .find(|v| !v.is_finite())
-                }
-            } else {
-                None
-            };
-            if let Some(v) = bad {
-                return Err(file(format!(
-                    "weight {:?} holds a non-finite value ({v}): broken weights",
-                    t.name
-                )));
-            }
-        }
-        let names: Vec<String> = graph.input.iter().map(|i| i.name.clone()).collect();
-        let want: Vec<String> = inputs.iter().map(|i| i.name.to_string()).collect();
-        if names != want {
-            return Err(mismatch(
-                "inputs",
-                format!("{want:?}"),
-                format!("{names:?}"),
-            ));
-        }
-        let mut model = onnx
-            .model_for_proto_model(&proto)
-            .map_err(|e| file(format!("cannot build the graph: {e}")))?;
-        let n = model.sym("n");
-        for (i, spec) in inputs.iter().enumerate() {
-            let dims: TVec<TDim> = spec
-                .shape
-                .iter()
-                .map(|d| d.map(|d| d.to_dim()).unwrap_or_else(|| n.clone().into()))
-                .collect();
-            model = model
-                .with_input_fact(i, f32::fact(dims).into())
-                .map_err(|e| {
-                    mismatch(
-                        &format!("input {}", spec.name),
-                        format!("{:?}", spec.shape),
-                        e.to_string(),
-                    )
-                })?;
-        }
-        let typed = model.into_typed().map_err(|e| {
-            let want: Vec<String> = inputs
-                .iter()
-                .map(|i| format!("{} {:?}", i.name, i.shape))
-                .collect();
-            file(format!(
-                "the graph does not accept the expected inputs ({}; None = batch): {e:#}",
-                want.join(", ")
-            ))
-        })?;
-        let fact = typed
-            .output_fact(0)
-            .map_err(|e| file(format!("no output: {e}")))?;
-        let shape: Vec<Option<usize>> = fact
-            .shape
-            .iter()
-            .map(|d| d.as_i64().and_then(|v| usize::try_from(v).ok()))
-            .collect();
-        if shape != output {
-            return Err(mismatch(
-                "output shape",
-                format!("{output:?}"),
-                format!("{shape:?}"),
-            ));
-        }
-        let plan = typed
-            .into_optimized()
-            .and_then(|m| m.into_runnable())
-            .map_err(|e| file(format!("cannot optimize: {e:#}")))?;
-        let net = Net {
-            path: path.to_path_buf(),
-            plan,
-            meta,
-        };
-        net.probe(inputs)?;
-        Ok(net)
-    }
-
-    /// Run once on a fixed probe input (0.5 everywhere, batch 1): a file whose weights are
-    /// broken (NaN, infinities) gives non-finite output for any input and is refused here,
-    /// at load, instead of publishing garbage as "running".
-    fn probe(&self, inputs: &[InputSpec]) -> Result<(), ModelError> {
-        let shapes: Vec<Vec<usize>> = inputs
-            .iter()
-            .map(|i| i.shape.iter().map(|d| d.unwrap_or(1)).collect())
-            .collect();
-        let data: Vec<Vec<f32>> = shapes
-            .iter()
-            .map(|s| vec![0.5f32; s.iter().product()])
-            .collect();
-        let args: Vec<(&[usize], &[f32])> = shapes
-            .iter()
-            .zip(&data)
-            .map(|(s, d)| (s.as_slice(), d.as_slice()))
-            .collect();
-        let out = self.run(&args)?;
-        if let Some((i, v)) = out.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-            return Err(ModelError::File {
-                path: self.path.display().to_string(),
-                msg: format!(
-                    "the probe input (0.5 everywhere) gives a non-finite output ({v} at element {i} of {}): broken weights",
-                    out.len()
-                ),
-            });
-        }
-        Ok(())
-    }
-
-    pub fn meta(&self, key: &str) -> Option<&str> {
-        self.meta.get(&format!("volcap.{key}")).map(|s| s.as_str())
-    }
-
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
-    /// Run on f32 inputs (shape, data); the first output as a flat vector.
-    pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, ModelError> {
-        let err = |msg: String| ModelError::Run {
-            path: self.path.display().to_string(),
-            msg,
-        };
-        let mut tv: TVec<TValue> = tvec![];
-        for (shape, data) in inputs {
-            let t = Tensor::from_shape(shape, data).map_err(|e| err(e.to_string()))?;
-            tv.push(t.into_tvalue());
-        }
-        let out = self.plan.run(tv).map_err(|e| err(format!("{e:#}")))?;
-        let v = out[0]
-            .to_plain_array_view::<f32>()
-            .map_err(|e| err(e.to_string()))?;
-        Ok(v.iter().copied().collect())
-    }
-}
-
 /// Depth encoding of a shape MLP.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ZEncoding {
@@ -331,43 +125,6 @@ pub struct Models {
 }
 
 pub(crate) const IMG: [Option<usize>; 4] = [Some(1), Some(4), Some(INPUT_SIZE), Some(INPUT_SIZE)];
-
-/// The `volcap.*` metadata of an ONNX file (empty when it cannot be read: loading the
-/// network then reports why).
-pub(crate) fn meta_of(path: &Path) -> HashMap<String, String> {
-    tract_onnx::onnx()
-        .proto_model_for_path(path)
-        .map(|p| {
-            p.metadata_props
-                .iter()
-                .map(|e| (e.key.clone(), e.value.clone()))
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
-/// A positive integer metadata value, or an error naming the file and key.
-pub(crate) fn meta_usize(
-    path: &Path,
-    meta: &HashMap<String, String>,
-    key: &str,
-) -> Result<usize, ModelError> {
-    if !path.is_file() {
-        return Err(ModelError::File {
-            path: path.display().to_string(),
-            msg: "model file not found (models are committed under models/; train with tools/train/train_all.sh)".into(),
-        });
-    }
-    meta.get(&format!("volcap.{key}"))
-        .and_then(|v| v.parse::<usize>().ok())
-        .filter(|v| *v > 0)
-        .ok_or_else(|| ModelError::Mismatch {
-            path: path.display().to_string(),
-            what: format!("metadata volcap.{key}"),
-            expected: "a positive integer".into(),
-            found: format!("{:?}", meta.get(&format!("volcap.{key}"))),
-        })
-}
 
 fn encoder(path: &Path, kind: &str) -> Result<(Net, usize), ModelError> {
     let channels = meta_usize(path, &meta_of(path), "feature_channels")?;
