@@ -7,8 +7,11 @@
 use crate::capture::{Backoff, Camera, CameraState, Frame, Skip, Step, Supervisor};
 use crate::config::{Config, FieldMode};
 
+mod capture_stage;
+mod encode_stage;
 mod field_stage;
 mod live;
+mod render_stage;
 mod slot;
 use glam::{Quat, Vec3};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -320,152 +323,12 @@ pub fn start(
     let mut threads = Vec::new();
 
     // Capture: the supervised camera; losses become states and placeholder frames.
-    {
-        let (sh, out, placeholders) = (shared.clone(), captured.clone(), rendered.clone());
-        threads.push(
-            std::thread::Builder::new()
-                .name("capture".into())
-                .spawn(move || {
-                    let cam = match factory() {
-                        Ok(c) => c,
-                        Err(e) => {
-                            tracing::error!("camera: {e}");
-                            sh.set_state(PipelineState::Failed(format!("camera: {e}")));
-                            return;
-                        }
-                    };
-                    let mut sup: Supervisor<dyn Camera> = Supervisor::new(cam, Backoff::default());
-                    let mut last_placeholder: Option<Instant> = None;
-                    let mut last_kind = "";
-                    let mut skips = 0u64;
-                    let mut skips_in_a_row = 0u64;
-                    while !sh.stop.load(Ordering::Relaxed) {
-                        sh.beat(0);
-                        let swap = sh
-                            .camera_swap
-                            .lock()
-                            .unwrap_or_else(|p| p.into_inner())
-                            .take();
-                        if let Some(factory) = swap {
-                            match factory() {
-                                Ok(cam) => {
-                                    sup.shutdown();
-                                    tracing::info!(source = %cam.describe(), "switching camera (config reload)");
-                                    sup = Supervisor::new(cam, Backoff::default());
-                                    last_kind = "";
-                                }
-                                Err(e) => tracing::error!(
-                                    "camera switch refused, keeping the current one: {e}"
-                                ),
-                            }
-                        }
-                        let step = sup.step(Duration::from_millis(200));
-                        {
-                            let mut st = sh.camera.lock().unwrap_or_else(|p| p.into_inner());
-                            camera_status_from(&sup, &mut st);
-                            if let Step::Skipped(s) = &step {
-                                match s {
-                                    Skip::Truncated(_) => st.truncated += 1,
-                                    Skip::Corrupt(_) => st.corrupt += 1,
-                                }
-                            }
-                        }
-                        match step {
-                            Step::Frame(f) => {
-                                skips_in_a_row = 0;
-                                if last_kind != "running" {
-                                    tracing::info!(source = %sup.describe(), "camera running");
-                                    last_kind = "running";
-                                }
-                                sh.stats[stage::CAPTURE].record(f.at.elapsed().as_secs_f64() * 1e3);
-                                if out.put(f) {
-                                    sh.stats[stage::CAPTURE].dropped.fetch_add(1, Ordering::Relaxed);
-                                }
-                            }
-                            Step::Skipped(s) => {
-                                skips += 1;
-                                skips_in_a_row += 1;
-                                if skips <= 10 || skips.is_power_of_two() {
-                                    tracing::warn!(skipped = skips, "camera frame skipped: {s:?}");
-                                }
-                                // Nothing decodable for a while (a folder of bad files, a
-                                // garbled stream): say so, with a placeholder (which also
-                                // lets systemd see the daemon up), instead of "starting".
-                                if skips_in_a_row >= SKIPS_DEGRADE {
-                                    let why = format!(
-                                        "no decodable frame from {}: {skips_in_a_row} skipped in a row (last: {})",
-                                        sup.describe(),
-                                        match &s {
-                                            Skip::Truncated(m) | Skip::Corrupt(m) => m,
-                                        }
-                                    );
-                                    sh.set_state(PipelineState::Degraded(why.clone()));
-                                    if last_placeholder
-                                        .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
-                                    {
-                                        last_placeholder = Some(Instant::now());
-                                        let live = sh.live();
-                                        placeholders.put(Rendered {
-                                            index: 0,
-                                            at: Instant::now(),
-                                            rgba: crate::placeholder::frame(
-                                                live.resolution,
-                                                live.background,
-                                                "NO USABLE FRAME",
-                                                &why,
-                                            ),
-                                            size: live.resolution,
-                                            placeholder: true,
-                                        });
-                                    }
-                                }
-                            }
-                            Step::State(state) => {
-                                let (kind, why) = match &state {
-                                    CameraState::Lost { fault, retry_in } => (
-                                        fault.kind(),
-                                        format!(
-                                            "camera lost: {fault}; retrying in {:.1} s",
-                                            retry_in.as_secs_f32()
-                                        ),
-                                    ),
-                                    CameraState::Stopped(fault) => {
-                                        (fault.kind(), format!("camera stopped: {fault}"))
-                                    }
-                                    other => ("", format!("camera {other:?}")),
-                                };
-                                if kind != last_kind {
-                                    tracing::warn!(source = %sup.describe(), "{why}");
-                                    last_kind = kind;
-                                }
-                                sh.set_state(PipelineState::Degraded(why.clone()));
-                                if last_placeholder
-                                    .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
-                                {
-                                    last_placeholder = Some(Instant::now());
-                                    let live = sh.live();
-                                    let (size, bg) = (live.resolution, live.background);
-                                    placeholders.put(Rendered {
-                                        index: 0,
-                                        at: Instant::now(),
-                                        rgba: crate::placeholder::frame(
-                                            size,
-                                            bg,
-                                            "NO CAMERA",
-                                            &why,
-                                        ),
-                                        size,
-                                        placeholder: true,
-                                    });
-                                }
-                            }
-                        }
-                    }
-                    sup.shutdown();
-                })
-                .expect("spawning the capture thread"),
-        );
-    }
+    threads.push(capture_stage::spawn(
+        shared.clone(),
+        factory,
+        captured.clone(),
+        rendered.clone(),
+    ));
 
     // Model mode: segmentation and the encoders on threads of their own, so that frame N + 2
     // is segmented and N + 1 encoded while frame N is localized and rendered (latest wins
@@ -494,209 +357,18 @@ pub fn start(
 
     // Render: the model's field (from the field thread), the oracle field through the
     // engine's localization and renderer, or the camera frame itself.
-    {
-        let (sh, input, out) = (shared.clone(), captured.clone(), rendered.clone());
-        let fielded = fielded.clone();
-        let voxel = cfg.render.oracle_voxel_m;
-        let mode = cfg.field();
-        let eval_threads = cfg.compute.threads;
-        threads.push(
-            std::thread::Builder::new()
-                .name("render".into())
-                .spawn(move || {
-                    let mut renderer = Renderer::new();
-                    renderer.set_threads(eval_threads);
-                    let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
-                        let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
-                        sh.set_state(PipelineState::Degraded(why));
-                        if out.put(Rendered {
-                            index: f.seq,
-                            at: f.at,
-                            rgba,
-                            size,
-                            placeholder: true,
-                        }) {
-                            sh.stats[stage::RENDER]
-                                .dropped
-                                .fetch_add(1, Ordering::Relaxed);
-                        }
-                    };
-                    while !sh.stop.load(Ordering::Relaxed) {
-                        sh.beat(1);
-                        let (f, outcome) = if mode == FieldMode::Model {
-                            let Some((f, o)) = fielded.take(Duration::from_millis(200)) else {
-                                continue;
-                            };
-                            (f, Some(o))
-                        } else {
-                            let Some(f) = input.take(Duration::from_millis(200)) else {
-                                continue;
-                            };
-                            (f, None)
-                        };
-                        let live = sh.live();
-                        if live.paused {
-                            sh.set_state(PipelineState::Paused);
-                            continue;
-                        }
-                        let (size, bg) = (live.resolution, live.background);
-                        let rgba = match mode {
-                            FieldMode::Camera => {
-                                let t = Instant::now();
-                                let rgba = letterbox(&f.rgb, f.width, f.height, size);
-                                sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
-                                rgba
-                            }
-                            FieldMode::Model => {
-                                let field = match outcome {
-                                    Some(Ok(field)) => field,
-                                    Some(Err(why)) => {
-                                        degraded(why, &f, size, bg);
-                                        continue;
-                                    }
-                                    None => {
-                                        degraded(
-                                            "model mode without loaded models".into(),
-                                            &f,
-                                            size,
-                                            bg,
-                                        );
-                                        continue;
-                                    }
-                                };
-                                let Some(rgba) =
-                                    render_field(&mut renderer, &sh, &field, &field, &live)
-                                else {
-                                    continue;
-                                };
-                                rgba
-                            }
-                            FieldMode::Oracle => {
-                                let Some(truth) = &f.truth else {
-                                    degraded(
-                                        "oracle mode needs the sim camera's ground truth".into(),
-                                        &f,
-                                        size,
-                                        bg,
-                                    );
-                                    continue;
-                                };
-                                sh.people.store(truth.people, Ordering::Relaxed);
-                                if truth.people != 1 {
-                                    degraded(
-                                        if truth.people == 0 {
-                                            "no person in view".into()
-                                        } else {
-                                            format!(
-                                                "{} people in view; one is supported",
-                                                truth.people
-                                            )
-                                        },
-                                        &f,
-                                        size,
-                                        bg,
-                                    );
-                                    continue;
-                                }
-                                let t = Instant::now();
-                                let view =
-                                    orbit(&truth.gt.camera, live.yaw, live.pitch, live.distance);
-                                let Some(truth) = f.truth else { continue };
-                                let field = Arc::new(truth.gt.into_field(voxel, view));
-                                sh.stats[stage::FIELD].record(t.elapsed().as_secs_f64() * 1e3);
-                                *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
-                                    Some(field.clone());
-                                let Some(rgba) = render_field(
-                                    &mut renderer,
-                                    &sh,
-                                    field.as_ref(),
-                                    field.as_ref(),
-                                    &live,
-                                ) else {
-                                    continue;
-                                };
-                                rgba
-                            }
-                        };
-                        if out.put(Rendered {
-                            index: f.seq,
-                            at: f.at,
-                            rgba,
-                            size,
-                            placeholder: false,
-                        }) {
-                            sh.stats[stage::RENDER]
-                                .dropped
-                                .fetch_add(1, Ordering::Relaxed);
-                        }
-                        // Running only while the camera is: a frame captured before the
-                        // camera was lost must not paint over the lost state.
-                        let camera_running =
-                            sh.camera.lock().unwrap_or_else(|p| p.into_inner()).state == "running";
-                        if camera_running {
-                            sh.set_state(PipelineState::Running);
-                        }
-                    }
-                })
-                .expect("spawning the render thread"),
-        );
-    }
+    threads.push(render_stage::spawn(
+        shared.clone(),
+        captured.clone(),
+        fielded.clone(),
+        rendered.clone(),
+        cfg.render.oracle_voxel_m,
+        cfg.field(),
+        cfg.compute.threads,
+    ));
 
     // Encode + publish.
-    {
-        let (sh, input) = (shared.clone(), rendered);
-        threads.push(
-            std::thread::Builder::new()
-                .name("encode".into())
-                .spawn(move || {
-                    // Reused across frames: the JPEG input (RGBA composited over the background).
-                    let mut rgb: Vec<u8> = Vec::new();
-                    while !sh.stop.load(Ordering::Relaxed) {
-                        sh.beat(2);
-                        let Some(r) = input.take(Duration::from_millis(200)) else {
-                            continue;
-                        };
-                        let bg = sh.live().background;
-                        let t = Instant::now();
-                        // JPEG has no alpha: composite over the background colour.
-                        rgb.clear();
-                        rgb.extend(r.rgba.chunks_exact(4).flat_map(|p| {
-                            let a = p[3] as f32 / 255.0;
-                            [0, 1, 2].map(|c| {
-                                (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8
-                            })
-                        }));
-                        let mut jpeg = Vec::new();
-                        let ok = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 85)
-                            .encode(
-                                &rgb,
-                                r.size as u32,
-                                r.size as u32,
-                                image::ExtendedColorType::Rgb8,
-                            )
-                            .is_ok();
-                        if !ok {
-                            continue;
-                        }
-                        let latency_ms = r.at.elapsed().as_secs_f64() * 1e3;
-                        // Placeholders are not frames of the pipeline: not in its figures.
-                        if !r.placeholder {
-                            sh.stats[stage::ENCODE].record(t.elapsed().as_secs_f64() * 1e3);
-                            sh.e2e.record(latency_ms);
-                        }
-                        sh.published.send_replace(Some(Arc::new(Published {
-                            jpeg,
-                            rgba: r.rgba,
-                            size: r.size,
-                            index: r.index,
-                            latency_ms,
-                            placeholder: r.placeholder,
-                        })));
-                    }
-                })
-                .expect("spawning the encode thread"),
-        );
-    }
+    threads.push(encode_stage::spawn(shared.clone(), rendered));
     threads
 }
 
