@@ -1,0 +1,127 @@
+use super::*;
+
+#[test]
+fn shipped_sim_config_parses() {
+    let p = Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../board-config/sim.toml"
+    ));
+    let c = Config::load(p).unwrap();
+    assert_eq!(c.camera.backend, Backend::Sim);
+    assert!(c.http.bind.ip().is_loopback());
+    let scene = c.scene_path().unwrap();
+    assert!(scene.exists(), "{}", scene.display());
+}
+
+/// Hardening #5: numbers that passed the check and then broke the daemon.
+#[test]
+fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    for (extra, key, line) in [
+        (
+            "[http]\nheader_timeout_s = 18446744073709551615\n",
+            "http.header_timeout_s",
+            5,
+        ),
+        ("[http]\nheader_timeout_s = 0\n", "http.header_timeout_s", 5),
+        (
+            "[http]\nheader_timeout_s = 301\n",
+            "http.header_timeout_s",
+            5,
+        ),
+    ] {
+        let e = Config::parse(&format!("{base}{extra}"), Path::new("b.toml")).unwrap_err();
+        assert!(
+            e.contains(&format!("line {line}")) && e.contains(key) && e.contains("1..=300"),
+            "{extra}: {e}"
+        );
+    }
+    let e = Config::parse(
+        &format!("{base}[compute]\nthreads = 1000000\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("line 5") && e.contains("compute.threads") && e.contains("1..=64"),
+        "{e}"
+    );
+    let e = Config::parse(
+        &format!("{base}[compute]\nsegment_thread_up_to = 100\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("line 5") && e.contains("compute.segment_thread_up_to") && e.contains("100"),
+        "{e}"
+    );
+    for ok in [0, 65, 513] {
+        let c = Config::parse(
+            &format!("{base}[compute]\nsegment_thread_up_to = {ok}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.compute.segment_thread_up_to, ok);
+    }
+    let ok = Config::parse(
+        &format!("{base}[http]\nheader_timeout_s = 300\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(ok.http.header_timeout_s, 300);
+}
+
+#[test]
+fn errors_name_file_line_and_key() {
+    let e = Config::parse(
+        "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n[render]\nresolution = 100\n",
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("b.toml")
+            && e.contains("line 5")
+            && e.contains("resolution")
+            && e.contains("257"),
+        "{e}"
+    );
+    let e = Config::parse(
+        "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\nfsp = 3\n",
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(e.contains("line 4") && e.contains("fsp"), "{e}");
+    // A key of another backend names its line too.
+    let e = Config::parse(
+        "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n\nfps = 3\n",
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("line 5") && e.contains("camera.fps") && e.contains("does not apply"),
+        "{e}"
+    );
+    let e = Config::parse(
+        "[camera]\nbackend = \"v4l2\"\ndevice = \"/dev/video0\"\nwidth = 640\nheight = 480\n",
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(e.contains("camera.fps") && e.contains("required"), "{e}");
+    let e = Config::parse(
+        "[camera]\nbackend = \"file\"\npath = \"r.mjpg\"\n[render]\nfield = \"oracle\"\n",
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(e.contains("line 5") && e.contains("render.field"), "{e}");
+    let e = Config::parse(
+        "[camera]\nbackend = \"v4l9\"\nscene = \"x\"\n",
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(e.contains("v4l9"), "{e}");
+    let e = Config::parse(
+        "[camera]\nbackend = \"sim\"\nscene = \"x\"\n[http]\ntoken = \"abc\"\n",
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(e.contains("token"), "{e}");
+}
