@@ -261,8 +261,9 @@ pub struct ModelConfig {
     pub dir: PathBuf,
 }
 
+/// The best model measured (docs/eval): the Fourier head `fourier-small`.
 fn d_model() -> String {
-    "compact".into()
+    "fourier-small".into()
 }
 fn d_model_dir() -> PathBuf {
     PathBuf::from("../models")

@@ -57,7 +57,7 @@ pub struct EvalArgs {
     /// Models: NAME or NAME@int8 (files models/shape-NAME.*), comma-separated; `truth-kK`
     /// is the ground-truth Fourier field of order K (crop from the true mask): the Fourier
     /// family's upper bound at that truncation.
-    #[arg(long, value_delimiter = ',', default_value = "compact")]
+    #[arg(long, value_delimiter = ',', default_value = "fourier-small")]
     pub model: Vec<String>,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]

@@ -82,7 +82,7 @@ pub struct PipelineArgs {
     #[arg(long, value_delimiter = ',', default_value = "65,129,257")]
     pub res: Vec<usize>,
     /// Models (NAME or NAME@int8, comma-separated; models/shape-NAME.*).
-    #[arg(long = "model", value_delimiter = ',', default_value = "fourier")]
+    #[arg(long = "model", value_delimiter = ',', default_value = "fourier-small")]
     pub models: Vec<String>,
     /// Coarsest localization levels (comma-separated).
     #[arg(long = "coarse-level", value_delimiter = ',', default_value = "3")]

@@ -39,7 +39,7 @@ pub struct ReconstructArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Shape model: NAME or NAME@int8 (files models/shape-NAME.*).
-    #[arg(long, default_value = "fourier")]
+    #[arg(long, default_value = "fourier-small")]
     pub model: String,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]

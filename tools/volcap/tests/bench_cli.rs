@@ -220,8 +220,11 @@ fn pipeline_bench_measures_every_configuration() {
     assert!(rows.iter().any(|r| r["segment_thread_up_to"] == 0));
     assert!(rows.iter().any(|r| r["segment_thread_up_to"] == 65));
     let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
+    // The default model: one table row per configuration.
     assert_eq!(
-        md.lines().filter(|l| l.starts_with("| fourier |")).count(),
+        md.lines()
+            .filter(|l| l.starts_with("| fourier-small |"))
+            .count(),
         8
     );
     let png = std::fs::read(dir.join("pipeline.png")).unwrap();
