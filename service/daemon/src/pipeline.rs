@@ -1,8 +1,9 @@
 //! The real-time pipeline on dedicated threads: capture (a supervised camera backend) ->
-//! field (oracle: ground truth; camera: the frame itself) -> localization + mesh-free
-//! render -> encode -> publish. Stages are joined by bounded
-//! latest-wins slots, so latency never grows; every frame a slot overwrites is counted as a
-//! drop of the stage that produced it.
+//! segment -> field (model mode: the trained networks; oracle: ground truth; camera: the frame
+//! itself) -> localization + mesh-free render -> encode -> publish, each stage a module with
+//! `spawn` functions of one shape (`capture_stage`, `field_stage`, `render_stage`,
+//! `encode_stage`). Stages are joined by bounded latest-wins slots, so latency never grows;
+//! every frame a slot overwrites is counted as a drop of the stage that produced it.
 
 use crate::capture::{Backoff, Camera, CameraState, Frame, Skip, Step, Supervisor};
 use crate::config::{Config, FieldMode};

@@ -6,6 +6,17 @@ fn volcap() -> Command {
     Command::new(env!("CARGO_BIN_EXE_volcap"))
 }
 
+/// Run `cmd`; it must succeed (its stderr is shown otherwise). Returns its stdout.
+fn stdout_of(cmd: &mut Command) -> String {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
 /// The help states the coarse level the code uses (it is generated from the constants).
 #[test]
 fn coarse_level_help_comes_from_the_engine_constants() {
@@ -22,28 +33,19 @@ fn coarse_level_help_comes_from_the_engine_constants() {
 
 #[test]
 fn json_rows_cover_every_method_and_nothing_else_is_on_stdout() {
-    let out = volcap()
-        .args([
-            "bench",
-            "localize",
-            "--scene",
-            "sphere",
-            "--scene",
-            "capsule-human",
-            "--res",
-            "33,65",
-            "--runs",
-            "1",
-            "--json",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let text = String::from_utf8(out.stdout).unwrap();
+    let text = stdout_of(volcap().args([
+        "bench",
+        "localize",
+        "--scene",
+        "sphere",
+        "--scene",
+        "capsule-human",
+        "--res",
+        "33,65",
+        "--runs",
+        "1",
+        "--json",
+    ]));
     let rows: Vec<serde_json::Value> = text
         .lines()
         .map(|l| serde_json::from_str(l).expect("each line is JSON"))
@@ -92,27 +94,22 @@ fn json_rows_cover_every_method_and_nothing_else_is_on_stdout() {
 #[test]
 fn report_and_plot_are_written() {
     let dir = std::env::temp_dir().join(format!("volcap-bench-{}", std::process::id()));
-    let out = volcap()
-        .args([
-            "bench",
-            "localize",
-            "--scene",
-            "torus",
-            "--res",
-            "33,65",
-            "--runs",
-            "1",
-            "--methods",
-            "hierarchical,mise",
-        ])
-        .arg("--out")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    stdout_of(
+        volcap()
+            .args([
+                "bench",
+                "localize",
+                "--scene",
+                "torus",
+                "--res",
+                "33,65",
+                "--runs",
+                "1",
+                "--methods",
+                "hierarchical,mise",
+            ])
+            .arg("--out")
+            .arg(&dir),
     );
     let md = std::fs::read_to_string(dir.join("accuracy-vs-time.md")).unwrap();
     assert!(md.contains("| torus | 65 | hierarchical |"));
@@ -154,36 +151,30 @@ fn repo_root() -> std::path::PathBuf {
 #[test]
 fn pipeline_bench_measures_every_configuration() {
     let dir = std::env::temp_dir().join(format!("volcap-bench-pipeline-{}", std::process::id()));
-    let out = volcap()
-        .current_dir(repo_root())
-        .args([
-            "bench",
-            "pipeline",
-            "--res",
-            "33,65",
-            "--threads",
-            "1,2",
-            "--segment-thread-up-to",
-            "0,65",
-            "--seconds",
-            "1.5",
-            "--warmup",
-            "1",
-            "--frames",
-            "3",
-            "--json",
-            "--out",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let text = stdout_of(
+        volcap()
+            .current_dir(repo_root())
+            .args([
+                "bench",
+                "pipeline",
+                "--res",
+                "33,65",
+                "--threads",
+                "1,2",
+                "--segment-thread-up-to",
+                "0,65",
+                "--seconds",
+                "1.5",
+                "--warmup",
+                "1",
+                "--frames",
+                "3",
+                "--json",
+                "--out",
+            ])
+            .arg(&dir),
     );
-    let rows: Vec<serde_json::Value> = String::from_utf8(out.stdout)
-        .unwrap()
+    let rows: Vec<serde_json::Value> = text
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
@@ -264,17 +255,11 @@ fn pipeline_bench_names_bad_arguments() {
 /// fused) is refused by name.
 #[test]
 fn mlp_bench_reports_throughput_against_the_peak() {
-    let out = volcap()
-        .current_dir(repo_root())
-        .args(["bench", "mlp", "--points", "2000", "--runs", "1"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let text = stdout_of(
+        volcap()
+            .current_dir(repo_root())
+            .args(["bench", "mlp", "--points", "2000", "--runs", "1"]),
     );
-    let text = String::from_utf8(out.stdout).unwrap();
     let rows: Vec<&str> = text
         .lines()
         .filter(|l| l.starts_with("| ") && !l.starts_with("| what"))

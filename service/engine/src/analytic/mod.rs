@@ -56,10 +56,8 @@ pub struct AnalyticScene {
     special: Special,
     width: f64,
     bodies: usize,
-    /// `parts[i].prim.bound()`.
-    bounds: Vec<Bound>,
-    /// `parts[i].prim.prepared()`.
-    prepared: Vec<Prim>,
+    /// `parts[i].prim.prepared()` and its bound.
+    prepared: Vec<(Prim, Bound)>,
 }
 
 /// Margin (NDC units) by which a bound must exceed the running minimum before a primitive is
@@ -281,15 +279,19 @@ impl AnalyticScene {
             ),
             _ => return None,
         };
-        let bounds = parts.iter().map(|q| q.prim.bound()).collect();
-        let prepared = parts.iter().map(|q| q.prim.prepared()).collect();
+        let prepared = parts
+            .iter()
+            .map(|q| {
+                let p = q.prim.prepared();
+                (p, p.bound())
+            })
+            .collect();
         Some(Self {
             name,
             parts,
             special,
             width: DEFAULT_WIDTH,
             bodies,
-            bounds,
             prepared,
         })
     }
@@ -331,18 +333,18 @@ impl AnalyticScene {
     /// neighbouring points share it), updated on return.
     pub fn sdf_culled(&self, p: DVec3, hint: &mut usize) -> f64 {
         let first = (*hint).min(self.prepared.len().saturating_sub(1));
-        let Some(q) = self.prepared.get(first) else {
+        let Some((q, _)) = self.prepared.get(first) else {
             return f64::INFINITY;
         };
-        let mut best = q.sdf_prepared(p);
+        let mut best = q.sdf(p);
         if best.is_nan() {
             best = f64::INFINITY;
         }
-        for (i, (q, b)) in self.prepared.iter().zip(&self.bounds).enumerate() {
+        for (i, (q, b)) in self.prepared.iter().enumerate() {
             if i == first || b.exceeds((p - b.c).length_squared(), best + CULL_MARGIN) {
                 continue;
             }
-            let d = q.sdf_prepared(p);
+            let d = q.sdf(p);
             if d < best {
                 best = d;
                 *hint = i;
@@ -353,10 +355,12 @@ impl AnalyticScene {
 
     /// Reference occupancy, f64.
     pub fn occupancy64(&self, p: DVec3) -> f64 {
-        self.occupancy_from(p, self.sdf(p))
+        self.occupancy_from(p, || self.sdf(p))
     }
 
-    fn occupancy_from(&self, p: DVec3, sdf: f64) -> f64 {
+    /// The occupancy at `p` with the union's distance from `sdf`, called only where the
+    /// scene's value depends on it.
+    fn occupancy_from(&self, p: DVec3, sdf: impl FnOnce() -> f64) -> f64 {
         match self.special {
             Special::FlatHalf if p.x < FLAT_X => 0.5,
             Special::Noise => {
@@ -370,7 +374,7 @@ impl AnalyticScene {
                     0.5 * sigmoid(-(r - NOISE_R) / self.width)
                 }
             }
-            _ => sigmoid(-sdf / self.width),
+            _ => sigmoid(-sdf() / self.width),
         }
     }
 
@@ -433,7 +437,7 @@ impl OccupancyField for AnalyticScene {
         let mut hint = 0;
         for (o, p) in out.iter_mut().zip(points) {
             let p = p.as_dvec3();
-            *o = self.occupancy_from(p, self.sdf_culled(p, &mut hint)) as f32;
+            *o = self.occupancy_from(p, || self.sdf_culled(p, &mut hint)) as f32;
         }
         Ok(())
     }

@@ -81,19 +81,13 @@ impl Prim {
         };
         match *self {
             Prim::Sphere { c, r } => ball(c, r),
-            Prim::Ellipsoid { c, r } => Bound {
-                c,
-                a: r.max_element(),
-                b: r.max_element() / r.min_element(),
-                floor: 0.0,
-            },
+            Prim::Ellipsoid { .. } | Prim::Capsule { .. } => self.prepared().bound(),
             Prim::EllipsoidInv { c, rmin, rmax, .. } => Bound {
                 c,
                 a: rmax,
                 b: rmax / rmin,
                 floor: 0.0,
             },
-            Prim::Capsule { a, b, r } => ball(0.5 * (a + b), 0.5 * (b - a).length() + r),
             Prim::CapsuleInv { a, ba, r, .. } => ball(a + 0.5 * ba, 0.5 * ba.length() + r),
             Prim::Torus {
                 c, major, minor, ..
@@ -123,21 +117,13 @@ impl Prim {
         }
     }
 
-    /// Signed distance (Quilez's bound for ellipsoids).
-    pub(super) fn sdf(&self, p: DVec3) -> f64 {
-        match self {
-            Prim::Ellipsoid { .. } | Prim::Capsule { .. } => self.prepared().sdf_prepared(p),
-            _ => self.sdf_prepared(p),
-        }
-    }
-
-    /// [`Prim::sdf`] of a primitive from [`Prim::prepared`] (raw ellipsoids and capsules are
-    /// prepared on the fly).
+    /// Signed distance (Quilez's bound for ellipsoids). Raw ellipsoids and capsules are
+    /// prepared on the fly; [`Prim::prepared`] ones skip that.
     #[inline]
-    pub(super) fn sdf_prepared(&self, p: DVec3) -> f64 {
+    pub(super) fn sdf(&self, p: DVec3) -> f64 {
         match *self {
             Prim::Sphere { c, r } => (p - c).length() - r,
-            Prim::Ellipsoid { .. } | Prim::Capsule { .. } => self.prepared().sdf_prepared(p),
+            Prim::Ellipsoid { .. } | Prim::Capsule { .. } => self.prepared().sdf(p),
             Prim::EllipsoidInv {
                 c, inv, inv2, rmin, ..
             } => {
