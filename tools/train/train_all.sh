@@ -28,6 +28,20 @@ $T shape --data "$DATA" --out "$RUNS/compact-ohem-none" --variant compact --ohem
 $T shape --data "$DATA" --out "$RUNS/compact-ohem-P" --variant compact --ohem P --steps "$ABL"
 # The Fourier head: dense ray supervision (needs shards with ray_offsets/ray_z).
 $T fourier --data "$DATA" --out "$RUNS/fourier" --variant fourier --steps "${FOURIER_STEPS:-4000}" --point-weight 0.3
+# fourier-small, the default shape model, in stages (under stages/, which the export does not
+# list as models): (1) the dense ray loss alone in the body depth frame; (2) resumed with 0.1 x
+# the point term, OHEM on points and images, and augmentation; (3) the same at a lower rate.
+$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-dense" --variant fourier-small --steps 8000 --lr 1e-3 --point-weight 0 --moment-weight 1 --ohem none --no-aug --depth-frame body --points 2048
+$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-point" --variant fourier-small --steps 4000 --lr 5e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-dense/ckpt.pt"
+$T fourier --data "$DATA" --out "$RUNS/fourier-small" --variant fourier-small --steps 3000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-point/ckpt.pt"
+# fourier-small-upper: fourier-small resumed with upper bodies (the person cut by the frame's
+# lower edge) added to the training images, for close-range framing.
+$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/fourier-small/ckpt.pt"
+$T fourier --data "$DATA" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 2000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 4 --init "$RUNS/stages/fourier-small-upper-1/ckpt.pt"
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
+# fourier-small's surface level comes from a sweep on training subjects (its model card):
+#   volcap eval --subjects train --poses 1 --views 2 --res 129 --seed 7 --model fourier-small --iso-level 0.45,0.5,0.55,0.6
+$PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models --only fourier-small --iso-level "${FOURIER_SMALL_ISO:-0.55}"
+$PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5
 # The product's segmentation is MediaPipe's (pinned PyPI wheel, converted to ONNX); ours is seg-sim.onnx.
 $PY -m volcap_train.mediapipe_seg --out ../../models

@@ -594,3 +594,61 @@ fn cbn_mlps_run_fused_and_equal_tract() {
         assert!(q.fused.is_none());
     }
 }
+
+/// `volcap.iso_level`: a value outside (0, 1) or not a number is refused naming the file and
+/// the key; a valid one is what the maps read as the surface (decoded values move by
+/// `0.5 - level` against the same maps read at 0.5).
+#[test]
+fn fourier_surface_level_metadata_is_checked_and_applied() {
+    use prost::Message;
+    use tract_onnx::prelude::Framework;
+    let src = FourierNet::path(&models_dir(), "fourier", Precision::F32);
+    let with_level = |value: &str, dir: &Path| {
+        let mut m = tract_onnx::onnx().proto_model_for_path(&src).unwrap();
+        m.metadata_props.retain(|p| p.key != "volcap.iso_level");
+        let mut p = m.metadata_props[0].clone();
+        p.key = "volcap.iso_level".into();
+        p.value = value.into();
+        m.metadata_props.push(p);
+        std::fs::write(
+            FourierNet::path(dir, "fourier", Precision::F32),
+            m.encode_to_vec(),
+        )
+        .unwrap();
+    };
+    let dir = tmp("iso");
+    for bad in ["0", "1", "-0.2", "NaN", "inf", "half"] {
+        with_level(bad, &dir);
+        let e = FourierNet::load(&dir, "fourier", Precision::F32)
+            .err()
+            .unwrap_or_else(|| panic!("iso level {bad:?} was accepted"))
+            .to_string();
+        assert!(
+            e.contains("shape-fourier.fourier.onnx") && e.contains("volcap.iso_level"),
+            "{bad}: {e}"
+        );
+    }
+    with_level("0.35", &dir);
+    let low = FourierNet::load(&dir, "fourier", Precision::F32).unwrap();
+    assert_eq!(low.iso_level, 0.35);
+    let mut plain = FourierNet::load(&models_dir(), "fourier", Precision::F32).unwrap();
+    plain.iso_level = 0.5;
+    let g = Golden::load("shape-fourier");
+    let (x, _) = golden_input(&g);
+    let (a, b) = (plain.maps(&x).unwrap(), low.maps(&x).unwrap());
+    assert_eq!(b.iso_level(), 0.35);
+    let pts = points(&g);
+    let (mut oa, mut ob) = (vec![0.0; pts.len()], vec![0.0; pts.len()]);
+    a.occupancy(&pts, &mut oa, &mut Vec::new());
+    b.occupancy(&pts, &mut ob, &mut Vec::new());
+    let mut moved = 0;
+    for (u, v) in oa.iter().zip(&ob) {
+        assert!(v.is_finite() && (0.0..=1.0).contains(v));
+        if *u > 0.0 && *u < 0.85 && *v < 1.0 {
+            assert!((v - u - 0.15).abs() < 1e-5, "{u} -> {v}");
+            moved += 1;
+        }
+    }
+    assert!(moved > 10, "only {moved} points inside the clamp range");
+    std::fs::remove_dir_all(&dir).ok();
+}

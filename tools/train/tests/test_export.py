@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import onnx
 import onnxruntime as ort
 import pytest
 import torch
@@ -123,7 +124,10 @@ def test_committed_models_match_their_golden_vectors(name):
         pts = torch.from_numpy(g["points"])
         c = sample_features(torch.from_numpy(coeff), pts[None, :, :2])[0]
         k = (coeff.shape[1] - 1) // 2
-        occ = FO.decode(c, pts[:, 2] * FO.ZETA_SCALE, k).clamp(0, 1).numpy()
+        # The surface level the engine reads as 0.5 (`volcap.iso_level`, absent: 0.5).
+        meta = {p.key: p.value for p in onnx.load(str(fourier), load_external_data=False).metadata_props}
+        iso = float(meta.get("volcap.iso_level", "0.5"))
+        occ = (FO.decode(c, pts[:, 2] * FO.ZETA_SCALE, k) + (0.5 - iso)).clamp(0, 1).numpy()
         np.testing.assert_allclose(occ, g["occ"], rtol=1e-3, atol=1e-3)
         return
     feat = run(MODELS / f"{name}.encoder.onnx", {"image": x.numpy()})

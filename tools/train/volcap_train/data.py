@@ -112,6 +112,29 @@ def photometric(rgb: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
     return x.clamp(0, 1)
 
 
+def sensor(rgb: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+    """Camera effects that MakeHuman renders lack and real webcams have, per image: white
+    balance (per-channel gain), a gamma curve, defocus blur (p 0.3), sensor noise and a few
+    greyscale frames (p 0.1). Input and output [B, 3, H, W] in [0, 1]."""
+    b = rgb.shape[0]
+    wb = 0.8 + 0.4 * torch.rand(b, 3, 1, 1, generator=gen)
+    gamma = torch.exp((torch.rand(b, 1, 1, 1, generator=gen) - 0.5) * 0.7)  # 0.70 .. 1.42
+    x = (rgb * wb).clamp(0, 1).clamp_min(1e-6) ** gamma
+    blur = torch.rand(b, generator=gen) < 0.3
+    if bool(blur.any()):
+        k = torch.tensor([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
+        xb = x[blur]
+        c = xb.shape[1]
+        xb = F.conv2d(F.pad(xb, (2, 2, 0, 0), mode="replicate"), k.view(1, 1, 1, 5).repeat(c, 1, 1, 1), groups=c)
+        xb = F.conv2d(F.pad(xb, (0, 0, 2, 2), mode="replicate"), k.view(1, 1, 5, 1).repeat(c, 1, 1, 1), groups=c)
+        x[blur] = xb
+    sigma = 0.03 * torch.rand(b, 1, 1, 1, generator=gen)
+    x = x + sigma * torch.randn(x.shape, generator=gen)
+    grey = torch.rand(b, generator=gen) < 0.1
+    x[grey] = x[grey].mean(1, keepdim=True).expand(-1, 3, -1, -1)
+    return x.clamp(0, 1)
+
+
 def random_affine(rgb: torch.Tensor, mask: torch.Tensor, gen: torch.Generator, p: float = 0.5):
     """Scale/shift a fraction p of the images (tiny subjects, subjects cut by the edge)."""
     b = rgb.shape[0]

@@ -117,8 +117,16 @@ def main(argv=None):
     ap.add_argument("--runs", type=Path, required=True)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--only", nargs="*", default=None, help="run names to export (default: all present)")
+    ap.add_argument("--iso-level", default="auto", help="Fourier runs: the series level read as the surface (`volcap.iso_level`): `auto` (calibrated by point IoU on the training split, fourier.best_level) or a number in (0, 1) chosen from a sweep on training subjects (`volcap eval --subjects train --iso-level ...`)")
     ap.add_argument("--overfit", default=None, help="export only this Fourier run as the overfit test model (f32 ONNX + overfit.json: scene, frame, yaws of its training images)")
     args = ap.parse_args(argv)
+    if args.iso_level != "auto":
+        try:
+            level = float(args.iso_level)
+        except ValueError:
+            raise SystemExit(f"--iso-level {args.iso_level!r}: expected `auto` or a number in (0, 1)")
+        if not 0.0 < level < 1.0:
+            raise SystemExit(f"--iso-level {level}: must lie in (0, 1)")
     out = args.out
     if args.overfit:
         return export_overfit(args.runs / args.overfit, args.data, out)
@@ -187,7 +195,7 @@ def main(argv=None):
             continue
         variant = budget.get("args", {}).get("variant", "compact")
         if variant in FOURIER_VARIANTS:
-            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, calib, common, gen, va)
+            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, calib, common, gen, va, args.data, args.iso_level)
             continue
         if variant not in SHAPE_VARIANTS:
             continue
@@ -270,7 +278,7 @@ def ndc_to_world(cam: dict, n: torch.Tensor) -> torch.Tensor:
     return torch.linalg.solve(a, (n.double() - base).T).T
 
 
-def geometry_golden(net: FourierNet, va: Split, gi: int, gen: torch.Generator) -> dict:
+def geometry_golden(net: FourierNet, va: Split, gi: int, gen: torch.Generator, iso: float = 0.5) -> dict:
     """PyTorch's whole query at world points: world -> NDC (camera) -> crop (GT mask rule) ->
     coefficient maps -> sampled -> zeta -> basis. Points: surface +- 1, 2, 5 cm along random
     directions and uniform in the subject's box."""
@@ -290,7 +298,7 @@ def geometry_golden(net: FourierNet, va: Split, gi: int, gen: torch.Generator) -
     u = C.to_crop(ndc.float(), crop)
     with torch.no_grad():
         coeff = net(x)
-        occ = FO.decode(sample_features(coeff, u[None, :, :2])[0], u[:, 2] * FO.ZETA_SCALE, net.k)
+        occ = FO.decode(sample_features(coeff, u[None, :, :2])[0], u[:, 2] * FO.ZETA_SCALE, net.k) + (0.5 - iso)
     # The engine's field is 0 outside the mask and the crop square; so is this reference.
     mask_c = C.apply_crop(mask, crop)
     m = sample_features(mask_c[None], u[None, :, :2])[0, :, 0]
@@ -305,14 +313,42 @@ def geometry_golden(net: FourierNet, va: Split, gi: int, gen: torch.Generator) -
     }
 
 
-def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, calib, common, gen, va: Split) -> dict:
+def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96) -> tuple[float, dict]:
+    """The series level read as the surface (`volcap.iso_level`), chosen on the training
+    split (never the held-out one): the level of `fourier.ISO_LEVELS` with the best mean point
+    IoU over `images` training images (their true masks and labelled points, in the model's
+    depth frame)."""
+    from .train import fourier_cached, fourier_query
+
+    k = net.k
+    d = fourier_cached(data, "train", k)
+    n = len(d["rgb"])
+    idx = torch.arange(0, n, max(1, n // images))[:images]
+    coeff, points = d["coeff"][idx].clone(), d["points"][idx].clone()
+    if body:
+        FO.centre_depth(coeff, points, k)
+    with torch.no_grad():
+        pred = torch.cat([net(encoder_input(d["rgb"][idx[s : s + 8]].float() / 255, d["mask"][idx[s : s + 8]].float() / 255)) for s in range(0, len(idx), 8)])
+        occ = fourier_query(pred, points, k)
+    return FO.best_level(occ, d["occ"][idx] > 0.5)
+
+
+def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, calib, common, gen, va: Split, data: Path, level: str = "auto") -> dict:
     net = load_fourier(run, variant)
     k = net.k
     base = f"shape-{name}"
     size = 128
+    frame = budget.get("args", {}).get("depth_frame", "camera")
+    iso, iso_ious = calibrate_level(net, data, frame == "body")
+    iso_rule = "chosen on the training split by mean point IoU"
+    if level != "auto":
+        iso = float(level)
+        iso_rule = "set at export (`--iso-level`, from a sweep on training subjects: see the run history); mean point IoU on the training split"
     meta = {"kind": "shape-fourier", "variant": variant, "input_size": 256, "fourier_k": k, "coeff_size": size, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": name,
             # Where the person sits along depth (train --depth-frame; runs before it: camera).
-            "depth_frame": budget.get("args", {}).get("depth_frame", "camera")}
+            "depth_frame": frame,
+            # The series level read as the surface (calibrated on the training split).
+            "iso_level": f"{iso:.2f}"}
     path = out / f"{base}.fourier.onnx"
     export(net, (x,), ["image"], ["coeff"], path, meta, False)
     files = [path.name]
@@ -320,10 +356,10 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     files.append(f"{base}.fourier.int8.onnx")
     with torch.no_grad():
         coeff = net(x)
-        occ = FO.decode(sample_features(coeff, pts[None, :, :2])[0], pts[:, 2] * FO.ZETA_SCALE, k).clamp(0.0, 1.0)
+        occ = (FO.decode(sample_features(coeff, pts[None, :, :2])[0], pts[:, 2] * FO.ZETA_SCALE, k) + (0.5 - iso)).clamp(0.0, 1.0)
     iy, ix, fv = golden_sample(coeff[0], 256, gen)
     save_file({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "occ": occ.numpy()}, str(out / "golden" / f"{base}.safetensors"))
-    save_file(geometry_golden(net, va, 0, gen), str(out / "golden" / f"geometry-{base}.safetensors"))
+    save_file(geometry_golden(net, va, 0, gen, iso), str(out / "golden" / f"geometry-{base}.safetensors"))
     # A light checkpoint (weights and step, no optimizer state) for resuming training in a
     # later session: `train fourier --init models/checkpoints/shape-NAME.pt`.
     st = torch.load(run / "ckpt.pt", weights_only=False)
@@ -331,7 +367,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     torch.save({"net": net.state_dict(), "step": st["step"], "variant": variant}, out / "checkpoints" / f"{base}.pt")
     macs = count_macs(net, x)
     history = (run / "history.md").read_text() if (run / "history.md").exists() else ""
-    return {"history": history, "files": files, "variant": variant, "family": "fourier", "fourier_k": k, "params": params(net), "gmacs_frame": macs / 1e9, "macs_point": 4 * (2 * k + 1) + 4 * k, "budget": budget}
+    return {"history": history, "files": files, "variant": variant, "family": "fourier", "fourier_k": k, "iso_level": iso, "iso_rule": iso_rule, "iso_point_iou_train": iso_ious, "params": params(net), "gmacs_frame": macs / 1e9, "macs_point": 4 * (2 * k + 1) + 4 * k, "budget": budget}
 
 
 def export_overfit(run: Path, data: Path, out: Path):
@@ -377,6 +413,8 @@ def write_card(out: Path, name: str, c: dict, data: Path):
         f"| variant | {c.get('variant', '-')} |",
         f"| family | {c.get('family', 'mlp')}{' (K = ' + str(c['fourier_k']) + ', coefficient maps 128x128, zeta = 2 * crop-NDC z)' if c.get('fourier_k') else ''} |",
         *([f"| depth frame | {frame} |"] if c.get("fourier_k") else []),
+        *([f"| surface level | {c['iso_level']:.2f} of the series (`volcap.iso_level`; the engine reads it as 0.5), {c.get('iso_rule', 'chosen on the training split by mean point IoU')}: "
+           + ", ".join(f"{t:.2f}: {v:.3f}" for t, v in c['iso_point_iou_train'].items()) + " |"] if c.get("iso_level") is not None else []),
         f"| loss | {'dense: Parseval L2 of each pixel ray (every crop pixel), + ' + a.get('point_weight', '0.1') + ' x BCE of tau (occ - 0.5) on labelled points' if c.get('fourier_k') else 'BCE on labelled points'} |",
         f"| parameters | {c['params']:,} |",
         f"| GMACs per frame (encoder) | {c['gmacs_frame']:.3f} |",

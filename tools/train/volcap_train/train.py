@@ -22,7 +22,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from . import crop as C
-from .data import Split, backgrounds, photometric, random_affine
+from .data import Split, backgrounds, photometric, random_affine, sensor
 from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
@@ -60,25 +60,54 @@ def cropped_cached(root: Path, split: str):
 COEFF_SIZE = 128
 
 
-def fourier_items(split: Split, k: int, points: int = 4096):
+def cut_row(mask: torch.Tensor, keep: float) -> int | None:
+    """The last image row kept when only the top `keep` of the person's height stays in the
+    frame (a person close to the camera, cut by the frame's lower edge: a webcam's upper body);
+    None when the mask is empty."""
+    rows = torch.nonzero(mask.amax(-1) > 0.5)[:, 0]
+    if len(rows) == 0:
+        return None
+    top, bottom = int(rows.min()), int(rows.max())
+    return top + max(1, int(round(keep * (bottom - top))))
+
+
+def truncate_below(img: torch.Tensor, row: int) -> torch.Tensor:
+    """[C, H, W] with every row after `row` set to 0 (what the crop reads beyond the frame)."""
+    out = img.clone()
+    out[..., row + 1 :, :] = 0
+    return out
+
+
+def fourier_items(split: Split, k: int, points: int = 4096, keep=None):
     """Per image: the GT-mask crop (engine rule), the cropped RGB and mask (u8), the ground-truth
     coefficient maps [2K+1, 128, 128] (f16) on the crop's map grid, and labelled points in crop
     NDC. The coefficient maps are computed on the input pixel grid (intervals scaled by the
     crop, fourier.py) and resampled through the crop (bilinear, zeros outside): linear in the
-    coefficients, so a map pixel holds the mean occupancy function of its neighbourhood."""
+    coefficients, so a map pixel holds the mean occupancy function of its neighbourhood.
+
+    `keep` (image index -> fraction, or None): the upper-body variant. Only the top fraction
+    of the person stays in the frame; everything below the cut row is zero in the image, the
+    mask, the target series and the point labels (the field is what the image shows, a bust),
+    and the crop is taken from the cut mask, as the engine would on such a frame."""
     if not split.ray_offsets:
         raise ValueError(f"{split.files[0]}: shards have no ray_offsets/ray_z (regenerate with `volcap sim dataset`)")
-    rgb, mask, coeff, pts, occ, keep = [], [], [], [], [], []
+    rgb, mask, coeff, pts, occ, keep_idx = [], [], [], [], [], []
     size = split.image.shape[-1]
-    for i in tqdm(range(len(split)), desc=f"fourier targets K={k}", unit="img"):
+    for i in tqdm(range(len(split)), desc=f"fourier targets K={k}{' (cut)' if keep else ''}", unit="img"):
         m = split.mask01(i)
+        image = split.rgb01(i)
+        row = cut_row(m[0], keep(i)) if keep is not None else None
+        if row is not None:
+            m, image = truncate_below(m, row), truncate_below(image, row)
         p = C.crop_params(m[0])
         if p is None:
             continue
         s, tx, ty = p
-        rgb.append((C.apply_crop(split.rgb01(i), p) * 255).round().to(torch.uint8))
+        rgb.append((C.apply_crop(image, p) * 255).round().to(torch.uint8))
         mask.append((C.apply_crop(m, p) * 255).round().to(torch.uint8))
         full = FO.ray_coeff_maps(split.ray_offsets[i], split.ray_z[i], size, s, k)
+        if row is not None:
+            full = truncate_below(full, row)
         theta = torch.tensor([[[s, 0.0, tx], [0.0, s, ty]]], dtype=torch.float32)
         grid = F.affine_grid(theta, (1, 1, COEFF_SIZE, COEFF_SIZE), align_corners=True)
         coeff.append(F.grid_sample(full[None], grid, mode="bilinear", padding_mode="zeros", align_corners=True)[0].half())
@@ -87,11 +116,14 @@ def fourier_items(split: Split, k: int, points: int = 4096):
         # which pushes the series outward).
         n_all, half = split.points.shape[1], points // 2
         sel = torch.cat([torch.arange(half), torch.arange(n_all - (points - half), n_all)])
-        q = C.to_crop(split.points[i][sel], p)
-        pts.append(q)
-        occ.append(split.occ[i][sel])
-        keep.append(i)
-    return {"rgb": torch.stack(rgb), "mask": torch.stack(mask), "coeff": torch.stack(coeff), "points": torch.stack(pts), "occ": torch.stack(occ), "keep": torch.tensor(keep), "k": k}
+        o = split.occ[i][sel]
+        if row is not None:
+            # Input NDC y of pixel row r is -1 + 2 r / (S - 1) (crop.py): below the cut is empty.
+            o = torch.where(split.points[i][sel][:, 1] > -1 + 2 * (row + 0.5) / (size - 1), torch.zeros_like(o), o)
+        pts.append(C.to_crop(split.points[i][sel], p))
+        occ.append(o)
+        keep_idx.append(i)
+    return {"rgb": torch.stack(rgb), "mask": torch.stack(mask), "coeff": torch.stack(coeff), "points": torch.stack(pts), "occ": torch.stack(occ), "keep": torch.tensor(keep_idx), "k": k}
 
 
 def fourier_cached(root: Path, split: str, k: int):
@@ -101,6 +133,45 @@ def fourier_cached(root: Path, split: str, k: int):
     out = fourier_items(Split(root, split), k)
     torch.save(out, cache)
     return out
+
+
+UPPER_KEEP = (0.3, 0.75)
+
+
+def fourier_upper_cached(root: Path, split: str, k: int, every: int = 2):
+    """The upper-body variant (fourier_items `keep`) of every `every`-th image of a split, the
+    kept fraction drawn per image in UPPER_KEEP (seeded by the image index), cached."""
+    cache = root / f"fourier-{split}-k{k}-upper{every}-v1.pt"
+    if cache.exists():
+        return torch.load(cache)
+    sp = Split(root, split)
+    lo, hi = UPPER_KEEP
+    frac = lambda i: lo + (hi - lo) * float(torch.rand(1, generator=torch.Generator().manual_seed(1000 + i)))
+    out = fourier_items(Subset(sp, list(range(0, len(sp), every))), k, keep=frac)
+    torch.save(out, cache)
+    return out
+
+
+class Subset:
+    """Every listed image of a Split, with the accessors fourier_items reads."""
+
+    def __init__(self, split: Split, idx: list):
+        self.split, self.idx = split, idx
+        self.image, self.ray_offsets = split.image, split.ray_offsets
+        self.files = [split.files[i] for i in idx]
+        self.points = split.points[idx]
+        self.occ = split.occ[idx]
+        self.ray_z = [split.ray_z[i] for i in idx]
+        self.ray_offsets = [split.ray_offsets[i] for i in idx]
+
+    def __len__(self):
+        return len(self.idx)
+
+    def mask01(self, i):
+        return self.split.mask01(self.idx[i])
+
+    def rgb01(self, i):
+        return self.split.rgb01(self.idx[i])
 
 
 def perturb_mask(m: torch.Tensor, gen: torch.Generator, p: float = 0.5) -> torch.Tensor:
@@ -128,6 +199,18 @@ def fourier_query(coeff: torch.Tensor, pts: torch.Tensor, k: int) -> torch.Tenso
 
 def hardware():
     return {"cpu": platform.processor() or platform.machine(), "threads": torch.get_num_threads(), "torch": torch.__version__, "cuda": torch.cuda.is_available()}
+
+
+def init_weights(ckpt, path) -> dict:
+    """The net's weights (as f32) from a light checkpoint (models/checkpoints/*.pt:
+    {"net": ...}) or from a run's full one ({"modules": {"net": ...}, "opt": ...}: the
+    optimizer state is dropped); anything else is refused naming the file."""
+    weights = None
+    if isinstance(ckpt, dict):
+        weights = ckpt["net"] if "net" in ckpt else (ckpt.get("modules") or {}).get("net")
+    if not isinstance(weights, dict):
+        raise SystemExit(f"--init {path}: neither a light checkpoint (key `net`) nor a run checkpoint (key `modules.net`)")
+    return {n: v.float() for n, v in weights.items()}
 
 
 class Run:
@@ -342,6 +425,12 @@ def train_fourier(args):
     k, width, shift = fourier_variant(args.variant)
     tr = fourier_cached(args.data, "train", k)
     va = fourier_cached(args.data, "val", k)
+    if args.upper_every:
+        # Upper bodies cut by the frame's lower edge (a webcam at a desk): added to the
+        # training images (the validation set stays whole bodies, the product's eval).
+        up = fourier_upper_cached(args.data, "train", k, args.upper_every)
+        tr = {n: (torch.cat([tr[n], up[n] + (len(tr["keep"]) if n == "keep" else 0)]) if torch.is_tensor(tr[n]) else tr[n]) for n in tr}
+        print(f"training on {len(tr['rgb'])} images, {len(up['rgb'])} of them upper-body crops")
     if args.depth_frame == "body":
         # Depth relative to the body (FO.centre_depth): where the camera stood is not learnable.
         for d in (tr, va):
@@ -353,7 +442,7 @@ def train_fourier(args):
     run = Run(args.out, args)
     if args.init and not run.ckpt.exists():
         light = torch.load(args.init, weights_only=False)
-        sd = {n: v.float() for n, v in light["net"].items()}
+        sd = init_weights(light, args.init)
         own = net.state_dict()
         for n, v in sd.items():
             if n in own and own[n].shape != v.shape and own[n].shape[1:] == v.shape[1:]:
@@ -370,7 +459,7 @@ def train_fourier(args):
         rgb = d["rgb"][idx].float() / 255.0
         m = d["mask"][idx].float() / 255.0
         if g is not None:
-            rgb = photometric(rgb, g)
+            rgb = sensor(photometric(rgb, g), g)
             m = perturb_mask(m, g)
         return encoder_input(rgb, m)
 
@@ -443,7 +532,8 @@ def main(argv=None):
     ap.add_argument("--moment-weight", type=float, default=0.0, help="Fourier: weight of the L1 loss on each ray's first depth moment (depth order)")
     ap.add_argument("--depth-frame", default="body", choices=["body", "camera"], help="Fourier: targets with each image's mean depth at z = 0 (body, fourier.centre_depth) or as the camera saw them (camera: runs before 2026-11-23 evening)")
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
-    ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) when --out has none")
+    ap.add_argument("--upper-every", type=int, default=0, help="Fourier: add the upper-body variant (fourier_upper_cached: the person cut by the frame's lower edge) of every N-th training image; 0: none")
+    ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
     ap.add_argument("--ckpt-every", type=int, default=100)
     args = ap.parse_args(argv)
     if args.threads:

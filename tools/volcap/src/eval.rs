@@ -87,6 +87,11 @@ pub struct EvalArgs {
     /// or `body` / `camera` for every model.
     #[arg(long, value_enum, default_value_t = FrameArg::Auto)]
     pub depth_frame: FrameArg,
+    /// Series levels read as the surface, comma-separated, each in (0, 1): every Fourier
+    /// model is evaluated at each (rows `NAME-f32-iso0.40`) instead of its own
+    /// `volcap.iso_level`, to calibrate or show the knob. Other families ignore it.
+    #[arg(long, value_delimiter = ',')]
+    pub iso_level: Vec<f32>,
 }
 
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -143,6 +148,9 @@ pub struct ModelRow {
     pub family: String,
     /// The depth frame of the comparison: "camera" or "body" (see `--depth-frame`).
     pub depth_frame: String,
+    /// The series level read as the surface (Fourier models: `--iso-level` or the file's
+    /// `volcap.iso_level`; none for the other families and the ground-truth rows).
+    pub iso_level: Option<f32>,
     pub images: usize,
     pub failed: usize,
     pub chamfer_cm: f64,
@@ -438,6 +446,16 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         };
         specs.push((name.to_string(), prec));
     }
+    for l in &a.iso_level {
+        if !(l.is_finite() && *l > 0.0 && *l < 1.0) {
+            anyhow::bail!("--iso-level {l}: each level must lie in (0, 1)");
+        }
+    }
+    let levels: Vec<Option<f32>> = if a.iso_level.is_empty() {
+        vec![None]
+    } else {
+        a.iso_level.iter().map(|l| Some(*l)).collect()
+    };
     let cases = render_cases(a)?;
     let pb = ProgressBar::new((cases.len() * specs.len()) as u64);
     pb.set_style(
@@ -447,19 +465,34 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let mut images = Vec::new();
     let mut summary = Vec::new();
     let (mut loc, mut grid, mut truth) = (Localizer::new(), Grid::new(spec), Grid::new(spec));
-    for (name, prec) in &specs {
-        let label = format!(
-            "{name}-{}{}",
-            prec.name(),
-            if a.gt_mask { "-gtmask" } else { "" }
-        );
+    for ((name, prec), level) in specs
+        .iter()
+        .flat_map(|s| levels.iter().map(move |l| (s, *l)))
+    {
         let truth_k = truth_order(name);
         // Ground-truth fields still segment (for the mask IoU column) with the default models.
-        let models = Models::load(
+        let mut models = Models::load(
             &a.models_dir,
             if truth_k.is_some() { "compact" } else { name },
             *prec,
         )?;
+        let level = match (&mut models.shape, level) {
+            (ShapeModel::Fourier(f), Some(l)) if truth_k.is_none() => {
+                Arc::get_mut(f)
+                    .ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?
+                    .iso_level = l;
+                Some(l)
+            }
+            // Other families and the ground-truth rows once, at their own rule.
+            (_, Some(l)) if Some(l) != levels[0] => continue,
+            _ => None,
+        };
+        let label = format!(
+            "{name}-{}{}{}",
+            prec.name(),
+            if a.gt_mask { "-gtmask" } else { "" },
+            level.map(|l| format!("-iso{l:.2}")).unwrap_or_default()
+        );
         pb.set_message(label.clone());
         let frame = frame_of(a.depth_frame, &models, truth_k);
         if let Some(c) = cases.first().filter(|_| a.turntable && truth_k.is_none()) {
@@ -503,6 +536,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         let m = ModelRow {
             model: label.clone(),
             depth_frame: frame.name().to_string(),
+            iso_level: match &models.shape {
+                ShapeModel::Fourier(f) if truth_k.is_none() => Some(f.iso_level),
+                _ => None,
+            },
             family: if truth_k.is_some() {
                 "fourier (ground truth)".to_string()
             } else {

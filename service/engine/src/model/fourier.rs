@@ -76,6 +76,9 @@ pub struct FourierMaps {
     size: usize,
     zeta_scale: f32,
     data: Vec<f32>,
+    /// Added to every decoded value before the clamp: `0.5 - iso level`, so that the model's
+    /// calibrated level set becomes the 0.5 level every field is read at (0 by default).
+    offset: f32,
 }
 
 impl FourierMaps {
@@ -101,7 +104,22 @@ impl FourierMaps {
             size,
             zeta_scale,
             data,
+            offset: 0.0,
         })
+    }
+
+    /// The surface at `occ = iso` of the series instead of 0.5 (a model's calibrated level,
+    /// `volcap.iso_level`): decoded values move by `0.5 - iso`, so the rest of the engine
+    /// keeps reading "inside" as `> 0.5`. `iso` must lie in (0, 1) ([`FourierNet::load`]
+    /// checks the file's).
+    pub fn with_iso_level(mut self, iso: f32) -> Self {
+        self.offset = 0.5 - iso;
+        self
+    }
+
+    /// The level of the series that decodes as 0.5 (0.5 unless [`Self::with_iso_level`]).
+    pub fn iso_level(&self) -> f32 {
+        0.5 - self.offset
     }
 
     pub fn k(&self) -> usize {
@@ -152,7 +170,7 @@ impl FourierMaps {
             }
             // The truncated series rings past [0, 1] (Gibbs); occupancy is clamped, which
             // leaves the 0.5 level set unchanged.
-            *o = acc.clamp(0.0, 1.0);
+            *o = (acc + self.offset).clamp(0.0, 1.0);
         }
     }
 }
@@ -189,6 +207,10 @@ pub struct FourierNet {
     /// `zeta = zeta_scale * crop-NDC z`.
     pub zeta_scale: f32,
     pub depth_frame: DepthFrame,
+    /// The series level taken as the surface (metadata `volcap.iso_level`, calibrated on the
+    /// training split by the exporter; 0.5 when absent). A coefficient regression blurs thin
+    /// parts (arms, hands) below 0.5; a level under 0.5 brings them back.
+    pub iso_level: f32,
 }
 
 impl FourierNet {
@@ -223,6 +245,19 @@ impl FourierNet {
                 });
             }
         };
+        let iso_level = match meta.get("volcap.iso_level") {
+            None => 0.5,
+            Some(v) => v
+                .parse::<f32>()
+                .ok()
+                .filter(|x| x.is_finite() && *x > 0.0 && *x < 1.0)
+                .ok_or_else(|| ModelError::Mismatch {
+                    path: path.display().to_string(),
+                    what: "metadata volcap.iso_level".into(),
+                    expected: "a number in (0, 1)".into(),
+                    found: format!("{v:?}"),
+                })?,
+        };
         let net = Net::load(
             &path,
             "shape-fourier",
@@ -238,6 +273,7 @@ impl FourierNet {
             size,
             zeta_scale,
             depth_frame,
+            iso_level,
         })
     }
 
@@ -245,12 +281,12 @@ impl FourierNet {
     pub fn maps(&self, x: &[f32]) -> Result<FourierMaps, ModelError> {
         let s = INPUT_SIZE;
         let planar = self.net.run(&[(&[1, 4, s, s], x)])?;
-        FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale).ok_or_else(|| {
-            ModelError::Run {
+        FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale)
+            .map(|m| m.with_iso_level(self.iso_level))
+            .ok_or_else(|| ModelError::Run {
                 path: self.net.path().display().to_string(),
                 msg: "non-finite Fourier coefficients".into(),
-            }
-        })
+            })
     }
 }
 
@@ -346,6 +382,54 @@ mod tests {
         ];
         maps.occupancy(&pts, &mut out, &mut Vec::new());
         assert_eq!(out, [0.0; 3]);
+    }
+
+    /// A level under 0.5 widens the decoded interval by where the series crosses that level
+    /// (a blurred thin part comes back), a level above narrows it; occupancy stays in [0, 1]
+    /// and the default is the series' own 0.5 crossing.
+    #[test]
+    fn iso_level_moves_the_surface_to_that_level_of_the_series() {
+        let k = 15;
+        // A thin interval, its series scaled as a blurring regression would leave it: peak
+        // well under 1, so at 0.5 it decodes narrower than it is.
+        let c: Vec<f32> = interval_coeffs(&[[-0.1, 0.1]], k)
+            .iter()
+            .map(|v| 0.6 * *v as f32)
+            .collect();
+        let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
+        let raw = FourierMaps::from_planar(&planar, k, 2, 1.0).unwrap();
+        assert_eq!(raw.iso_level(), 0.5);
+        let width = |m: &FourierMaps| {
+            let (mut out, mut s, mut n) = ([0.0f32], Vec::new(), 0);
+            for i in 0..=2000 {
+                let z = -1.0 + 2.0 * i as f32 / 2000.0;
+                m.occupancy(&[Vec3::new(0.1, 0.1, z)], &mut out, &mut s);
+                assert!((0.0..=1.0).contains(&out[0]), "{}", out[0]);
+                n += (out[0] > 0.5) as usize;
+            }
+            n as f64 / 1000.0
+        };
+        let (w_raw, w_low, w_high) = (
+            width(&raw),
+            width(&raw.clone().with_iso_level(0.3)),
+            width(&raw.clone().with_iso_level(0.58)),
+        );
+        assert!(w_low > w_raw && w_raw > w_high, "{w_low} {w_raw} {w_high}");
+        // The level-0.3 surface is where the series equals 0.3: check one crossing in f64.
+        let series = |z: f64| -> f64 {
+            let mut b = vec![0.0f32; 2 * k + 1];
+            basis(z as f32, k, &mut b);
+            c.iter()
+                .zip(&b)
+                .map(|(x, y)| (*x as f64) * (*y as f64))
+                .sum()
+        };
+        let edge = w_low / 2.0;
+        assert!(
+            (series(edge) - 0.3).abs() < 0.02,
+            "series at the edge {}",
+            series(edge)
+        );
     }
 
     #[test]

@@ -42,10 +42,13 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
     for m in summary {
         let _ = writeln!(
             s,
-            "| {} | {}, {} frame | {} | {} | {} | {:.0} | {:.1} | {:.1} | {:.0} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} | {}/{} |",
+            "| {} | {}, {} frame{} | {} | {} | {} | {:.0} | {:.1} | {:.1} | {:.0} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} | {}/{} |",
             m.model,
             m.family,
             m.depth_frame,
+            m.iso_level
+                .map(|l| format!(", iso {l:.2}"))
+                .unwrap_or_default(),
             m.params
                 .map(|p| p.to_string())
                 .unwrap_or_else(|| "-".into()),

@@ -1,0 +1,24 @@
+"""`train --init`: a light checkpoint and a run's full checkpoint give the same weights;
+anything else is refused with the file named."""
+import pytest
+import torch
+
+from volcap_train.train import init_weights
+
+
+def test_light_and_full_checkpoints_give_the_same_weights():
+    net = {"a.weight": torch.randn(3, 2, dtype=torch.float16), "a.bias": torch.randn(3)}
+    light = {"net": net, "step": 8000}
+    full = {"modules": {"net": net}, "opt": {"state": {}}, "step": 8000}
+    a, b = init_weights(light, "light.pt"), init_weights(full, "ckpt.pt")
+    assert a.keys() == net.keys() == b.keys()
+    for k in net:
+        assert a[k].dtype == torch.float32
+        assert torch.equal(a[k], b[k])
+        assert torch.equal(a[k], net[k].float())
+
+
+@pytest.mark.parametrize("bad", [{}, {"modules": {}}, {"modules": None}, {"net": [1, 2]}, [1, 2], None])
+def test_other_files_are_refused_naming_the_file(bad):
+    with pytest.raises(SystemExit, match="somewhere/odd.pt"):
+        init_weights(bad, "somewhere/odd.pt")
