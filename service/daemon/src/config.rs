@@ -251,7 +251,8 @@ pub enum Precision {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
-    /// `compact` (the default, fast on a CPU), `large`, or another committed variant.
+    /// The shape model: `fourier-small` (the default, the best measured) or another committed
+    /// variant (`models/models.json`).
     #[serde(default = "d_model")]
     pub name: String,
     #[serde(default)]
@@ -259,6 +260,11 @@ pub struct ModelConfig {
     /// Folder with the ONNX files and model cards, relative to the config file.
     #[serde(default = "d_model_dir")]
     pub dir: PathBuf,
+    /// A second shape model for close-range framing (e.g. `fourier-small-upper`): frames
+    /// whose person the frame's lower edge cuts (an upper body at a desk) are encoded with it;
+    /// unset: `name` for every frame.
+    #[serde(default)]
+    pub close_range: Option<String>,
 }
 
 /// The best model measured (docs/eval): the Fourier head `fourier-small`.
@@ -275,6 +281,7 @@ impl Default for ModelConfig {
             name: d_model(),
             precision: Precision::F32,
             dir: d_model_dir(),
+            close_range: None,
         }
     }
 }

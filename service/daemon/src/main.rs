@@ -76,7 +76,13 @@ fn main() -> ExitCode {
             config::Precision::F32 => volcap_engine::model::Precision::F32,
             config::Precision::Int8 => volcap_engine::model::Precision::Int8,
         };
-        match volcap_engine::model::Models::load(&dir, &cfg.model.name, prec) {
+        let loaded = volcap_engine::model::Models::load(&dir, &cfg.model.name, prec).and_then(
+            |m| match &cfg.model.close_range {
+                Some(close) => m.with_close_range(&dir, close),
+                None => Ok(m),
+            },
+        );
+        match loaded {
             Ok(m) => Some(Arc::new(m)),
             Err(e) => {
                 eprintln!("volcapd: [model] in {}: {e}", cli.config.display());

@@ -508,6 +508,19 @@ fn file_backend_counts_and_skips_bad_frames() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `volcapd --check-config --config PATH`: the exit code and stderr.
+fn check_config(path: &std::path::Path) -> (Option<i32>, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
+        .args(["--check-config", "--config"])
+        .arg(path)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).to_string(),
+    )
+}
+
 /// Backends that are not built in, and bad camera keys, are configuration errors (exit 2)
 /// that say what to do.
 #[test]
@@ -519,15 +532,7 @@ fn camera_config_errors_are_clear() {
         // Real-camera backends default to the model field: point it at the committed models.
         let models = format!("\n[model]\ndir = \"{}\"\n", root().join("models").display());
         std::fs::write(dir.join("b.toml"), format!("{text}{models}")).unwrap();
-        let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
-            .args(["--check-config", "--config"])
-            .arg(dir.join("b.toml"))
-            .output()
-            .unwrap();
-        (
-            o.status.code(),
-            String::from_utf8_lossy(&o.stderr).to_string(),
-        )
+        check_config(&dir.join("b.toml"))
     };
     let (code, e) = run("[camera]\nbackend = \"file\"\npath = \"gone.mjpg\"\n");
     assert_eq!(code, Some(2));
@@ -548,5 +553,32 @@ fn camera_config_errors_are_clear() {
         assert_eq!(code, Some(2));
         assert!(e.contains("--features v4l2"), "{e}");
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `[model] close_range`: a committed model loads with the main one at `--check-config`; a
+/// missing one is a configuration error naming its file.
+#[test]
+fn close_range_model_is_checked_at_start() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-close-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |close: &str| {
+        let text = format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\n[model]\ndir = \"{}\"\nclose_range = \"{close}\"\n",
+            root().join("tests/scenes/front-walk.toml").display(),
+            root().join("models").display()
+        );
+        std::fs::write(dir.join("c.toml"), text).unwrap();
+        check_config(&dir.join("c.toml"))
+    };
+    let (code, e) = run("fourier-small-upper");
+    assert_eq!(code, Some(0), "{e}");
+    let (code, e) = run("no-such-model");
+    assert_eq!(code, Some(2), "{e}");
+    assert!(
+        e.contains("shape-no-such-model") && e.contains("c.toml"),
+        "{e}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

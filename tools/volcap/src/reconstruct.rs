@@ -41,6 +41,11 @@ pub struct ReconstructArgs {
     /// Shape model: NAME or NAME@int8 (files models/shape-NAME.*).
     #[arg(long, default_value = "fourier-small")]
     pub model: String,
+    /// Close-range shape model (e.g. `fourier-small-upper`): used instead of --model on
+    /// images whose person the image's lower edge cuts (an upper body), as `volcapd`'s
+    /// `[model] close_range`.
+    #[arg(long, value_name = "NAME")]
+    pub close_range: Option<String>,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
@@ -65,6 +70,8 @@ struct ImageReport {
     height: u32,
     people: usize,
     mask_fraction: f32,
+    /// The image cuts the person at its lower edge and --close-range encoded it.
+    close_range: bool,
     decode_ms: f64,
     segment_ms: f64,
     encode_ms: f64,
@@ -144,8 +151,17 @@ fn one(
     let name = stem(path);
     let mut info = FrameInfo::default();
     let prepared = models.prepare(&rgb, w, h, &mut info);
-    (rep.people, rep.mask_fraction, rep.segment_ms) =
-        (info.people, info.mask_fraction, info.segment_ms);
+    (
+        rep.people,
+        rep.mask_fraction,
+        rep.segment_ms,
+        rep.close_range,
+    ) = (
+        info.people,
+        info.mask_fraction,
+        info.segment_ms,
+        info.close_range,
+    );
     let save = |file: String, r: image::ImageResult<()>, rep: &mut ImageReport| {
         r.with_context(|| format!("writing {}", a.out.join(&file).display()))?;
         rep.files.push(file);
@@ -242,6 +258,10 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
         None => (a.model.as_str(), Precision::F32),
     };
     let models = Models::load(&a.models_dir, name, precision)?;
+    let models = match &a.close_range {
+        Some(close) => models.with_close_range(&a.models_dir, close)?,
+        None => models,
+    };
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let bar = if a.json {
         ProgressBar::hidden()
@@ -287,10 +307,11 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
         } else if rep.ok {
             bar.suspend(|| {
                 println!(
-                    "{}: {} people, mask {:.1} %, seg {:.0} ms, encode {:.0} ms, localize {:.0} ms, mesh {:.0} ms ({} triangles), renders {:.0} ms -> {}",
+                    "{}: {} people, mask {:.1} %{}, seg {:.0} ms, encode {:.0} ms, localize {:.0} ms, mesh {:.0} ms ({} triangles), renders {:.0} ms -> {}",
                     rep.image,
                     rep.people,
                     100.0 * rep.mask_fraction,
+                    if rep.close_range { ", cut by the frame: close-range model" } else { "" },
                     rep.segment_ms,
                     rep.encode_ms,
                     rep.localize_ms,

@@ -208,3 +208,67 @@ fn two_people_are_counted_and_the_larger_is_kept() {
         "kept mask covers subject 1: {on1} px, subject 2: {on2} px"
     );
 }
+
+/// `--close-range` / `[model] close_range`: a photo whose person the lower edge cuts is
+/// encoded with the close-range model (the field equals that model's own, and differs from
+/// the main model's); a whole body standing in a simulator frame keeps the main model.
+#[test]
+fn the_close_range_model_encodes_people_cut_by_the_frame_and_only_them() {
+    use glam::Vec3;
+    use volcap_engine::field::OccupancyField;
+    use volcap_engine::model::ModelView;
+    let dir = repo().join("models");
+    let both = Models::load(&dir, "fourier-small", Precision::F32)
+        .unwrap()
+        .with_close_range(&dir, "fourier-small-upper")
+        .unwrap();
+    let main = Models::load(&dir, "fourier-small", Precision::F32).unwrap();
+    let close = Models::load(&dir, "fourier-small-upper", Precision::F32).unwrap();
+    let occ = |m: &Models, rgb: &[u8], w: usize, h: usize| {
+        let mut info = FrameInfo::default();
+        let (img, mask, crop) = m.prepare(rgb, w, h, &mut info).unwrap();
+        let field = m.encode(&img, &mask, crop, ModelView::default()).unwrap();
+        let pts: Vec<Vec3> = (0..400)
+            .map(|i| {
+                let t = i as f32 / 400.0;
+                Vec3::new(
+                    (t * 37.0).sin() * 0.5,
+                    (t * 23.0).cos() * 0.8,
+                    (t * 11.0).sin() * 0.3,
+                )
+            })
+            .collect();
+        let mut out = vec![0.0f32; pts.len()];
+        field.occupancy(&pts, &mut out).unwrap();
+        assert!(out.iter().all(|v| v.is_finite()));
+        (info, crop, out)
+    };
+    let photo = image::open(repo().join("tests/data/real/astronaut.jpg"))
+        .unwrap()
+        .to_rgb8();
+    let (w, h) = (photo.width() as usize, photo.height() as usize);
+    let (info, crop, a) = occ(&both, photo.as_raw(), w, h);
+    assert!(crop.cut_by_frame && info.close_range, "{info:?} {crop:?}");
+    let (info_main, crop_main, b) = occ(&main, photo.as_raw(), w, h);
+    assert!(crop_main.cut_by_frame && !info_main.close_range);
+    let (_, _, c) = occ(&close, photo.as_raw(), w, h);
+    assert_eq!(a, c, "the close-range field is that model's own");
+    let differ = a
+        .iter()
+        .zip(&b)
+        .filter(|(x, y)| (*x - *y).abs() > 1e-3)
+        .count();
+    assert!(
+        differ > 10,
+        "only {differ} of 400 values differ from the main model"
+    );
+    // A whole body in view: the main model.
+    let text = std::fs::read_to_string(repo().join("tests/scenes/front-walk.toml")).unwrap();
+    let scene = Scene::parse(&text, Path::new("front-walk.toml")).unwrap();
+    let mut sim = Simulator::new(scene, Arc::new(HumanAssets::embedded().unwrap())).unwrap();
+    let f = sim.render(0).unwrap();
+    let (info, crop, a) = occ(&both, &f.rgb, f.width, f.height);
+    assert!(!crop.cut_by_frame && !info.close_range, "{info:?} {crop:?}");
+    let (_, _, b) = occ(&main, &f.rgb, f.width, f.height);
+    assert_eq!(a, b);
+}

@@ -122,6 +122,10 @@ pub struct Models {
     pub color: Arc<ColorNets>,
     pub name: String,
     pub precision: Precision,
+    /// The shape model for close-range framing (`name`, model), used instead of `shape` on
+    /// frames whose person the frame's lower edge cuts ([`preprocess::cut_by_frame`]); none:
+    /// `shape` for every frame.
+    pub close_range: Option<(String, ShapeModel)>,
 }
 
 pub(crate) const IMG: [Option<usize>; 4] = [Some(1), Some(4), Some(INPUT_SIZE), Some(INPUT_SIZE)];
@@ -337,6 +341,9 @@ pub struct FrameInfo {
     pub people: usize,
     /// Fraction of the 256x256 input that is the chosen person's mask (> 0.5).
     pub mask_fraction: f32,
+    /// The frame cuts the person at its lower edge and the close-range shape model
+    /// ([`Models::with_close_range`]) encodes it.
+    pub close_range: bool,
 }
 
 /// The render view relative to the input camera: rotation about the crop centre (yaw about
@@ -383,7 +390,17 @@ impl Models {
             color: Arc::new(ColorNets::load(dir)?),
             name: name.into(),
             precision,
+            close_range: None,
         })
+    }
+
+    /// Also load `shape-NAME.*` (at the same precision) as the close-range shape model: frames
+    /// whose person the frame's lower edge cuts are encoded with it (`FrameInfo::close_range`
+    /// says so). It must be of the same family as the main shape model's colour and crop
+    /// contract, which every committed shape model shares.
+    pub fn with_close_range(mut self, dir: &Path, name: &str) -> Result<Self, ModelError> {
+        self.close_range = Some((name.into(), ShapeModel::load(dir, name, self.precision)?));
+        Ok(self)
     }
 
     /// The soft person mask `[S, S]` of a letterboxed frame `[3, S, S]`.
@@ -417,7 +434,9 @@ impl Models {
         info.mask_fraction =
             mask.iter().filter(|&&m| m > 0.5).count() as f32 / (INPUT_SIZE * INPUT_SIZE) as f32;
         info.segment_ms = t.elapsed().as_secs_f64() * 1e3;
-        let crop = Crop::from_mask(&mask, INPUT_SIZE).ok_or(FrameError::NoPerson)?;
+        let mut crop = Crop::from_mask(&mask, INPUT_SIZE).ok_or(FrameError::NoPerson)?;
+        crop.cut_by_frame = preprocess::cut_by_frame(&mask, width, height);
+        info.close_range = crop.cut_by_frame && self.close_range.is_some();
         Ok((img, mask, crop))
     }
 
@@ -438,7 +457,17 @@ impl Models {
         Ok((field, info))
     }
 
-    /// Encode a letterboxed image `[3, S, S]` with its mask `[S, S]` through `crop`.
+    /// The shape model for a crop: the close-range one when the frame cuts the person and
+    /// one is loaded, the main one otherwise.
+    pub fn shape_for(&self, crop: &Crop) -> (&str, &ShapeModel) {
+        match &self.close_range {
+            Some((name, m)) if crop.cut_by_frame => (name, m),
+            _ => (&self.name, &self.shape),
+        }
+    }
+
+    /// Encode a letterboxed image `[3, S, S]` with its mask `[S, S]` through `crop` (the
+    /// shape model chosen by [`Models::shape_for`]).
     pub fn encode(
         &self,
         img: &[f32],
@@ -450,7 +479,7 @@ impl Models {
         let rgb_c = crop.apply(img, 3, s);
         let mask_c = crop.apply(mask, 1, s);
         let x = preprocess::encoder_input(&rgb_c, &mask_c, s);
-        let shape = match &self.shape {
+        let shape = match self.shape_for(&crop).1 {
             ShapeModel::Mlp(nets) => ShapeState::Mlp {
                 feat: nets.features(&x)?,
                 nets: nets.clone(),

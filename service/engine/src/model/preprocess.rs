@@ -68,6 +68,21 @@ fn letterbox_geometry(w: usize, h: usize) -> (f32, usize, usize, usize, usize) {
     (scale, fw, fh, (s - fw) / 2, (s - fh) / 2)
 }
 
+/// Whether the person of a `[S, S]` mask (> 0.5) reaches the lower edge of a letterboxed
+/// `w x h` frame, i.e. a row of person pixels lies in the frame's last row of the input
+/// square (padding rows below a landscape frame do not count). The frame then cuts the
+/// person (an upper body at a desk, someone close to the camera); a whole body standing in
+/// view ends above it. An empty mask or frame is not cut.
+pub fn cut_by_frame(mask: &[f32], w: usize, h: usize) -> bool {
+    let s = INPUT_SIZE;
+    if w == 0 || h == 0 || mask.len() < s * s {
+        return false;
+    }
+    let (_, _, fh, _, oy) = letterbox_geometry(w, h);
+    let last = (oy + fh).saturating_sub(1).min(s - 1);
+    mask[last * s..(last + 1) * s].iter().any(|&m| m > 0.5)
+}
+
 /// A `[S, S]` mask of the input square back at the frame's own `w x h` (the inverse of
 /// [`letterbox`], bilinear), as 0/255 (person where the mask is > 0.5).
 pub fn unletterbox_mask(mask: &[f32], w: usize, h: usize) -> Vec<u8> {
@@ -102,6 +117,10 @@ pub struct Crop {
     pub s: f32,
     pub tx: f32,
     pub ty: f32,
+    /// The person reaches the frame's lower edge (the frame cuts them: close-range framing,
+    /// [`cut_by_frame`]). Set by `Models::prepare`, which knows the frame; `from_mask` alone
+    /// cannot tell and leaves it false.
+    pub cut_by_frame: bool,
 }
 
 impl Crop {
@@ -127,6 +146,7 @@ impl Crop {
             s,
             tx: 0.5 * (ax + bx),
             ty: 0.5 * (ay + by),
+            cut_by_frame: false,
         })
     }
 
@@ -310,11 +330,47 @@ mod tests {
     }
 
     #[test]
+    fn cut_by_frame_is_a_person_on_the_frames_last_row() {
+        let s = INPUT_SIZE;
+        // A 4:3 landscape frame: letterboxed with padding rows above and below.
+        let (_, _, fh, _, oy) = letterbox_geometry(640, 480);
+        assert!(oy > 0 && oy + fh < s);
+        let last = oy + fh - 1;
+        let column = |rows: std::ops::Range<usize>| {
+            let mut m = vec![0.0f32; s * s];
+            for y in rows {
+                for x in 100..140 {
+                    m[y * s + x] = 1.0;
+                }
+            }
+            m
+        };
+        // Reaching the frame's last row: cut. Ending a row above it: a whole body.
+        assert!(cut_by_frame(&column(oy + 10..last + 1), 640, 480));
+        assert!(!cut_by_frame(&column(oy + 10..last), 640, 480));
+        // Mask values in the padding below the frame are not the frame's edge.
+        let mut pad = column(oy + 10..last);
+        pad[(s - 1) * s + 120] = 1.0;
+        assert!(!cut_by_frame(&pad, 640, 480));
+        // A portrait frame fills the square's height: its last row is the square's.
+        assert!(cut_by_frame(&column(50..s), 480, 640));
+        assert!(!cut_by_frame(&column(50..s - 3), 480, 640));
+        // Soft values at or below 0.5 are not person; empty inputs are not cut.
+        let mut soft = column(oy + 10..last);
+        soft[last * s + 120] = 0.5;
+        assert!(!cut_by_frame(&soft, 640, 480));
+        assert!(!cut_by_frame(&vec![0.0; s * s], 640, 480));
+        assert!(!cut_by_frame(&[], 640, 480));
+        assert!(!cut_by_frame(&column(0..s), 0, 480));
+    }
+
+    #[test]
     fn crop_round_trips_points() {
         let c = Crop {
             s: 0.6,
             tx: 0.1,
             ty: -0.2,
+            cut_by_frame: false,
         };
         let p = Vec3::new(0.3, -0.4, 0.25);
         assert!((c.to_input(c.to_crop(p)) - p).length() < 1e-6);
@@ -342,6 +398,7 @@ mod tests {
             s: 1.0,
             tx: 0.0,
             ty: 0.0,
+            cut_by_frame: false,
         };
         let out = c.apply(&img, 1, s);
         for (a, b) in img.iter().zip(&out) {
