@@ -318,7 +318,7 @@ def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96) -
     split (never the held-out one): the level of `fourier.ISO_LEVELS` with the best mean point
     IoU over `images` training images (their true masks and labelled points, in the model's
     depth frame)."""
-    from .train import fourier_cached, fourier_query
+    from .train import fourier_cached, predict_points
 
     k = net.k
     d = fourier_cached(data, "train", k)
@@ -327,9 +327,7 @@ def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96) -
     coeff, points = d["coeff"][idx].clone(), d["points"][idx].clone()
     if body:
         FO.centre_depth(coeff, points, k)
-    with torch.no_grad():
-        pred = torch.cat([net(encoder_input(d["rgb"][idx[s : s + 8]].float() / 255, d["mask"][idx[s : s + 8]].float() / 255)) for s in range(0, len(idx), 8)])
-        occ = fourier_query(pred, points, k)
+    occ = predict_points(net, d["rgb"][idx], d["mask"][idx], points)
     return FO.best_level(occ, d["occ"][idx] > 0.5)
 
 

@@ -133,20 +133,26 @@ def centre_depth(coeff: torch.Tensor, points: torch.Tensor, k: int, chunk: int =
 ISO_LEVELS = (0.30, 0.35, 0.40, 0.45, 0.50, 0.55)
 
 
+def level_iou(occ: torch.Tensor, lab: torch.Tensor, level: float) -> torch.Tensor:
+    """Per-image IoU [B] of `occ > level` against the labels (`occ`, `lab` [B, N], lab bool);
+    1 where both are empty."""
+    p = occ > level
+    inter = (p & lab).sum(1).float()
+    union = (p | lab).sum(1).float()
+    return torch.where(union > 0, inter / union.clamp(min=1), torch.ones_like(union))
+
+
 def best_level(occ: torch.Tensor, lab: torch.Tensor, levels=ISO_LEVELS, tol: float = 0.005) -> tuple[float, dict]:
     """The series level to read as the surface: of `levels`, the one whose `occ > level`
     gives the highest mean per-image IoU against the labels (`occ`, `lab` [B, N], lab bool),
     and the IoU at every level. A coefficient regression under uncertainty blurs thin parts
-    (arms, hands) below 0.5, so on real data the best level sits under 0.5; on a sharp
-    prediction it is 0.5 or near it. Levels within `tol` of the best IoU count as tied and
+    (arms, hands) below 0.5, which point IoU rewards reading lower; on a sharp prediction
+    the best is 0.5 or near it. (Point IoU weighs little the surface a lower level adds in
+    front of and behind the body; the committed models' levels come from the pipeline's
+    Chamfer + P2S on training subjects instead, see their cards.) Levels within `tol` of the best IoU count as tied and
     the one nearest 0.5 wins (a lower level also adds surface in front of and behind the
     body, which point IoU weighs little: keep the smallest move that buys the IoU)."""
-    ious = {}
-    for t in levels:
-        p = occ > t
-        inter = (p & lab).sum(1).float()
-        union = (p | lab).sum(1).float()
-        ious[float(t)] = float(torch.where(union > 0, inter / union.clamp(min=1), torch.ones_like(union)).mean())
+    ious = {float(t): float(level_iou(occ, lab, t).mean()) for t in levels}
     top = max(ious.values())
     best = min((t for t in ious if ious[t] >= top - tol), key=lambda t: abs(t - 0.5))
     return best, ious

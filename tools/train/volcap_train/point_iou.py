@@ -11,11 +11,9 @@ import argparse
 from pathlib import Path
 
 import torch
-from tqdm import tqdm
-
 from . import fourier as FO
-from .nets import FourierNet, encoder_input, fourier_variant
-from .train import fourier_cached, fourier_query, fourier_upper_cached, init_weights
+from .nets import FourierNet, fourier_variant
+from .train import fourier_cached, fourier_upper_cached, init_weights, predict_points
 
 
 def load(path: Path, variant: str) -> FourierNet:
@@ -27,17 +25,11 @@ def load(path: Path, variant: str) -> FourierNet:
 
 
 def point_iou(net: FourierNet, d: dict, levels) -> dict:
-    occs = []
-    with torch.no_grad():
-        for s in tqdm(range(0, len(d["rgb"]), 16), desc="point IoU", unit="batch", leave=False):
-            idx = torch.arange(s, min(s + 16, len(d["rgb"])))
-            x = encoder_input(d["rgb"][idx].float() / 255, d["mask"][idx].float() / 255)
-            occs.append(fourier_query(net(x), d["points"][idx], net.k))
-    occ, lab = torch.cat(occs), d["occ"] > 0.5
+    """level -> (mean, mean of the 10 worst) per-image point IoU over the items of `d`."""
+    occ, lab = predict_points(net, d["rgb"], d["mask"], d["points"], 16), d["occ"] > 0.5
     out = {}
     for level in levels:
-        p = occ > level
-        iou = (p & lab).sum(1).float() / (p | lab).sum(1).clamp(min=1).float()
+        iou = FO.level_iou(occ, lab, level)
         out[level] = (iou.mean().item(), iou.sort().values[:10].mean().item())
     return out
 

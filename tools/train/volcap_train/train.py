@@ -157,7 +157,7 @@ class Subset:
 
     def __init__(self, split: Split, idx: list):
         self.split, self.idx = split, idx
-        self.image, self.ray_offsets = split.image, split.ray_offsets
+        self.image = split.image
         self.files = [split.files[i] for i in idx]
         self.points = split.points[idx]
         self.occ = split.occ[idx]
@@ -188,6 +188,17 @@ def perturb_mask(m: torch.Tensor, gen: torch.Generator, p: float = 0.5) -> torch
         else:
             out[i] = -F.max_pool2d(-m[i : i + 1], k, 1, r)[0]
     return out
+
+
+def predict_points(net: FourierNet, rgb: torch.Tensor, mask: torch.Tensor, points: torch.Tensor, batch: int = 8) -> torch.Tensor:
+    """A Fourier net's occupancy [B, N] at crop-NDC points [B, N, 3] of crops given as u8
+    RGB [B, 3, S, S] and masks [B, 1, S, S], in batches, without gradients."""
+    out = []
+    with torch.no_grad():
+        for s in range(0, len(rgb), batch):
+            x = encoder_input(rgb[s : s + batch].float() / 255, mask[s : s + batch].float() / 255)
+            out.append(fourier_query(net(x), points[s : s + batch], net.k))
+    return torch.cat(out)
 
 
 def fourier_query(coeff: torch.Tensor, pts: torch.Tensor, k: int) -> torch.Tensor:

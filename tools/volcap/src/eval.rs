@@ -457,7 +457,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         a.iso_level.iter().map(|l| Some(*l)).collect()
     };
     let cases = render_cases(a)?;
-    let pb = ProgressBar::new((cases.len() * specs.len()) as u64);
+    let pb = ProgressBar::new((cases.len() * specs.len() * levels.len()) as u64);
     pb.set_style(
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -484,7 +484,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 Some(l)
             }
             // Other families and the ground-truth rows once, at their own rule.
-            (_, Some(l)) if Some(l) != levels[0] => continue,
+            (_, Some(l)) if Some(l) != levels[0] => {
+                pb.inc(cases.len() as u64);
+                continue;
+            }
             _ => None,
         };
         let label = format!(

@@ -207,9 +207,11 @@ pub struct FourierNet {
     /// `zeta = zeta_scale * crop-NDC z`.
     pub zeta_scale: f32,
     pub depth_frame: DepthFrame,
-    /// The series level taken as the surface (metadata `volcap.iso_level`, calibrated on the
-    /// training split by the exporter; 0.5 when absent). A coefficient regression blurs thin
-    /// parts (arms, hands) below 0.5; a level under 0.5 brings them back.
+    /// The series level taken as the surface (metadata `volcap.iso_level`, written by the
+    /// exporter: calibrated on the training split or chosen from a `volcap eval --iso-level`
+    /// sweep on training subjects, see the model card; 0.5 when absent). A smooth fit of the
+    /// series crosses 0.5 away from the true surface: below it thin parts shrink, above it
+    /// the surface swells.
     pub iso_level: f32,
 }
 

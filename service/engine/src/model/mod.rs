@@ -459,10 +459,10 @@ impl Models {
 
     /// The shape model for a crop: the close-range one when the frame cuts the person and
     /// one is loaded, the main one otherwise.
-    pub fn shape_for(&self, crop: &Crop) -> (&str, &ShapeModel) {
+    pub fn shape_for(&self, crop: &Crop) -> &ShapeModel {
         match &self.close_range {
-            Some((name, m)) if crop.cut_by_frame => (name, m),
-            _ => (&self.name, &self.shape),
+            Some((_, m)) if crop.cut_by_frame => m,
+            _ => &self.shape,
         }
     }
 
@@ -479,7 +479,7 @@ impl Models {
         let rgb_c = crop.apply(img, 3, s);
         let mask_c = crop.apply(mask, 1, s);
         let x = preprocess::encoder_input(&rgb_c, &mask_c, s);
-        let shape = match self.shape_for(&crop).1 {
+        let shape = match self.shape_for(&crop) {
             ShapeModel::Mlp(nets) => ShapeState::Mlp {
                 feat: nets.features(&x)?,
                 nets: nets.clone(),
