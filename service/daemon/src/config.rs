@@ -265,6 +265,16 @@ pub struct ModelConfig {
     /// unset: `name` for every frame.
     #[serde(default)]
     pub close_range: Option<String>,
+    /// Consecutive frames that must agree before the shape model changes between `name` and
+    /// `close_range` (a person at the frame's lower edge would otherwise flip models frame
+    /// by frame: `volcap_engine::model::preprocess::CloseRangeSwitch`); 1 follows every frame.
+    #[serde(default = "d_close_range_frames")]
+    pub close_range_frames: u32,
+}
+
+/// About a quarter of a second at the sim's frame rate, a few frames on a webcam.
+fn d_close_range_frames() -> u32 {
+    5
 }
 
 /// The best model measured (docs/eval): the Fourier head `fourier-small`.
@@ -282,6 +292,7 @@ impl Default for ModelConfig {
             precision: Precision::F32,
             dir: d_model_dir(),
             close_range: None,
+            close_range_frames: d_close_range_frames(),
         }
     }
 }
@@ -339,6 +350,8 @@ fn d_threads() -> usize {
 }
 /// Accepted range of `compute.threads`.
 pub const THREADS: std::ops::RangeInclusive<usize> = 1..=64;
+/// `model.close_range_frames`: up to ten seconds at 30 fps.
+pub const CLOSE_RANGE_FRAMES: std::ops::RangeInclusive<u32> = 1..=300;
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -458,6 +471,12 @@ impl Config {
             " (seconds)",
         )?;
         in_range("compute.threads", self.compute.threads, &THREADS, "")?;
+        in_range(
+            "model.close_range_frames",
+            self.model.close_range_frames,
+            &CLOSE_RANGE_FRAMES,
+            " (frames)",
+        )?;
         let split = self.compute.segment_thread_up_to;
         if split != 0 && !GRID_RESOLUTIONS.contains(&split) {
             return bad(

@@ -290,6 +290,7 @@ fn state_json(app: &App, details: bool) -> serde_json::Value {
             usize::MAX => serde_json::Value::Null,
             n => n.into(),
         },
+        "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
         "resolution": live.resolution,
         "paused": live.paused,
         "frames_published": published,

@@ -115,6 +115,11 @@ pub struct Shared {
     /// segmentation, the largest one rendered; oracle mode: the simulator's count);
     /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
     pub people: AtomicUsize,
+    /// Model mode with `[model] close_range` configured...
+    pub close_range_model: bool,
+    /// ...and whether that model encodes the frames now (the field thread's
+    /// `CloseRangeSwitch`).
+    pub close_range: AtomicBool,
     /// Occupancy-field evaluations of every frame rendered so far (localization, final
     /// level, normals), for the pipeline benchmark.
     pub evaluations: AtomicU64,
@@ -155,6 +160,8 @@ impl Shared {
             camera_swap: Mutex::new(None),
             beats: Default::default(),
             people: AtomicUsize::new(usize::MAX),
+            close_range_model: cfg.field() == FieldMode::Model && cfg.model.close_range.is_some(),
+            close_range: AtomicBool::new(false),
             evaluations: AtomicU64::new(0),
         }
     }
@@ -351,8 +358,11 @@ pub fn start(
             captured.clone(),
             segmented,
             fielded.clone(),
-            cfg.compute.threads,
-            cfg.compute.segment_thread_up_to,
+            field_stage::FieldSettings {
+                threads: cfg.compute.threads,
+                split_up_to: cfg.compute.segment_thread_up_to,
+                close_frames: cfg.model.close_range_frames,
+            },
         ));
     }
 

@@ -403,6 +403,8 @@ fn model_mode_renders_network_output() {
     assert_eq!(s["mode"], "model", "{s}");
     // The segmentation's count of people in the walking scene: exactly one.
     assert_eq!(s["people"], 1, "{s}");
+    // No close-range model configured: nothing to report.
+    assert!(s["close_range"].is_null(), "{s}");
     assert!(
         s["mode_note"]
             .as_str()
@@ -553,6 +555,32 @@ fn camera_config_errors_are_clear() {
         assert_eq!(code, Some(2));
         assert!(e.contains("--features v4l2"), "{e}");
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A person cut by the frame's lower edge (tests/scenes/cut-by-edge.toml: an upper body)
+/// is encoded by the close-range model once `close_range_frames` frames in a row were cut;
+/// `/state` says which model encodes.
+#[test]
+fn close_range_model_takes_over_when_the_frame_cuts_the_person() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-close-live-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("b.toml"),
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 33\n[model]\ndir = \"{}\"\nclose_range = \"fourier-small-upper\"\nclose_range_frames = 2\n",
+            root().join("tests/scenes/cut-by-edge.toml").display(),
+            root().join("models").display()
+        ),
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    let s = wait_for(&d.addr, "close-range model", Duration::from_secs(60), |s| {
+        s["close_range"] == true
+    });
+    assert_eq!(s["mode"], "model", "{s}");
+    drop(d);
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -1,7 +1,7 @@
 """Point IoU of Fourier checkpoints on held-out whole bodies and on their upper-body crops
 (train.fourier_upper_cached: the person cut by the frame's lower edge), at surface levels.
 
-  python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55]
+  python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55] [--seg ../../models/seg.onnx]
 
 RUN is a run folder (its ckpt.pt) or a light checkpoint (models/checkpoints/*.pt). Depth in the
 body frame (fourier.centre_depth), as the committed models are trained."""
@@ -41,10 +41,13 @@ def main(argv=None):
     ap.add_argument("--variant", default="fourier-small")
     ap.add_argument("--split", default="val")
     ap.add_argument("--levels", default="0.5,0.55")
+    ap.add_argument("--seg", type=Path, default=None, help="also score the whole bodies with this ONNX segmentation model's masks and crops (the engine's input; seg_masks)")
     args = ap.parse_args(argv)
     levels = [float(v) for v in args.levels.split(",")]
     k = fourier_variant(args.variant)[0]
     sets = {"whole": fourier_cached(args.data, args.split, k), "upper": fourier_upper_cached(args.data, args.split, k, 1)}
+    if args.seg is not None:
+        sets[f"whole, {args.seg.stem} masks"] = fourier_cached(args.data, args.split, k, args.seg)
     for d in sets.values():
         FO.centre_depth(d["coeff"], d["points"], k)
     for ck in args.ckpt:

@@ -78,7 +78,7 @@ def truncate_below(img: torch.Tensor, row: int) -> torch.Tensor:
     return out
 
 
-def fourier_items(split: Split, k: int, points: int = 4096, keep=None):
+def fourier_items(split: Split, k: int, points: int = 4096, keep=None, masks: torch.Tensor | None = None):
     """Per image: the GT-mask crop (engine rule), the cropped RGB and mask (u8), the ground-truth
     coefficient maps [2K+1, 128, 128] (f16) on the crop's map grid, and labelled points in crop
     NDC. The coefficient maps are computed on the input pixel grid (intervals scaled by the
@@ -88,7 +88,11 @@ def fourier_items(split: Split, k: int, points: int = 4096, keep=None):
     `keep` (image index -> fraction, or None): the upper-body variant. Only the top fraction
     of the person stays in the frame; everything below the cut row is zero in the image, the
     mask, the target series and the point labels (the field is what the image shows, a bust),
-    and the crop is taken from the cut mask, as the engine would on such a frame."""
+    and the crop is taken from the cut mask, as the engine would on such a frame.
+
+    `masks` (u8 [B, 1, H, W], seg_masks.predicted_masks): the engine's segmentation instead of
+    the ground-truth mask for the crop and the encoder's mask channel (the targets stay the
+    ground truth's); images where it finds no person are left out, as the engine reports none."""
     if not split.ray_offsets:
         raise ValueError(f"{split.files[0]}: shards have no ray_offsets/ray_z (regenerate with `volcap sim dataset`)")
     rgb, mask, coeff, pts, occ, keep_idx = [], [], [], [], [], []
@@ -97,6 +101,8 @@ def fourier_items(split: Split, k: int, points: int = 4096, keep=None):
         m = split.mask01(i)
         image = split.rgb01(i)
         row = cut_row(m[0], keep(i)) if keep is not None else None
+        if masks is not None:
+            m = masks[i].float() / 255.0
         if row is not None:
             m, image = truncate_below(m, row), truncate_below(image, row)
         p = C.crop_params(m[0])
@@ -126,11 +132,22 @@ def fourier_items(split: Split, k: int, points: int = 4096, keep=None):
     return {"rgb": torch.stack(rgb), "mask": torch.stack(mask), "coeff": torch.stack(coeff), "points": torch.stack(pts), "occ": torch.stack(occ), "keep": torch.tensor(keep_idx), "k": k}
 
 
-def fourier_cached(root: Path, split: str, k: int):
-    cache = root / f"fourier-{split}-k{k}-v2.pt"
+def fourier_cached(root: Path, split: str, k: int, seg: Path | None = None):
+    """`fourier_items` of a split, cached beside the shards; with `seg` (an ONNX segmentation
+    model) the crops and mask channels come from its masks (seg_masks.predicted_masks)."""
+    if seg is None:
+        cache = root / f"fourier-{split}-k{k}-v2.pt"
+    else:
+        cache = root / f"fourier-{split}-k{k}-seg-{seg.stem}-v1.pt"
     if cache.exists():
         return torch.load(cache)
-    out = fourier_items(Split(root, split), k)
+    data = Split(root, split)
+    masks = None
+    if seg is not None:
+        from .seg_masks import predicted_masks
+
+        masks = predicted_masks(root, data, split, seg)
+    out = fourier_items(data, k, masks=masks)
     torch.save(out, cache)
     return out
 
@@ -434,8 +451,10 @@ def train_fourier(args):
     torch.manual_seed(args.seed)
     gen = torch.Generator().manual_seed(args.seed)
     k, width, shift = fourier_variant(args.variant)
-    tr = fourier_cached(args.data, "train", k)
-    va = fourier_cached(args.data, "val", k)
+    # --seg: the crops and mask channels from the product's segmentation (what the engine
+    # feeds the encoder), for training and validation alike; targets stay the ground truth's.
+    tr = fourier_cached(args.data, "train", k, args.seg)
+    va = fourier_cached(args.data, "val", k, args.seg)
     if args.upper_every:
         # Upper bodies cut by the frame's lower edge (a webcam at a desk): added to the
         # training images (the validation set stays whole bodies, the product's eval).
@@ -545,6 +564,7 @@ def main(argv=None):
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
     ap.add_argument("--upper-every", type=int, default=0, help="Fourier: add the upper-body variant (fourier_upper_cached: the person cut by the frame's lower edge) of every N-th training image; 0: none")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
+    ap.add_argument("--seg", type=Path, default=None, help="Fourier: crops and mask channels from this ONNX segmentation model's masks (e.g. ../../models/seg.onnx, the product's) instead of the ground truth's (seg_masks)")
     ap.add_argument("--ckpt-every", type=int, default=100)
     args = ap.parse_args(argv)
     if args.threads:

@@ -25,6 +25,16 @@ fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
         ),
         ("[http]\nheader_timeout_s = 0\n", "http.header_timeout_s", 5),
         (
+            "[model]\nclose_range_frames = 0\n",
+            "model.close_range_frames",
+            5,
+        ),
+        (
+            "[model]\nclose_range_frames = 301\n",
+            "model.close_range_frames",
+            5,
+        ),
+        (
             "[http]\nheader_timeout_s = 301\n",
             "http.header_timeout_s",
             5,

@@ -13,7 +13,7 @@ use crate::capture::Frame;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-use volcap_engine::model::preprocess::Crop;
+use volcap_engine::model::preprocess::{CloseRangeSwitch, Crop};
 use volcap_engine::model::{FrameError, FrameInfo, ModelField, ModelView, Models};
 
 /// What the field thread hands the render thread: the model's field of a frame, or why
@@ -106,20 +106,36 @@ pub(super) fn spawn_segment(
         .expect("spawning the segment thread")
 }
 
+/// The field thread's settings from the config: `compute.threads`,
+/// `compute.segment_thread_up_to`, `model.close_range_frames`.
+pub(super) struct FieldSettings {
+    pub threads: usize,
+    pub split_up_to: usize,
+    pub close_frames: u32,
+}
+
 /// Start the field thread: segmented frames from `segmented` (or, above `split_up_to`,
-/// frames from `captured`, segmented here), fields (or why none) into `out`.
+/// frames from `captured`, segmented here), fields (or why none) into `out`. With a
+/// close-range model loaded, the choice between it and the main model follows the frames
+/// only after `close_frames` of them in a row agree (`CloseRangeSwitch`, held here: the one
+/// thread that encodes).
 pub(super) fn spawn(
     sh: Arc<Shared>,
     models: Arc<Models>,
     captured: Arc<Slot<Frame>>,
     segmented: Arc<Slot<(Frame, Segmented)>>,
     out: Arc<Slot<(Frame, FieldOutcome)>>,
-    threads: usize,
-    split_up_to: usize,
+    settings: FieldSettings,
 ) -> std::thread::JoinHandle<()> {
+    let FieldSettings {
+        threads,
+        split_up_to,
+        close_frames,
+    } = settings;
     std::thread::Builder::new()
         .name("field".into())
         .spawn(move || {
+            let mut switch = CloseRangeSwitch::new(close_frames);
             while !sh.stop.load(Ordering::Relaxed) {
                 sh.beat(3);
                 // One field in flight: compute the next only once the render thread
@@ -147,7 +163,11 @@ pub(super) fn spawn(
                     continue;
                 }
                 let view = model_view(&live);
-                let outcome = seg.and_then(|(img, mask, crop)| {
+                let outcome = seg.and_then(|(img, mask, mut crop)| {
+                    if models.close_range.is_some() {
+                        crop.cut_by_frame = switch.update(crop.cut_by_frame);
+                        sh.close_range.store(crop.cut_by_frame, Ordering::Relaxed);
+                    }
                     let t = Instant::now();
                     let r = volcap_engine::model::with_threads(threads, || {
                         models.encode(&img, &mask, crop, view)

@@ -83,6 +83,50 @@ pub fn cut_by_frame(mask: &[f32], w: usize, h: usize) -> bool {
     mask[last * s..(last + 1) * s].iter().any(|&m| m > 0.5)
 }
 
+/// The close-range choice held steady over frames: a person at the frame's lower edge (feet
+/// in and out of view as they walk, a hand dipping below a desk's edge) would otherwise
+/// switch shape models on every other frame, a visible jump in the render. The choice
+/// changes only after `frames` consecutive frames disagree with it ([`cut_by_frame`]'s
+/// answer on each); a frame without a person leaves it as it is. Starts on the main model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CloseRangeSwitch {
+    frames: u32,
+    on: bool,
+    against: u32,
+}
+
+impl CloseRangeSwitch {
+    /// `frames` consecutive disagreeing frames change the choice (0 is taken as 1: follow
+    /// every frame).
+    pub fn new(frames: u32) -> Self {
+        Self {
+            frames: frames.max(1),
+            on: false,
+            against: 0,
+        }
+    }
+
+    /// Whether the close-range model is chosen, after a frame whose person the frame
+    /// `cut` (or not).
+    pub fn update(&mut self, cut: bool) -> bool {
+        if cut == self.on {
+            self.against = 0;
+        } else {
+            self.against += 1;
+            if self.against >= self.frames {
+                self.on = cut;
+                self.against = 0;
+            }
+        }
+        self.on
+    }
+
+    /// The current choice.
+    pub fn is_on(&self) -> bool {
+        self.on
+    }
+}
+
 /// A `[S, S]` mask of the input square back at the frame's own `w x h` (the inverse of
 /// [`letterbox`], bilinear), as 0/255 (person where the mask is > 0.5).
 pub fn unletterbox_mask(mask: &[f32], w: usize, h: usize) -> Vec<u8> {
@@ -119,7 +163,9 @@ pub struct Crop {
     pub ty: f32,
     /// The person reaches the frame's lower edge (the frame cuts them: close-range framing,
     /// [`cut_by_frame`]). Set by `Models::prepare`, which knows the frame; `from_mask` alone
-    /// cannot tell and leaves it false.
+    /// cannot tell and leaves it false. `Models::encode` reads it to choose the close-range
+    /// model; a caller that holds the choice over frames ([`CloseRangeSwitch`]) sets it to
+    /// the switch's answer before encoding.
     pub cut_by_frame: bool,
 }
 
@@ -362,6 +408,32 @@ mod tests {
         assert!(!cut_by_frame(&vec![0.0; s * s], 640, 480));
         assert!(!cut_by_frame(&[], 640, 480));
         assert!(!cut_by_frame(&column(0..s), 0, 480));
+    }
+
+    #[test]
+    fn the_close_range_choice_changes_only_after_frames_in_a_row_disagree() {
+        let mut sw = CloseRangeSwitch::new(3);
+        assert!(!sw.is_on());
+        // Feet flickering at the frame's edge: never three cut frames in a row.
+        for cut in [true, true, false, true, false, true, true, false] {
+            assert!(!sw.update(cut));
+        }
+        // Three in a row switch on, at the third.
+        assert!(!sw.update(true));
+        assert!(!sw.update(true));
+        assert!(sw.update(true));
+        // And back only after three whole-body frames in a row.
+        for cut in [false, false, true, false, false] {
+            assert!(sw.update(cut));
+        }
+        assert!(!sw.update(false));
+        // 0 and 1 follow every frame.
+        for n in [0, 1] {
+            let mut sw = CloseRangeSwitch::new(n);
+            for cut in [true, false, false, true, true, false] {
+                assert_eq!(sw.update(cut), cut);
+            }
+        }
     }
 
     #[test]
