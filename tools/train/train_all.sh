@@ -30,13 +30,16 @@ $T shape --data "$DATA" --out "$RUNS/compact-ohem-P" --variant compact --ohem P 
 $T fourier --data "$DATA" --out "$RUNS/fourier" --variant fourier --steps "${FOURIER_STEPS:-4000}" --point-weight 0.3
 # fourier-small, the default shape model, in stages (under stages/, which the export does not
 # list as models): (1) the dense ray loss alone in the body depth frame; (2) resumed with 0.1 x
-# the point term, OHEM on points and images, and augmentation; (3) the same at a lower rate.
+# the point term, OHEM on points and images, and augmentation; (3) the same at a lower rate;
+# (4) resumed on the product's segmentation masks (crops and mask channels from models/seg.onnx,
+# as the engine makes them; targets from the ground truth).
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-dense" --variant fourier-small --steps 8000 --lr 1e-3 --point-weight 0 --moment-weight 1 --ohem none --no-aug --depth-frame body --points 2048
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-point" --variant fourier-small --steps 4000 --lr 5e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-dense/ckpt.pt"
-$T fourier --data "$DATA" --out "$RUNS/fourier-small" --variant fourier-small --steps 3000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-point/ckpt.pt"
-# fourier-small-upper: fourier-small resumed with upper bodies (the person cut by the frame's
-# lower edge) added to the training images, for close-range framing.
-$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/fourier-small/ckpt.pt"
+$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-gt" --variant fourier-small --steps 3000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-point/ckpt.pt"
+$T fourier --data "$DATA" --out "$RUNS/fourier-small" --variant fourier-small --steps 7000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
+# fourier-small-upper: stage (3) resumed with upper bodies (the person cut by the frame's lower
+# edge) added to the training images, for close-range framing.
+$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
 $T fourier --data "$DATA" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 2000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 4 --init "$RUNS/stages/fourier-small-upper-1/ckpt.pt"
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 # fourier-small's surface level comes from a sweep on training subjects (its model card):

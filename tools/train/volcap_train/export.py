@@ -313,15 +313,29 @@ def geometry_golden(net: FourierNet, va: Split, gi: int, gen: torch.Generator, i
     }
 
 
-def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96) -> tuple[float, dict]:
+def run_seg(budget: dict) -> Path | None:
+    """The segmentation model a run trained its masks from (`train --seg`), if any."""
+    seg = budget.get("args", {}).get("seg")
+    return Path(seg) if seg not in (None, "None", "") else None
+
+
+def masks_row(budget: dict) -> str:
+    """The model card's masks row: where the encoder's crops and mask channels came from."""
+    seg = run_seg(budget)
+    if seg is None:
+        return "ground truth (dilated or eroded 1-3 px for half the images when augmenting)"
+    return f"the product's segmentation (`{seg.name}`, `train --seg`): crops and mask channels as the engine makes them (dilated or eroded 1-3 px for half the images when augmenting); targets from the ground truth"
+
+
+def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96, seg: Path | None = None) -> tuple[float, dict]:
     """The series level read as the surface (`volcap.iso_level`), chosen on the training
     split (never the held-out one): the level of `fourier.ISO_LEVELS` with the best mean point
-    IoU over `images` training images (their true masks and labelled points, in the model's
-    depth frame)."""
+    IoU over `images` training images (their labelled points, in the model's depth frame; the
+    crops and mask channels from the true masks, or from `seg`'s where the run trained on them)."""
     from .train import fourier_cached, predict_points
 
     k = net.k
-    d = fourier_cached(data, "train", k)
+    d = fourier_cached(data, "train", k, seg)
     n = len(d["rgb"])
     idx = torch.arange(0, n, max(1, n // images))[:images]
     coeff, points = d["coeff"][idx].clone(), d["points"][idx].clone()
@@ -337,7 +351,8 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     base = f"shape-{name}"
     size = 128
     frame = budget.get("args", {}).get("depth_frame", "camera")
-    iso, iso_ious = calibrate_level(net, data, frame == "body")
+    seg = run_seg(budget)
+    iso, iso_ious = calibrate_level(net, data, frame == "body", seg=seg)
     iso_rule = "chosen on the training split by mean point IoU"
     if level != "auto":
         iso = float(level)
@@ -411,6 +426,7 @@ def write_card(out: Path, name: str, c: dict, data: Path):
         f"| variant | {c.get('variant', '-')} |",
         f"| family | {c.get('family', 'mlp')}{' (K = ' + str(c['fourier_k']) + ', coefficient maps 128x128, zeta = 2 * crop-NDC z)' if c.get('fourier_k') else ''} |",
         *([f"| depth frame | {frame} |"] if c.get("fourier_k") else []),
+        *([f"| masks | {masks_row(b)} |"] if c.get("fourier_k") else []),
         *([f"| surface level | {c['iso_level']:.2f} of the series (`volcap.iso_level`; the engine reads it as 0.5), {c.get('iso_rule', 'chosen on the training split by mean point IoU')}: "
            + ", ".join(f"{t:.2f}: {v:.3f}" for t, v in c['iso_point_iou_train'].items()) + " |"] if c.get("iso_level") is not None else []),
         f"| loss | {'dense: Parseval L2 of each pixel ray (every crop pixel), + ' + a.get('point_weight', '0.1') + ' x BCE of tau (occ - 0.5) on labelled points' if c.get('fourier_k') else 'BCE on labelled points'} |",
