@@ -58,17 +58,18 @@ def test_predicted_masks_set_the_crop_and_the_mask_channel_but_not_the_targets()
     pred[0, 0, cut:, :] = 0
     pred[0, 0, TOP:cut, RIGHT + 1 : RIGHT + 3] = 160
     seg = fourier_items(sp, 3, points=800, masks=pred)
+    # fourier_items takes the shard's first 400 (inside) and last 400 (outside) points.
+    sel = torch.cat([torch.arange(400), torch.arange(400, 800)])
     p = C.crop_params(pred[0, 0].float() / 255)
     assert p != C.crop_params(sp.mask01(0)[0])
     # The mask channel is the predicted mask through its own crop...
     assert torch.equal(seg["mask"][0], (C.apply_crop(pred[0].float() / 255, p) * 255).round().to(torch.uint8))
     # ...the labels are the ground truth's, only moved into that crop...
     assert torch.equal(seg["occ"], gt["occ"])
-    assert torch.allclose(seg["points"][0], C.to_crop(sp.points[0][torch.cat([torch.arange(400), torch.arange(400, 800)])], p))
+    assert torch.allclose(seg["points"][0], C.to_crop(sp.points[0][sel], p))
     # ...and the series still holds the whole box, the part the segmentation lost included:
     # at the box's inside points, the ray length (c0 in crop units, x s in input units) is
     # the ground-truth crop's, above and below the predicted mask's last row alike.
-    sel = torch.cat([torch.arange(400), torch.arange(400, 800)])
     inside = (torch.arange(800) < 400) & (sp.points[0][sel][:, 1].abs() < 1)
     lost = inside & (sp.points[0][sel][:, 1] > -1 + 2 * (cut + 2) / 63)
     assert lost.any()

@@ -87,19 +87,16 @@ def main(argv=None):
     ap.add_argument("--sim-images", type=int, default=96)
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)
-    import onnxruntime as ort
+    from .seg_masks import session
 
     real = real_set(args.real)
     sim = sim_set(args.data, args.sim_images) if args.data else None
     rows, masks = [], {}
-    so = ort.SessionOptions()
-    so.intra_op_num_threads = 1
-    so.log_severity_level = 3
     for spec in tqdm(args.model, desc="candidates", unit="model"):
         name, _, path = spec.partition("=")
         if not path:
             raise SystemExit(f"--model {spec}: expected NAME=PATH")
-        sess = ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
+        sess = session(path)
 
         def run(x: np.ndarray) -> np.ndarray:
             return sess.run(None, {"image": np.ascontiguousarray(x[None].transpose(0, 3, 1, 2) if x.shape[-1] == 3 else x[None], dtype=np.float32)})[0][0, 0]

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from tqdm import tqdm
 
 # preprocess.rs
@@ -79,15 +78,20 @@ def keep_most_prominent(mask: torch.Tensor) -> tuple[torch.Tensor, int]:
     return torch.where(keep, mask, torch.zeros_like(mask)), people
 
 
-def segment(model: Path, images: torch.Tensor, threads: int = 1) -> torch.Tensor:
-    """Soft person masks [B, H, W] from RGB [B, 3, 256, 256] in [0, 1] through the ONNX
-    segmentation model (`image` -> `mask`); non-finite values count as 0, as in the engine."""
+def session(model: Path | str, threads: int = 1):
+    """An onnxruntime CPU session for a segmentation model, `threads` intra-op threads, quiet."""
     import onnxruntime as ort
 
     so = ort.SessionOptions()
     so.intra_op_num_threads = threads
     so.log_severity_level = 3
-    sess = ort.InferenceSession(str(model), so, providers=["CPUExecutionProvider"])
+    return ort.InferenceSession(str(model), so, providers=["CPUExecutionProvider"])
+
+
+def segment(model: Path, images: torch.Tensor, threads: int = 1) -> torch.Tensor:
+    """Soft person masks [B, H, W] from RGB [B, 3, 256, 256] in [0, 1] through the ONNX
+    segmentation model (`image` -> `mask`); non-finite values count as 0, as in the engine."""
+    sess = session(model, threads)
     out = []
     for i in tqdm(range(len(images)), desc=f"segmenting ({model.name})", unit="img"):
         m = sess.run(None, {"image": np.ascontiguousarray(images[i : i + 1].numpy(), dtype=np.float32)})[0][0, 0]
