@@ -127,8 +127,34 @@ fn random_subject(assets: &HumanAssets, r: &mut ChaCha8Rng, id: &str) -> String 
 /// The scene of one dataset (or evaluation) image: the training camera (weak perspective,
 /// 2.3 m image height, looking at 0.95 m), studio light, one subject in a procedural pose.
 pub fn scene_text(size: usize, subject_table: &str, style: Style, seed: u32) -> String {
+    scene_text_framed(
+        size,
+        subject_table,
+        style,
+        seed,
+        WHOLE_HEIGHT_M,
+        WHOLE_LOOK_AT_Y,
+    )
+}
+
+/// The dataset's framing: metres of the world the image height spans, and the height of the
+/// point the camera looks at (the whole person in the frame).
+pub const WHOLE_HEIGHT_M: f32 = 2.3;
+pub const WHOLE_LOOK_AT_Y: f32 = 0.95;
+
+/// [`scene_text`] with another weak-perspective framing: the image height spans `height_m`
+/// metres around a look-at point `look_at_y` metres above the floor (a smaller span higher up
+/// is a person close to the camera, cut by the frame's lower edge).
+pub fn scene_text_framed(
+    size: usize,
+    subject_table: &str,
+    style: Style,
+    seed: u32,
+    height_m: f32,
+    look_at_y: f32,
+) -> String {
     format!(
-        "[camera]\nwidth = {size}\nheight = {size}\nheight_m = 2.3\nlook_at = [0.0, 0.95, 0.0]\n[lighting]\npreset = \"studio\"\n{subject_table}\
+        "[camera]\nwidth = {size}\nheight = {size}\nheight_m = {height_m:?}\nlook_at = [0.0, {look_at_y:?}, 0.0]\n[lighting]\npreset = \"studio\"\n{subject_table}\
          motion = {{ kind = \"procedural\", style = \"{}\", seed = {seed} }}\n",
         style.name()
     )

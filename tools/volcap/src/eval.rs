@@ -92,6 +92,54 @@ pub struct EvalArgs {
     /// `volcap.iso_level`, to calibrate or show the knob. Other families ignore it.
     #[arg(long, value_delimiter = ',')]
     pub iso_level: Vec<f32>,
+    /// Framing of the test images: `whole` (the whole person in the frame, as the dataset) or
+    /// `upper` (a person close to the camera, cut by the frame's lower edge between the hips
+    /// and the knees: a webcam's view, where a close-range model takes over). Either way the
+    /// truth is what the frame shows: the oracle and the ground-truth surface outside it are
+    /// left out.
+    #[arg(long, value_enum, default_value_t = Framing::Whole)]
+    pub framing: Framing,
+}
+
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Framing {
+    Whole,
+    Upper,
+}
+
+/// Top of the frame (metres above the floor) in the `upper` framing: above the tallest
+/// subject's head.
+const UPPER_TOP_M: f32 = 1.95;
+/// Metres the frame's height spans in the `upper` framing, drawn per pose: the lower edge
+/// then lies 0.65 to 0.95 m above the floor.
+const UPPER_SPAN_M: (f32, f32) = (1.0, 1.3);
+
+impl Framing {
+    /// (metres spanned by the image height, look-at height) of one pose's camera.
+    fn camera(self, r: &mut impl Rng) -> (f32, f32) {
+        match self {
+            Framing::Whole => (
+                volcap_sim::dataset::WHOLE_HEIGHT_M,
+                volcap_sim::dataset::WHOLE_LOOK_AT_Y,
+            ),
+            Framing::Upper => {
+                let h = r.random_range(UPPER_SPAN_M.0..UPPER_SPAN_M.1);
+                (h, UPPER_TOP_M - 0.5 * h)
+            }
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Framing::Whole => "whole",
+            Framing::Upper => "upper",
+        }
+    }
+}
+
+/// Whether an input-NDC point lies inside the frame (the part of the world the image shows).
+fn in_frame(n: Vec3) -> bool {
+    n.x.abs() <= 1.0 && n.y.abs() <= 1.0
 }
 
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -122,6 +170,31 @@ fn depth_shift(frame: DepthFrame, c: &Case) -> f32 {
     }
 }
 
+/// From a model's input NDC to the frame camera's NDC. A model's depth keeps the training
+/// camera's proportions (`NDC_HALF_EXTENT_M`: 1.15 m across and 1.5 m deep per NDC unit, the
+/// crop scaling all three alike); a frame spanning `h` metres has `h / 2` across per unit but
+/// the same depth range, so the model's depth is scaled by `h / 2.3` (1 for the dataset's
+/// framing), then moved by [`depth_shift`]. The ground-truth rows are already in the frame's
+/// own NDC.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ToCamera {
+    pub dz: f32,
+    pub z_scale: f32,
+}
+
+impl ToCamera {
+    fn new(frame: DepthFrame, c: &Case, truth: bool) -> Self {
+        Self {
+            dz: depth_shift(frame, c),
+            z_scale: if truth { 1.0 } else { c.z_scale },
+        }
+    }
+
+    pub fn apply(self, n: Vec3) -> Vec3 {
+        Vec3::new(n.x, n.y, n.z * self.z_scale + self.dz)
+    }
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct ImageRow {
     pub model: String,
@@ -134,6 +207,9 @@ pub struct ImageRow {
     pub p2s_cm: f64,
     pub iou: f64,
     pub mask_iou: f64,
+    /// Whether the frame's lower edge cuts the person (the true mask reaches the last row:
+    /// what switches the daemon to its close-range model).
+    pub cut_by_frame: bool,
     pub evaluations: u64,
     pub segment_ms: f64,
     pub encode_ms: f64,
@@ -193,6 +269,8 @@ struct Case {
     oracle: volcap_sim::oracle::SceneField,
     /// Inside intervals along every pixel ray (the Fourier ground truth).
     rays: volcap_sim::rays::RayIntervals,
+    /// The frame's height span over the dataset's ([`ToCamera`]).
+    z_scale: f32,
 }
 
 fn subjects(a: &EvalArgs) -> anyhow::Result<Vec<(String, String)>> {
@@ -246,7 +324,10 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
         for pose in 0..a.poses {
             let style = Style::ALL[r.random_range(0..Style::ALL.len())];
             let frame: u64 = r.random_range(0..60);
-            let text = volcap_sim::dataset::scene_text(size, table, style, r.random::<u32>());
+            let seed = r.random::<u32>();
+            let (height_m, look_y) = a.framing.camera(&mut r);
+            let text =
+                volcap_sim::dataset::scene_text_framed(size, table, style, seed, height_m, look_y);
             let scene = Scene::parse(&text, Path::new("<eval>")).map_err(|e| anyhow!("{e}"))?;
             let mut sim = Simulator::new(scene, assets.clone())?;
             for v in 0..a.views {
@@ -270,6 +351,7 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
                     gt_mesh,
                     oracle,
                     rays,
+                    z_scale: height_m / volcap_sim::dataset::WHOLE_HEIGHT_M,
                 });
             }
         }
@@ -277,21 +359,28 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
     Ok(cases)
 }
 
-/// The model's crop-NDC grid, seen by the oracle: crop NDC -> input NDC -> world.
+/// The model's crop-NDC grid, seen by the oracle: crop NDC -> input NDC -> world; empty
+/// outside the frame (the truth is what the image shows).
 struct OracleInCrop<'a> {
     oracle: &'a volcap_sim::oracle::SceneField,
     crop: volcap_engine::model::preprocess::Crop,
-    /// Input-NDC depth added before the lookup ([`depth_shift`]).
-    dz: f32,
+    /// Model input NDC -> the frame camera's ([`ToCamera`]).
+    to_cam: ToCamera,
 }
 
 impl OccupancyField for OracleInCrop<'_> {
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), volcap_engine::FieldError> {
         let moved: Vec<Vec3> = points
             .iter()
-            .map(|p| self.crop.to_input(*p) + Vec3::Z * self.dz)
+            .map(|p| self.to_cam.apply(self.crop.to_input(*p)))
             .collect();
-        self.oracle.occupancy(&moved, out)
+        self.oracle.occupancy(&moved, out)?;
+        for (o, p) in out.iter_mut().zip(&moved) {
+            if !in_frame(*p) {
+                *o = 0.0;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -316,7 +405,7 @@ fn run_case(
     truth: &mut Grid,
     gt_mask: bool,
     truth_k: Option<usize>,
-    dz: f32,
+    to_cam: ToCamera,
 ) -> anyhow::Result<ImageRow> {
     let mut row = ImageRow {
         model: label.into(),
@@ -328,6 +417,7 @@ fn run_case(
         p2s_cm: f64::NAN,
         iou: 0.0,
         mask_iou: 0.0,
+        cut_by_frame: false,
         evaluations: 0,
         segment_ms: 0.0,
         encode_ms: 0.0,
@@ -335,6 +425,8 @@ fn run_case(
         mesh_ms: 0.0,
     };
     let s = c.size;
+    let truth_mask: Vec<f32> = c.mask.iter().map(|&m| m as f32 / 255.0).collect();
+    row.cut_by_frame = volcap_engine::model::preprocess::cut_by_frame(&truth_mask, s, s);
     // Mask IoU of the segmentation (the product's: the most prominent person kept) against
     // the simulator's person mask.
     let img = volcap_engine::model::preprocess::letterbox(&c.rgb, s, s);
@@ -354,7 +446,7 @@ fn run_case(
         inter as f64 / union as f64
     };
     let prob = if gt_mask || truth_k.is_some() {
-        c.mask.iter().map(|&m| m as f32 / 255.0).collect()
+        truth_mask
     } else {
         prob
     };
@@ -397,7 +489,7 @@ fn run_case(
         &OracleInCrop {
             oracle: &c.oracle,
             crop,
-            dz,
+            to_cam,
         },
         spec,
         default_coarse(spec),
@@ -413,10 +505,22 @@ fn run_case(
     }
     let cam = c.oracle.camera.projector();
     for v in &mut mesh.vertices {
-        *v = cam.ndc_to_world(crop.to_input(*v) + Vec3::Z * dz);
+        *v = cam.ndc_to_world(to_cam.apply(crop.to_input(*v)));
     }
-    let pred = sample_surface(&mesh, 10_000, 1);
-    let gt = sample_surface(&c.gt_mesh, 10_000, 2);
+    // Both surfaces where the frame shows them (a no-op for a person wholly in the frame).
+    let shown = |p: &glam::DVec3| in_frame(cam.world_to_ndc(p.as_vec3()));
+    let pred: Vec<_> = sample_surface(&mesh, 10_000, 1)
+        .into_iter()
+        .filter(shown)
+        .collect();
+    let gt: Vec<_> = sample_surface(&c.gt_mesh, 10_000, 2)
+        .into_iter()
+        .filter(shown)
+        .collect();
+    if pred.is_empty() {
+        row.status = "empty surface".into();
+        return Ok(row);
+    }
     row.chamfer_cm = chamfer(&pred, &gt) * 100.0;
     row.p2s_cm = point_to_surface(&pred, &c.gt_mesh) * 100.0;
     Ok(row)
@@ -501,8 +605,14 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         if let Some(c) = cases.first().filter(|_| a.turntable && truth_k.is_none()) {
             std::fs::create_dir_all(&a.out).with_context(|| format!("{}", a.out.display()))?;
             let path = a.out.join(format!("turntable-{label}.png"));
-            turntable(&models, c, a.turntable_res, depth_shift(frame, c), &path)
-                .with_context(|| format!("turntable of {label}"))?;
+            turntable(
+                &models,
+                c,
+                a.turntable_res,
+                ToCamera::new(frame, c, false),
+                &path,
+            )
+            .with_context(|| format!("turntable of {label}"))?;
         }
         let start = images.len();
         for c in &cases {
@@ -516,7 +626,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 &mut truth,
                 a.gt_mask,
                 truth_k,
-                depth_shift(frame, c),
+                ToCamera::new(frame, c, truth_k.is_some()),
             )
             .with_context(|| format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw))?;
             if a.json {
@@ -586,4 +696,58 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         print!("{md}");
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volcap_engine::model::NDC_HALF_EXTENT_M;
+
+    const SUBJECT: &str = "[[subject]]\nid = \"t\"\noutfit = \"female_casualsuit01\"\nshoes = \"shoes01\"\nhair = \"ponytail01\"\nskin = \"young_caucasian_female2\"\n";
+
+    /// The simulator's camera of one framing (dataset scene text, embedded assets).
+    fn camera(height_m: f32, look_y: f32) -> volcap_sim::camera::Camera {
+        let assets = Arc::new(volcap_sim::HumanAssets::embedded().unwrap());
+        let text =
+            volcap_sim::dataset::scene_text_framed(64, SUBJECT, Style::ALL[0], 1, height_m, look_y);
+        let scene = Scene::parse(&text, Path::new("t.toml")).unwrap();
+        Simulator::new(scene, assets)
+            .unwrap()
+            .render(0)
+            .unwrap()
+            .camera
+    }
+
+    /// A model's input NDC, read in the engine's metric (`NDC_HALF_EXTENT_M`), is the world up
+    /// to one scale in every framing: equal steps in metres along x, y and depth stay equal
+    /// once the frame camera's NDC is taken back through `ToCamera` (without its depth
+    /// scale a closer framing would stretch depth, by 2 at half the dataset's span).
+    #[test]
+    fn model_depth_keeps_the_world_proportions_in_every_framing() {
+        for (h, look_y) in [(2.3f32, 0.95f32), (1.15, 1.4), (1.0, 1.45), (1.3, 1.3)] {
+            let cam = camera(h, look_y);
+            let to = ToCamera {
+                dz: 0.07,
+                z_scale: h / volcap_sim::dataset::WHOLE_HEIGHT_M,
+            };
+            let model = |w: Vec3| {
+                let n = cam.world_to_ndc(w);
+                Vec3::new(n.x, n.y, (n.z - to.dz) / to.z_scale)
+            };
+            let o = Vec3::new(0.1, look_y - 0.1, 0.05);
+            let step = |d: Vec3| ((model(o + d) - model(o)) * NDC_HALF_EXTENT_M).length();
+            let (x, y, z) = (
+                step(Vec3::X * 0.2),
+                step(Vec3::Y * 0.2),
+                step(Vec3::Z * 0.2),
+            );
+            assert!(x > 0.0, "h {h}");
+            for v in [y, z] {
+                assert!((v - x).abs() < 1e-3 * x, "h {h}: steps {x} {y} {z}");
+            }
+            // `apply` is the way back.
+            let n = cam.world_to_ndc(o);
+            assert!((to.apply(model(o)) - n).length() < 1e-5, "h {h}");
+        }
+    }
 }

@@ -1,7 +1,7 @@
 //! The evaluation's report: the Markdown table (models side by side, per-image rows) and the
 //! Chamfer-vs-time plot.
 
-use super::{EvalArgs, ImageRow, ModelRow};
+use super::{EvalArgs, Framing, ImageRow, ModelRow};
 use anyhow::anyhow;
 use plotters::prelude::*;
 use std::fmt::Write as _;
@@ -12,7 +12,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
     let _ = writeln!(
         s,
         "# Evaluation: full pipeline on held-out simulator subjects\n\n\
-         `volcap eval --subjects {} --poses {} --views {} --res {} --model {} --seed {}` (manifest `{}`, assets {}).\n\
+         `volcap eval --subjects {} --poses {} --views {} --res {} --model {} --seed {}{}` (manifest `{}`, assets {}).\n\
          Pipeline: segmentation -> crop -> shape encoder -> hierarchical localization at {}^3 -> marching cubes.\n\
          Chamfer / P2S in cm against the ground-truth clothed mesh (10k surface samples each); IoU against the\n\
          simulator's occupancy oracle on the same grid; mask IoU of the segmentation; worst-10 = mean of the 10\n\
@@ -26,6 +26,10 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         a.res,
         a.model.join(","),
         a.seed,
+        match a.framing {
+            Framing::Whole => String::new(),
+            Framing::Upper => format!(" --framing {}", a.framing.name()),
+        },
         a.manifest.display(),
         a.data
             .as_ref()
@@ -33,6 +37,18 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             .unwrap_or_else(|| "embedded pack".into()),
         a.res,
     );
+    if a.framing == Framing::Upper {
+        let _ = writeln!(
+            s,
+            "Framing `upper`: a person close to the camera, the frame's lower edge between the hips and the\n\
+             knees (weak perspective spanning {:.1} to {:.1} m, top at {:.2} m above the floor). The truth is\n\
+             what the frame shows: the oracle and the ground-truth surface below the edge are left out, and\n\
+             so is the reconstruction's surface there.\n",
+            super::UPPER_SPAN_M.0,
+            super::UPPER_SPAN_M.1,
+            super::UPPER_TOP_M,
+        );
+    }
     let _ = writeln!(
         s,
         "| model | family | params | GMACs/frame | MACs/point | ms/frame | seg ms | enc ms | localize ms | evals | Chamfer cm | P2S cm | worst-10 Chamfer | worst-10 P2S | IoU | mask IoU | failed |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"

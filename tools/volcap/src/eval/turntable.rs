@@ -1,7 +1,7 @@
 //! Turntable sheets: a model's field rendered mesh-free at four yaws above the oracle's from
 //! the same views.
 
-use super::Case;
+use super::{Case, ToCamera, in_frame};
 use anyhow::{Context, anyhow};
 use glam::Vec3;
 use std::path::Path;
@@ -14,23 +14,34 @@ use volcap_engine::model::{ModelView, Models};
 struct OracleInView<'a> {
     oracle: &'a volcap_sim::oracle::SceneField,
     field: &'a volcap_engine::model::ModelField,
-    /// Input-NDC depth added before the lookup (the truth moved into the model's depth
-    /// frame; see `eval::depth_shift`).
-    dz: f32,
+    /// Model input NDC -> the frame camera's (the truth moved into the model's depth frame
+    /// and proportions; see `eval::ToCamera`).
+    to_cam: ToCamera,
 }
 
 impl OracleInView<'_> {
     fn moved(&self, points: &[Vec3]) -> Vec<Vec3> {
         points
             .iter()
-            .map(|p| self.field.crop.to_input(self.field.to_crop(*p)) + Vec3::Z * self.dz)
+            .map(|p| {
+                self.to_cam
+                    .apply(self.field.crop.to_input(self.field.to_crop(*p)))
+            })
             .collect()
     }
 }
 
 impl OccupancyField for OracleInView<'_> {
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), volcap_engine::FieldError> {
-        self.oracle.occupancy(&self.moved(points), out)
+        // What the frame shows (the truth the reconstruction is scored against).
+        let moved = self.moved(points);
+        self.oracle.occupancy(&moved, out)?;
+        for (o, p) in out.iter_mut().zip(&moved) {
+            if !in_frame(*p) {
+                *o = 0.0;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -48,13 +59,13 @@ impl volcap_engine::ColorField for OracleInView<'_> {
 pub const TURNTABLE_YAWS: [f32; 4] = [0.0, 90.0, 180.0, 270.0];
 
 /// A sheet of mesh-free renders (shaded, grey background) of one case: the model's field at
-/// yaw 0/90/180/270 above the oracle's from the same views (the oracle moved by `dz` in
-/// input-NDC depth: the model's depth frame).
+/// yaw 0/90/180/270 above the oracle's from the same views (the oracle where the frame shows
+/// it, seen through `to_cam`: the model's depth frame and proportions).
 pub(super) fn turntable(
     models: &Models,
     c: &Case,
     res: usize,
-    dz: f32,
+    to_cam: ToCamera,
     path: &Path,
 ) -> anyhow::Result<()> {
     use volcap_engine::render::{RenderOptions, Renderer};
@@ -81,7 +92,7 @@ pub(super) fn turntable(
         let truth = OracleInView {
             oracle: &c.oracle,
             field: &field,
-            dz,
+            to_cam,
         };
         for (row, (occ, colors)) in [
             (
