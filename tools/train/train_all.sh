@@ -36,7 +36,8 @@ $T fourier --data "$DATA" --out "$RUNS/fourier" --variant fourier --steps "${FOU
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-dense" --variant fourier-small --steps 8000 --lr 1e-3 --point-weight 0 --moment-weight 1 --ohem none --no-aug --depth-frame body --points 2048
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-point" --variant fourier-small --steps 4000 --lr 5e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-dense/ckpt.pt"
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-gt" --variant fourier-small --steps 3000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-point/ckpt.pt"
-$T fourier --data "$DATA" --out "$RUNS/fourier-small" --variant fourier-small --steps 7000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
+$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-seg" --variant fourier-small --steps 7000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
+$T fourier --data "$DATA" --out "$RUNS/fourier-small" --variant fourier-small --steps 9000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-seg/ckpt.pt"
 # fourier-small-upper: stage (3) resumed with upper bodies (the person cut by the frame's lower
 # edge) added to the training images, for close-range framing.
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
