@@ -44,9 +44,9 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
              knees (weak perspective spanning {:.1} to {:.1} m, top at {:.2} m above the floor). The truth is\n\
              what the frame shows: the oracle and the ground-truth surface below the edge are left out, and\n\
              so is the reconstruction's surface there.\n",
-            super::UPPER_SPAN_M.0,
-            super::UPPER_SPAN_M.1,
-            super::UPPER_TOP_M,
+            super::framing::UPPER_SPAN_M.0,
+            super::framing::UPPER_SPAN_M.1,
+            super::framing::UPPER_TOP_M,
         );
     }
     let _ = writeln!(

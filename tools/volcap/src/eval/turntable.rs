@@ -1,7 +1,8 @@
 //! Turntable sheets: a model's field rendered mesh-free at four yaws above the oracle's from
 //! the same views.
 
-use super::{Case, ToCamera, in_frame};
+use super::Case;
+use super::framing::{ToCamera, occupancy_in_frame};
 use anyhow::{Context, anyhow};
 use glam::Vec3;
 use std::path::Path;
@@ -34,14 +35,7 @@ impl OracleInView<'_> {
 impl OccupancyField for OracleInView<'_> {
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), volcap_engine::FieldError> {
         // What the frame shows (the truth the reconstruction is scored against).
-        let moved = self.moved(points);
-        self.oracle.occupancy(&moved, out)?;
-        for (o, p) in out.iter_mut().zip(&moved) {
-            if !in_frame(*p) {
-                *o = 0.0;
-            }
-        }
-        Ok(())
+        occupancy_in_frame(self.oracle, &self.moved(points), out)
     }
 }
 
