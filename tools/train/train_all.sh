@@ -38,6 +38,11 @@ $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-point" --variant fou
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-gt" --variant fourier-small --steps 3000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --init "$RUNS/stages/fourier-small-point/ckpt.pt"
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-seg" --variant fourier-small --steps 7000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
 $T fourier --data "$DATA" --out "$RUNS/fourier-small" --variant fourier-small --steps 9000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-seg/ckpt.pt"
+# fourier-medium: fourier-small widened from c = 8 to 12 without changing its function
+# (volcap_train.widen: the new channels start unread), then trained on as fourier-small's last
+# stage (more capacity without starting over).
+$PY -m volcap_train.widen --init "$RUNS/fourier-small/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
+$T fourier --data "$DATA" --out "$RUNS/fourier-medium" --variant fourier-medium --steps 5000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-medium-init.pt"
 # fourier-small-upper: stage (3) resumed with upper bodies (the person cut by the frame's lower
 # edge) added to the training images, for close-range framing.
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"

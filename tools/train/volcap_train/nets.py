@@ -265,6 +265,8 @@ FOURIER_VARIANTS = {
     "fourier-k7": (7, 12),
     "fourier-k31": (31, 12),
     "fourier-small": (15, 8),
+    # fourier-small widened (volcap_train.widen) and trained on: more capacity, same K
+    "fourier-medium": (15, 12),
     "fourier-tiny": (15, 6),
     # name: (K, c, depth as a phase shift)
     "fourier-shift": (15, 12, True),

@@ -1,0 +1,58 @@
+"""volcap_train.widen: a widened Fourier head computes what the narrow one did (eval and
+train mode, batch-norm statistics that are not the defaults), then trains like any net."""
+import torch
+
+from volcap_train.nets import FourierNet
+from volcap_train.widen import main, widen
+
+
+def narrow_net():
+    torch.manual_seed(0)
+    net = FourierNet(15, 8)
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-1, 1)
+            m.running_var.uniform_(0.5, 2)
+            m.weight.data.uniform_(0.5, 1.5)
+            m.bias.data.uniform_(-0.5, 0.5)
+    return net
+
+
+def test_widened_net_computes_the_narrow_ones_function():
+    a = narrow_net()
+    b = widen(a, FourierNet(15, 12), 8, 12)
+    assert sum(p.numel() for p in b.parameters()) > 2 * sum(p.numel() for p in a.parameters())
+    x = torch.randn(2, 4, 256, 256)
+    for mode in ("eval", "train"):
+        a.train(mode == "train")
+        b.train(mode == "train")
+        with torch.no_grad():
+            ya, yb = a(x), b(x)
+        assert ya.abs().max() > 0.1
+        assert torch.allclose(ya, yb, atol=1e-5), (mode, (ya - yb).abs().max())
+    # The new channels are live: the first step opens the zero weights that read them, the
+    # second reaches the first layer's new filters.
+    b.train()
+    opt = torch.optim.SGD(b.parameters(), lr=0.1)
+    w_new = b.e0[0].weight[8:].clone()
+    for _ in range(2):
+        opt.zero_grad()
+        b(x).square().mean().backward()
+        opt.step()
+    assert not torch.equal(w_new, b.e0[0].weight[8:])
+
+
+def test_cli_refuses_a_narrower_or_different_target(tmp_path):
+    ck = tmp_path / "n.pt"
+    torch.save({"net": narrow_net().state_dict(), "step": 5}, ck)
+    out = tmp_path / "w.pt"
+    main(["--init", str(ck), "--from", "fourier-small", "--to", "fourier-medium", "--out", str(out)])
+    wide = FourierNet(15, 12)
+    wide.load_state_dict(torch.load(out)["net"])
+    for bad in ("fourier-tiny", "fourier-k7"):
+        try:
+            main(["--init", str(ck), "--from", "fourier-small", "--to", bad, "--out", str(out)])
+        except SystemExit as e:
+            assert bad in str(e)
+        else:
+            raise AssertionError(bad)
