@@ -11,10 +11,19 @@
 //! `subject_table`, `style`, `time_s`, `yaw_deg`, `split`, and the `scene` text and `frame`
 //! that reproduce the image). Points: half inside, half outside; near-surface samples with a
 //! Gaussian offset (sigma, default 5 cm) plus uniform samples in the subject's box.
-//! Everything is deterministic from the seed; the split is by subject identity.
+//! Everything is deterministic from the seed; the split is by subject identity. A pose seed
+//! (`pose_seed`) keeps the seed's identities and split and draws new poses, views and points.
+//!
+//! Lighting ([`DatasetLighting`]): `studio` renders every image under the fixed studio rig;
+//! `varied` draws a light rig per pose (ambient, a key light and maybe a fill, each with its
+//! own direction, strength and tint: [`varied_lighting`]) from a random stream of its own, so
+//! a varied dataset holds the same subjects, poses, views and labels as the studio one of the
+//! same configuration and only the shading differs. The rig is written into the scene text
+//! as its SH irradiance (with a comment naming the lights).
 
 use crate::assets::{GarmentKind, HumanAssets};
 use crate::pose::Style;
+use crate::raster::Sh9;
 use crate::rays::{DEFAULT_STEP_M, ray_intervals};
 use crate::scene::Scene;
 use crate::sim::{SimError, Simulator};
@@ -47,6 +56,87 @@ pub struct DatasetConfig {
     pub val_fraction: f32,
     pub voxel_m: f32,
     pub seed: u64,
+    /// Draw the poses, views, points and light rigs from this seed instead of `seed`: the
+    /// same identities and split (those come from `seed`) in new poses.
+    pub pose_seed: Option<u64>,
+    pub lighting: DatasetLighting,
+}
+
+/// How a dataset's images are lit (module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DatasetLighting {
+    /// The fixed studio rig (`preset = "studio"`) for every image.
+    #[default]
+    Studio,
+    /// A random rig per pose ([`varied_lighting`]).
+    Varied,
+}
+
+impl DatasetLighting {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Studio => "studio",
+            Self::Varied => "varied",
+        }
+    }
+}
+
+/// The studio rig's `[lighting]` table.
+pub const STUDIO_LIGHTING: &str = "[lighting]\npreset = \"studio\"\n";
+
+/// A random light rig as a scene's `[lighting]` table (explicit SH irradiance, a comment
+/// naming the lights): grey ambient 0.08-0.5 (one pose in ten ambient only, 0.55-1.0, like
+/// an overcast room); a key light from any azimuth, 15 degrees below to 75 above the
+/// horizon, strength 0.35-1.1, warm to cool tint; seven times in ten a fill light, another
+/// direction, strength 0.05-0.4. World directions (y up), so views around a pose see it
+/// from their own sides.
+pub fn varied_lighting(r: &mut impl Rng) -> String {
+    let dir = |r: &mut dyn rand::RngCore, el_lo: f32, el_hi: f32| -> (f32, f32, Vec3) {
+        let az: f32 = r.random_range(0.0..360.0);
+        let el: f32 = r.random_range(el_lo..el_hi);
+        let (a, e) = (az.to_radians(), el.to_radians());
+        (
+            az,
+            el,
+            Vec3::new(e.cos() * a.sin(), e.sin(), e.cos() * a.cos()),
+        )
+    };
+    let tint = |r: &mut dyn rand::RngCore, s: f32| -> [f32; 3] {
+        let t: f32 = r.random_range(-0.12..0.12);
+        [s * (1.0 + t), s, s * (1.0 - t)]
+    };
+    let mut notes = Vec::new();
+    let sh = if r.random_range(0..10) == 0 {
+        let a: f32 = r.random_range(0.55..1.0);
+        notes.push(format!("ambient only {a:.2}"));
+        Sh9::ambient([a; 3])
+    } else {
+        let a: f32 = r.random_range(0.08..0.5);
+        let mut sh = Sh9::ambient([a; 3]);
+        let (az, el, d) = dir(r, -15.0, 75.0);
+        let strength: f32 = r.random_range(0.35..1.1);
+        sh.add_directional(d, tint(r, strength));
+        notes.push(format!(
+            "ambient {a:.2}, key az {az:.0} el {el:.0} strength {strength:.2}"
+        ));
+        if r.random_range(0..10) < 7 {
+            let (az, el, d) = dir(r, -10.0, 60.0);
+            let strength: f32 = r.random_range(0.05..0.4);
+            sh.add_directional(d, tint(r, strength));
+            notes.push(format!("fill az {az:.0} el {el:.0} strength {strength:.2}"));
+        }
+        sh
+    };
+    let triples: Vec<String> = sh
+        .coeffs
+        .iter()
+        .map(|c| format!("[{:?}, {:?}, {:?}]", c[0], c[1], c[2]))
+        .collect();
+    format!(
+        "[lighting]\n# varied rig: {}\nsh = [{}]\n",
+        notes.join("; "),
+        triples.join(", ")
+    )
 }
 
 impl Default for DatasetConfig {
@@ -62,6 +152,8 @@ impl Default for DatasetConfig {
             val_fraction: 0.25,
             voxel_m: 0.005,
             seed: 0,
+            pose_seed: None,
+            lighting: DatasetLighting::Studio,
         }
     }
 }
@@ -134,6 +226,7 @@ pub fn scene_text(size: usize, subject_table: &str, style: Style, seed: u32) -> 
         seed,
         WHOLE_HEIGHT_M,
         WHOLE_LOOK_AT_Y,
+        STUDIO_LIGHTING,
     )
 }
 
@@ -142,9 +235,10 @@ pub fn scene_text(size: usize, subject_table: &str, style: Style, seed: u32) -> 
 pub const WHOLE_HEIGHT_M: f32 = 2.3;
 pub const WHOLE_LOOK_AT_Y: f32 = 0.95;
 
-/// [`scene_text`] with another weak-perspective framing: the image height spans `height_m`
-/// metres around a look-at point `look_at_y` metres above the floor (a smaller span higher up
-/// is a person close to the camera, cut by the frame's lower edge).
+/// [`scene_text`] with another weak-perspective framing and light: the image height spans
+/// `height_m` metres around a look-at point `look_at_y` metres above the floor (a smaller span
+/// higher up is a person close to the camera, cut by the frame's lower edge), lit by the
+/// `[lighting]` table `lighting` ([`STUDIO_LIGHTING`], [`varied_lighting`]).
 pub fn scene_text_framed(
     size: usize,
     subject_table: &str,
@@ -152,9 +246,10 @@ pub fn scene_text_framed(
     seed: u32,
     height_m: f32,
     look_at_y: f32,
+    lighting: &str,
 ) -> String {
     format!(
-        "[camera]\nwidth = {size}\nheight = {size}\nheight_m = {height_m:?}\nlook_at = [0.0, {look_at_y:?}, 0.0]\n[lighting]\npreset = \"studio\"\n{subject_table}\
+        "[camera]\nwidth = {size}\nheight = {size}\nheight_m = {height_m:?}\nlook_at = [0.0, {look_at_y:?}, 0.0]\n{lighting}{subject_table}\
          motion = {{ kind = \"procedural\", style = \"{}\", seed = {seed} }}\n",
         style.name()
     )
@@ -206,6 +301,10 @@ pub fn generate(
         )));
     }
     let mut r = ChaCha8Rng::seed_from_u64(cfg.seed);
+    // Light rigs come from a stream of their own: the main stream (subjects, poses, views,
+    // points) is the same whatever the lighting.
+    let pose_seed = cfg.pose_seed.unwrap_or(cfg.seed);
+    let mut light_r = ChaCha8Rng::seed_from_u64(pose_seed ^ 0x6c69_6768_7473);
     let ids: Vec<String> = (0..cfg.subjects).map(|i| format!("s{i:03}")).collect();
     let tables: Vec<String> = ids
         .iter()
@@ -218,6 +317,10 @@ pub fn generate(
     let val: Vec<bool> = (0..cfg.subjects)
         .map(|i| order[..n_val].contains(&i))
         .collect();
+    if let Some(ps) = cfg.pose_seed {
+        // Identities and split are drawn; everything after comes from the pose seed.
+        r = ChaCha8Rng::seed_from_u64(ps);
+    }
     let werr = |p: &Path, e: &dyn std::fmt::Display| DatasetError::Write {
         path: p.display().to_string(),
         msg: e.to_string(),
@@ -227,6 +330,7 @@ pub fn generate(
         "format": "volcap-sim-dataset/1",
         "seed": cfg.seed, "subjects": cfg.subjects, "poses": cfg.poses, "views": cfg.views, "size": cfg.size,
         "points": cfg.points, "surface_points": cfg.surface_points, "sigma_m": cfg.sigma_m, "voxel_m": cfg.voxel_m,
+        "lighting": cfg.lighting.name(), "pose_seed": cfg.pose_seed,
         "assets": assets.source,
         "split": ids.iter().zip(&val).map(|(id, v)| (id.clone(), if *v { "val" } else { "train" })).collect::<HashMap<_, _>>(),
         "subject_tables": ids.iter().zip(&tables).map(|(id, t)| (id.clone(), t.clone())).collect::<HashMap<_, _>>(),
@@ -245,7 +349,19 @@ pub fn generate(
         for pi in 0..cfg.poses {
             let style = Style::ALL[r.random_range(0..Style::ALL.len())];
             let frame: u64 = r.random_range(0..60);
-            let text = scene_text(cfg.size, table, style, r.random::<u32>());
+            let lighting = match cfg.lighting {
+                DatasetLighting::Studio => STUDIO_LIGHTING.to_string(),
+                DatasetLighting::Varied => varied_lighting(&mut light_r),
+            };
+            let text = scene_text_framed(
+                cfg.size,
+                table,
+                style,
+                r.random::<u32>(),
+                WHOLE_HEIGHT_M,
+                WHOLE_LOOK_AT_Y,
+                &lighting,
+            );
             let scene = Scene::parse(&text, Path::new("<dataset>"))
                 .map_err(|e| DatasetError::Config(e.to_string()))?;
             let mut sim = Simulator::new(scene, assets.clone())?;

@@ -350,6 +350,10 @@ pub fn read_mhw(
     }
     let mut out = Vec::with_capacity(vertex_count);
     for (v, mut inf) in per.into_iter().enumerate() {
+        // The file's bones come in hash-map order, different in every process: sum in bone
+        // order so that a vertex's weights (and everything posed from them) are the same
+        // to the bit from run to run.
+        inf.sort_by_key(|x| x.0);
         let sum: f32 = inf.iter().map(|x| x.1).sum();
         if sum <= 0.0 {
             return Err(invalid(path, format!("vertex {v} has no bone weight")));
@@ -604,4 +608,46 @@ pub fn bvh_rotations(bvh: &BvhData, frame: usize) -> HashMap<String, Mat3> {
         out.insert(name.clone(), c * r * c.transpose());
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A vertex influenced by many bones whose weights sum differently in f32 depending on
+    /// the order: every read gives the same bits (the bones' hash-map order varies between
+    /// maps, so twenty reads see several orders).
+    #[test]
+    fn weights_are_the_same_to_the_bit_whatever_the_file_order() {
+        let bones: Vec<String> = (0..24).map(|i| format!("bone{i:02}")).collect();
+        let weights: Vec<String> = bones
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                let w = if i % 3 == 0 {
+                    1e-4 * (i + 1) as f32
+                } else {
+                    0.3 / (i + 1) as f32
+                };
+                format!("\"{b}\": [[0, {w:?}]]")
+            })
+            .collect();
+        let dir = std::env::temp_dir().join(format!("volcap-mhw-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("w.mhw");
+        std::fs::write(
+            &path,
+            format!("{{\"weights\": {{{}}}}}", weights.join(", ")),
+        )
+        .unwrap();
+        let first = read_mhw(&path, &bones, 1).unwrap();
+        for _ in 0..20 {
+            let again = read_mhw(&path, &bones, 1).unwrap();
+            let bits = |v: &[Influences]| -> Vec<(u16, u32)> {
+                v.iter().flatten().map(|(b, w)| (*b, w.to_bits())).collect()
+            };
+            assert_eq!(bits(&first), bits(&again));
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

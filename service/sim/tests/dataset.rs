@@ -2,7 +2,7 @@
 
 use safetensors::SafeTensors;
 use std::collections::BTreeSet;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use volcap_sim::HumanAssets;
 use volcap_sim::dataset::{DatasetConfig, generate};
@@ -112,6 +112,165 @@ fn tiny_dataset_is_deterministic_split_by_identity_and_balanced() {
         let info: serde_json::Value = serde_json::from_str(&md["volcap"]).unwrap();
         assert!(
             info["camera"]["width"] == 64 && (info["split"] == "train" || info["split"] == "val")
+        );
+    }
+    std::fs::remove_dir_all(&base).ok();
+}
+
+fn tensor_bytes(path: &Path, name: &str) -> Vec<u8> {
+    let bytes = std::fs::read(path).unwrap();
+    let st = SafeTensors::deserialize(&bytes).unwrap();
+    st.tensor(name).unwrap().data().to_vec()
+}
+
+/// A small dataset configuration at 48 px.
+fn tiny(subjects: usize, poses: usize, views: usize, seed: u64) -> DatasetConfig {
+    DatasetConfig {
+        subjects,
+        poses,
+        views,
+        size: 48,
+        points: 200,
+        surface_points: 50,
+        seed,
+        ..Default::default()
+    }
+}
+
+/// Two datasets from the embedded assets under a fresh temporary folder: (folder, a, b).
+fn pair(tag: &str, a: &DatasetConfig, b: &DatasetConfig) -> (PathBuf, PathBuf, PathBuf) {
+    let assets = Arc::new(HumanAssets::embedded().unwrap());
+    let base = std::env::temp_dir().join(format!("volcap-ds-{tag}-{}", std::process::id()));
+    let (da, db) = (base.join("a"), base.join("b"));
+    generate(assets.clone(), a, &da, |_| {}).unwrap();
+    generate(assets, b, &db, |_| {}).unwrap();
+    (base, da, db)
+}
+
+#[test]
+fn varied_lighting_changes_only_the_shading() {
+    use volcap_sim::dataset::DatasetLighting;
+    let cfg = tiny(2, 2, 2, 3);
+    let vcfg = DatasetConfig {
+        lighting: DatasetLighting::Varied,
+        ..cfg.clone()
+    };
+    let (base, studio, varied) = pair("light", &cfg, &vcfg);
+    let fs = files(&studio);
+    assert_eq!(fs.len(), 8);
+    let mut scenes = BTreeSet::new();
+    for f in &fs {
+        let g = varied.join(f.strip_prefix(&studio).unwrap());
+        // Same subjects, poses, views and labels...
+        for name in ["mask", "points", "occ", "ray_offsets", "ray_z", "surface"] {
+            assert!(
+                tensor_bytes(f, name) == tensor_bytes(&g, name),
+                "{name} differs in {}",
+                g.display()
+            );
+        }
+        // ...under another light.
+        let (a, b) = (tensor_bytes(f, "image"), tensor_bytes(&g, "image"));
+        let diff = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        assert!(
+            diff > a.len() / 20,
+            "{}: only {diff} bytes differ",
+            g.display()
+        );
+        let bytes = std::fs::read(&g).unwrap();
+        let (_, meta) = SafeTensors::read_metadata(&bytes).unwrap();
+        let info: serde_json::Value =
+            serde_json::from_str(&meta.metadata().as_ref().unwrap()["volcap"]).unwrap();
+        let scene = info["scene"].as_str().unwrap().to_string();
+        assert!(
+            scene.contains("# varied rig") && scene.contains("sh = ["),
+            "{scene}"
+        );
+        scenes.insert(scene);
+    }
+    // One rig per pose: 2 subjects x 2 poses, the views of a pose share it.
+    assert_eq!(scenes.len(), 4);
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(varied.join("dataset.json")).unwrap())
+            .unwrap();
+    assert_eq!(manifest["lighting"], "varied");
+    std::fs::remove_dir_all(&base).ok();
+}
+
+#[test]
+fn varied_rigs_are_bounded_never_black_and_come_from_all_sides() {
+    use rand::SeedableRng;
+    use volcap_sim::Scene;
+    let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    // Normals on a Fibonacci sphere.
+    let normals: Vec<glam::Vec3> = (0..200)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / 200.0;
+            let a = i as f32 * 2.399_963;
+            let s = (1.0 - y * y).sqrt();
+            glam::Vec3::new(s * a.cos(), y, s * a.sin())
+        })
+        .collect();
+    let (mut pos_x, mut neg_x, mut pos_z, mut neg_z) = (0, 0, 0, 0);
+    for _ in 0..300 {
+        let table = volcap_sim::dataset::varied_lighting(&mut r);
+        // The table is a valid scene lighting table.
+        let text = volcap_sim::dataset::scene_text_framed(
+            32,
+            "[[subject]]\nid = \"a\"\n",
+            volcap_sim::pose::Style::ALL[0],
+            1,
+            2.3,
+            0.95,
+            &table,
+        );
+        let scene =
+            Scene::parse(&text, Path::new("rig.toml")).unwrap_or_else(|e| panic!("{table}: {e}"));
+        let sh = scene.lighting.sh.as_ref().expect("explicit SH");
+        let coeffs: Vec<[f32; 3]> = sh.iter().map(|c| c.map(|x| x.0)).collect();
+        let sh9 = volcap_sim::raster::Sh9 {
+            coeffs: coeffs.clone().try_into().unwrap(),
+        };
+        let e: Vec<f32> = normals.iter().map(|n| sh9.irradiance(*n).x).collect();
+        assert!(e.iter().all(|v| v.is_finite() && *v <= 2.5), "{table}");
+        let mean = e.iter().sum::<f32>() / e.len() as f32;
+        assert!(mean > 0.05, "{table}: mean irradiance {mean}");
+        // Band-1 coefficients (y, z, x order) carry the light's direction.
+        let (z, x) = (coeffs[2][1], coeffs[3][1]);
+        pos_x += (x > 0.02) as u32;
+        neg_x += (x < -0.02) as u32;
+        pos_z += (z > 0.02) as u32;
+        neg_z += (z < -0.02) as u32;
+    }
+    for (n, side) in [(pos_x, "+x"), (neg_x, "-x"), (pos_z, "+z"), (neg_z, "-z")] {
+        assert!(n > 50, "only {n} of 300 rigs lit from {side}");
+    }
+}
+
+#[test]
+fn a_pose_seed_keeps_the_people_and_split_and_draws_new_poses() {
+    let cfg = tiny(3, 1, 1, 9);
+    let pcfg = DatasetConfig {
+        pose_seed: Some(4),
+        ..cfg.clone()
+    };
+    let (base, a, b) = pair("pose", &cfg, &pcfg);
+    let manifest = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("dataset.json")).unwrap()).unwrap()
+    };
+    let (ma, mb) = (manifest(&a), manifest(&b));
+    assert_eq!(ma["split"], mb["split"]);
+    assert_eq!(ma["subject_tables"], mb["subject_tables"]);
+    assert_eq!(mb["pose_seed"], 4);
+    let fa = files(&a);
+    assert_eq!(fa.len(), 3);
+    for f in &fa {
+        let g = b.join(f.strip_prefix(&a).unwrap());
+        assert!(g.exists(), "{} missing: the split changed", g.display());
+        assert!(
+            tensor_bytes(f, "points") != tensor_bytes(&g, "points"),
+            "{}: same points under another pose seed",
+            g.display()
         );
     }
     std::fs::remove_dir_all(&base).ok();

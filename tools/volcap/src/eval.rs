@@ -250,8 +250,15 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
             let frame: u64 = r.random_range(0..60);
             let seed = r.random::<u32>();
             let (height_m, look_y) = a.framing.camera(&mut r);
-            let text =
-                volcap_sim::dataset::scene_text_framed(size, table, style, seed, height_m, look_y);
+            let text = volcap_sim::dataset::scene_text_framed(
+                size,
+                table,
+                style,
+                seed,
+                height_m,
+                look_y,
+                volcap_sim::dataset::STUDIO_LIGHTING,
+            );
             let scene = Scene::parse(&text, Path::new("<eval>")).map_err(|e| anyhow!("{e}"))?;
             let mut sim = Simulator::new(scene, assets.clone())?;
             for v in 0..a.views {

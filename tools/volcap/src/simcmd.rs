@@ -45,10 +45,24 @@ pub struct DatasetArgs {
     pub val_fraction: f32,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Draw poses, views, points and light rigs from this seed: the identities and split of
+    /// `--seed` in new poses (another dataset of the same people).
+    #[arg(long)]
+    pub pose_seed: Option<u64>,
+    /// `studio`: every image under the fixed studio rig; `varied`: a random light rig per
+    /// pose (same subjects, poses and labels as the studio dataset of the same options).
+    #[arg(long, value_enum, default_value_t = LightingArg::Studio)]
+    pub lighting: LightingArg,
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
     pub assets: AssetArgs,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LightingArg {
+    Studio,
+    Varied,
 }
 
 #[derive(Args)]
@@ -357,6 +371,11 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
         points: a.points,
         val_fraction: a.val_fraction,
         seed: a.seed,
+        pose_seed: a.pose_seed,
+        lighting: match a.lighting {
+            LightingArg::Studio => volcap_sim::dataset::DatasetLighting::Studio,
+            LightingArg::Varied => volcap_sim::dataset::DatasetLighting::Varied,
+        },
         ..Default::default()
     };
     let total = (a.subjects * a.poses * a.views) as u64;

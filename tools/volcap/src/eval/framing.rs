@@ -135,8 +135,15 @@ mod tests {
     /// The simulator's camera of one framing (dataset scene text, embedded assets).
     fn camera(height_m: f32, look_y: f32) -> volcap_sim::camera::Camera {
         let assets = Arc::new(volcap_sim::HumanAssets::embedded().unwrap());
-        let text =
-            volcap_sim::dataset::scene_text_framed(64, SUBJECT, Style::ALL[0], 1, height_m, look_y);
+        let text = volcap_sim::dataset::scene_text_framed(
+            64,
+            SUBJECT,
+            Style::ALL[0],
+            1,
+            height_m,
+            look_y,
+            volcap_sim::dataset::STUDIO_LIGHTING,
+        );
         let scene = Scene::parse(&text, Path::new("t.toml")).unwrap();
         Simulator::new(scene, assets)
             .unwrap()
