@@ -1,10 +1,16 @@
 """Point IoU of Fourier checkpoints on held-out whole bodies and on their upper-body crops
 (train.fourier_upper_cached: the person cut by the frame's lower edge), at surface levels.
 
-  python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55] [--seg ../../models/seg.onnx]
+  python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55] [--seg ../../models/seg.onnx] [--ray-parts]
 
 RUN is a run folder (its ckpt.pt) or a light checkpoint (models/checkpoints/*.pt). Depth in the
-body frame (fourier.centre_depth), as the committed models are trained."""
+body frame (fourier.centre_depth), as the committed models are trained.
+
+`--ray-parts` also splits a volumetric IoU in the crop's frame (each crop pixel's predicted
+series against the ground-truth one, on depth bins, whole bodies with true masks) into where
+it is lost (`ray_parts`): the silhouette, the placement along depth (the best global shift
+per image), and the surfaces along each ray inside the shared silhouette (and the thickness
+bias there)."""
 from __future__ import annotations
 
 import argparse
@@ -12,8 +18,8 @@ from pathlib import Path
 
 import torch
 from . import fourier as FO
-from .nets import FourierNet, fourier_variant
-from .train import fourier_cached, fourier_upper_cached, init_weights, predict_points
+from .nets import FourierNet, fourier_variant, shift_series
+from .train import encoder_input, fourier_cached, fourier_upper_cached, init_weights, predict_points
 
 
 def load(path: Path, variant: str) -> FourierNet:
@@ -34,6 +40,68 @@ def point_iou(net: FourierNet, d: dict, levels) -> dict:
     return out
 
 
+COARSE_SHIFTS = torch.linspace(-0.2, 0.2, 9)  # zeta, then refined in 0.01 steps
+
+
+def _iou(a: torch.Tensor, b: torch.Tensor, dims) -> torch.Tensor:
+    return (a & b).sum(dims).float() / (a | b).sum(dims).clamp(min=1).float()
+
+
+def ray_parts(pred: torch.Tensor, truth: torch.Tensor, k: int, level: float = 0.5, bins: int = 64) -> dict:
+    """Per image of coefficient maps [B, 2K+1, H, W] (prediction, truth, same grid): occupancy
+    on `bins` depth bins in zeta [-1, 1] above `level`, and
+      iou       the volumetric IoU;
+      best_iou, best_shift  the IoU after the best global depth shift of the prediction
+                (zeta, within +-0.2 to 0.01, coarse to fine; what placement alone would buy);
+      sil_iou   the silhouette IoU (pixels with any bin occupied);
+      ray_iou   the IoU over the pixels inside both silhouettes (the surfaces along rays);
+      thick_pred, thick_true  mean occupied bins per ray there."""
+    z = torch.linspace(-1 + 1 / bins, 1 - 1 / bins, bins, dtype=pred.dtype)
+    basis = FO.basis(z, k)  # [bins, 2K+1]
+    vol = lambda c: torch.einsum("bchw,zc->bhwz", c[:, : FO.channels(k)], basis) > level
+    vp, vt = vol(pred), vol(truth)
+    dims = (1, 2, 3)
+    iou = _iou(vp, vt, dims)
+    best, best_shift = iou.clone(), torch.zeros_like(iou)
+
+    def search(offsets, centre):
+        nonlocal best, best_shift
+        for off in offsets:
+            d = centre + float(off)
+            u = _iou(vol(shift_series(pred, d.view(-1, 1, 1, 1).to(pred.dtype), k)), vt, dims)
+            better = u > best
+            best, best_shift = torch.where(better, u, best), torch.where(better, d, best_shift)
+
+    search(COARSE_SHIFTS, torch.zeros_like(iou))
+    search(torch.linspace(-0.04, 0.04, 9), best_shift.clone())
+    sp, st = vp.any(-1), vt.any(-1)
+    both = (sp & st).unsqueeze(-1)
+    return {
+        "iou": iou,
+        "best_iou": best,
+        "best_shift": best_shift,
+        "sil_iou": _iou(sp, st, (1, 2)),
+        "ray_iou": _iou(vp & both, vt & both, dims),
+        "thick_pred": (vp & both).sum(dims).float() / both.sum(dims).clamp(min=1).float(),
+        "thick_true": (vt & both).sum(dims).float() / both.sum(dims).clamp(min=1).float(),
+    }
+
+
+def net_ray_parts(net: FourierNet, d: dict, level: float = 0.5, batch: int = 8) -> dict:
+    """`ray_parts` of a net's maps against the ground-truth maps of the items of `d`, means and
+    standard deviations over the images."""
+    parts = []
+    with torch.no_grad():
+        for s in range(0, len(d["rgb"]), batch):
+            x = encoder_input(d["rgb"][s : s + batch].float() / 255, d["mask"][s : s + batch].float() / 255)
+            parts.append(ray_parts(net(x).float(), d["coeff"][s : s + batch].float(), net.k, level))
+    out = {}
+    for key in parts[0]:
+        v = torch.cat([p[key] for p in parts])
+        out[key] = (v.mean().item(), v.std(unbiased=False).item())
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="volcap_train.point_iou")
     ap.add_argument("--data", type=Path, required=True)
@@ -42,6 +110,7 @@ def main(argv=None):
     ap.add_argument("--split", default="val")
     ap.add_argument("--levels", default="0.5,0.55")
     ap.add_argument("--seg", type=Path, default=None, help="also score the whole bodies with this ONNX segmentation model's masks and crops (the engine's input; seg_masks)")
+    ap.add_argument("--ray-parts", action="store_true", help="also split a volumetric IoU of the whole bodies (true masks) into silhouette, placement and surfaces along rays (ray_parts)")
     args = ap.parse_args(argv)
     levels = [float(v) for v in args.levels.split(",")]
     k = fourier_variant(args.variant)[0]
@@ -55,6 +124,10 @@ def main(argv=None):
         for name, d in sets.items():
             r = point_iou(net, d, levels)
             print(f"{ck} {name} ({len(d['rgb'])} images): " + ", ".join(f"level {lv}: {m:.3f} (worst-10 {w:.3f})" for lv, (m, w) in r.items()), flush=True)
+        if args.ray_parts:
+            for lv in levels:
+                r = net_ray_parts(net, sets["whole"], lv)
+                print(f"{ck} whole, volumetric IoU in the crop at level {lv}: " + ", ".join(f"{key} {m:.3f} (sd {sd:.3f})" for key, (m, sd) in r.items()), flush=True)
 
 
 if __name__ == "__main__":
