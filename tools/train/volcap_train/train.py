@@ -443,6 +443,16 @@ def train_color(args):
     return loop(run, {"enc": enc, "mlp": mlp}, opt, args.steps, step_fn, eval_fn, {"gen": gen})
 
 
+def mirror_some(t: torch.Tensor, flips: torch.Tensor | None) -> torch.Tensor:
+    """Images or maps [B, C, H, W] mirrored left-right where `flips` [B] is true (None: as
+    they are). Exact in crop NDC on any grid with align_corners=True: pixel i of W sits at
+    x = -1 + 2 i / (W - 1), pixel W - 1 - i at -x, so the 256 px input and the 128 px maps
+    mirror about the same axis."""
+    if flips is None:
+        return t
+    return torch.where(flips.view(-1, 1, 1, 1), t.flip(-1), t)
+
+
 def train_fourier(args):
     """The Fourier head, densely supervised: every pixel's whole ray (Parseval L2 on the
     coefficients) plus BCE on labelled 3D points through the basis (OHEM on points and images).
@@ -507,7 +517,13 @@ def train_fourier(args):
             gparam["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * min(step / sched_total, 1.0)))
         items = ohem.sample_items(args.batch, gen)
         pidx = ohem.sample_points(items, args.points, gen)
-        pred, d = net(inputs(tr, items, None if args.no_aug else gen), with_centre=True)
+        x = inputs(tr, items, None if args.no_aug else gen)
+        flips = torch.rand(len(items), generator=gen) < 0.5 if args.flip else None
+        pred, d = net(mirror_some(x, flips), with_centre=True)
+        # A mirrored image's maps, mirrored back, are compared with the image's own targets:
+        # the same as training on the mirrored person with mirrored targets.
+        pred = mirror_some(pred, flips)
+        d = mirror_some(d, flips) if d is not None else None
         dense, bce, occ, lab = losses(pred, tr, items, pidx)
         loss = dense + args.point_weight * bce.mean()
         if args.moment_weight > 0:
@@ -562,6 +578,7 @@ def main(argv=None):
     ap.add_argument("--moment-weight", type=float, default=0.0, help="Fourier: weight of the L1 loss on each ray's first depth moment (depth order)")
     ap.add_argument("--depth-frame", default="body", choices=["body", "camera"], help="Fourier: targets with each image's mean depth at z = 0 (body, fourier.centre_depth) or as the camera saw them (camera: runs before 2026-11-23 evening)")
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
+    ap.add_argument("--flip", action="store_true", help="fourier: mirror half the training images left-right (their maps mirrored back before the losses): a mirrored person is a person")
     ap.add_argument("--upper-every", type=int, default=0, help="Fourier: add the upper-body variant (fourier_upper_cached: the person cut by the frame's lower edge) of every N-th training image; 0: none")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
     ap.add_argument("--seg", type=Path, default=None, help="Fourier: crops and mask channels from this ONNX segmentation model's masks (e.g. ../../models/seg.onnx, the product's) instead of the ground truth's (seg_masks)")
