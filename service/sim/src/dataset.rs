@@ -73,11 +73,28 @@ pub enum DatasetLighting {
 }
 
 impl DatasetLighting {
+    pub const ALL: [DatasetLighting; 2] = [Self::Studio, Self::Varied];
+
     pub fn name(self) -> &'static str {
         match self {
             Self::Studio => "studio",
             Self::Varied => "varied",
         }
+    }
+}
+
+impl std::str::FromStr for DatasetLighting {
+    type Err = String;
+
+    /// By [`DatasetLighting::name`]; anything else is refused naming the value and the choices.
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|l| l.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(|l| l.name()).collect();
+                format!("lighting {s:?}: expected one of {}", names.join(", "))
+            })
     }
 }
 

@@ -275,3 +275,16 @@ fn a_pose_seed_keeps_the_people_and_split_and_draws_new_poses() {
     }
     std::fs::remove_dir_all(&base).ok();
 }
+
+#[test]
+fn lighting_names_round_trip_and_others_are_refused_by_name() {
+    use volcap_sim::dataset::DatasetLighting;
+    for l in DatasetLighting::ALL {
+        assert_eq!(l.name().parse::<DatasetLighting>(), Ok(l));
+    }
+    let err = "sunny".parse::<DatasetLighting>().unwrap_err();
+    assert!(
+        err.contains("\"sunny\"") && err.contains("studio, varied"),
+        "{err}"
+    );
+}

@@ -26,6 +26,7 @@ import torch.nn as nn
 from safetensors.numpy import save_file
 
 from . import crop as C
+from . import light
 from .data import Split
 from . import fourier as FO
 from .onnx_rewrite import resize_to_shifts
@@ -435,8 +436,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     # A light checkpoint (weights and step, no optimizer state) for resuming training in a
     # later session: `train fourier --init models/checkpoints/shape-NAME.pt`.
     st = torch.load(run / "ckpt.pt", weights_only=False)
-    (out / "checkpoints").mkdir(exist_ok=True)
-    torch.save({"net": net.state_dict(), "step": st["step"], "variant": variant}, out / "checkpoints" / f"{base}.pt")
+    light.save(out / "checkpoints" / f"{base}.pt", net.state_dict(), st["step"], variant)
     macs = count_macs(net, x)
     history = (run / "history.md").read_text() if (run / "history.md").exists() else ""
     return {"history": history, "files": files, "variant": variant, "family": "fourier", "fourier_k": k, "iso_level": iso, "iso_rule": iso_rule, "iso_point_iou_train": iso_ious, "int8_calib": calib, "params": params(net), "gmacs_frame": macs / 1e9, "macs_point": 4 * (2 * k + 1) + 4 * k, "budget": budget}

@@ -51,18 +51,12 @@ pub struct DatasetArgs {
     pub pose_seed: Option<u64>,
     /// `studio`: every image under the fixed studio rig; `varied`: a random light rig per
     /// pose (same subjects, poses and labels as the studio dataset of the same options).
-    #[arg(long, value_enum, default_value_t = LightingArg::Studio)]
-    pub lighting: LightingArg,
+    #[arg(long, default_value = "studio")]
+    pub lighting: volcap_sim::dataset::DatasetLighting,
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
     pub assets: AssetArgs,
-}
-
-#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum LightingArg {
-    Studio,
-    Varied,
 }
 
 #[derive(Args)]
@@ -372,10 +366,7 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
         val_fraction: a.val_fraction,
         seed: a.seed,
         pose_seed: a.pose_seed,
-        lighting: match a.lighting {
-            LightingArg::Studio => volcap_sim::dataset::DatasetLighting::Studio,
-            LightingArg::Varied => volcap_sim::dataset::DatasetLighting::Varied,
-        },
+        lighting: a.lighting,
         ..Default::default()
     };
     let total = (a.subjects * a.poses * a.views) as u64;
