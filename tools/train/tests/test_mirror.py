@@ -42,3 +42,30 @@ def test_only_the_chosen_images_change_and_twice_is_nothing():
     assert torch.equal(m[0], t[0].flip(-1)) and not torch.equal(m[0], t[0])
     assert torch.equal(mirror_some(m, flips), t)
     assert mirror_some(t, None) is t
+
+
+def test_point_iou_mirrored_items_are_the_same_people_seen_mirrored():
+    # point_iou --mirrored: a net's answer for a mirrored item at its mirrored point is its
+    # answer for the mirrored input's maps mirrored back at the original point: one mirror.
+    from volcap_train.nets import FourierNet
+    from volcap_train.point_iou import mirrored
+    from volcap_train.train import predict_points
+
+    g = torch.Generator().manual_seed(2)
+    d = {
+        "rgb": torch.randint(0, 255, (2, 3, 256, 256), dtype=torch.uint8, generator=g),
+        "mask": torch.randint(0, 255, (2, 1, 256, 256), dtype=torch.uint8, generator=g),
+        "points": torch.rand(2, 300, 3, generator=g) * 2 - 1,
+        "occ": (torch.rand(2, 300, generator=g) > 0.5).float(),
+    }
+    m = mirrored(d)
+    assert torch.equal(m["occ"], d["occ"]) and torch.equal(mirrored(m)["points"], d["points"])
+    torch.manual_seed(0)
+    net = FourierNet(K, 4).eval()
+    got = predict_points(net, m["rgb"], m["mask"], m["points"])
+    from volcap_train.nets import encoder_input
+
+    with torch.no_grad():
+        maps = net(encoder_input(m["rgb"].float() / 255, m["mask"].float() / 255))
+    want = fourier_query(mirror_some(maps, torch.tensor([True, True])), d["points"], K)
+    assert torch.allclose(got, want, atol=1e-4)

@@ -64,3 +64,27 @@ def test_thick_rays_show_as_thickness_inside_a_right_silhouette(intervals):
     assert (r["ray_iou"] < 0.8).all()
     # Moving it along depth buys (almost) nothing: the error is the surfaces, not the place.
     assert (r["best_iou"] - r["iou"] < 0.02).all()
+
+
+def test_a_wrong_hidden_surface_is_told_from_a_wrong_visible_one(intervals):
+    lo, hi = intervals
+    t = maps(lo, hi)
+    # The back (far, low zeta) surface 0.1 zeta (3.2 bins) farther; the front exact.
+    r = ray_parts(maps(lo - 0.1, hi), t, K)
+    assert (r["front_err"] < 0.6).all()
+    assert (r["back_err"] > 2.5).all() and (r["back_bias"] < -2.5).all()
+    # The front (near) surface 0.1 zeta nearer the camera; the back exact.
+    r = ray_parts(maps(lo, hi + 0.1), t, K)
+    assert (r["back_err"] < 0.6).all()
+    assert (r["front_err"] > 2.5).all() and (r["front_bias"] > 2.5).all()
+    assert (r["gross"] == 0).all()  # 3.2 bins is surface error, not a limb out of place
+
+
+def test_limbs_out_of_place_count_as_gross(intervals):
+    lo, hi = intervals
+    t = maps(lo, hi)
+    lo2, hi2 = lo.clone(), hi.clone()
+    lo2[:, 2:4], hi2[:, 2:4] = lo[:, 2:4] + 0.5, hi[:, 2:4] + 0.5  # two rows 16 bins nearer
+    r = ray_parts(maps(lo2, hi2), t, K)
+    # those rows' rays, of the six body rows, and no other
+    assert torch.allclose(r["gross"], torch.full((2,), 2 / 6), atol=0.02)

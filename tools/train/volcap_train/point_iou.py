@@ -1,7 +1,10 @@
 """Point IoU of Fourier checkpoints on held-out whole bodies and on their upper-body crops
 (train.fourier_upper_cached: the person cut by the frame's lower edge), at surface levels.
 
-  python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55] [--seg ../../models/seg.onnx] [--ray-parts]
+  python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55] [--seg ../../models/seg.onnx] [--mirrored] [--ray-parts]
+
+`--mirrored` also scores the whole bodies mirrored left-right (`mirrored`): a person of the
+other handedness, which a net that never saw mirrored images scores far lower.
 
 RUN is a run folder (its ckpt.pt) or a light checkpoint (models/checkpoints/*.pt). Depth in the
 body frame (fourier.centre_depth), as the committed models are trained.
@@ -40,6 +43,16 @@ def point_iou(net: FourierNet, d: dict, levels) -> dict:
     return out
 
 
+def mirrored(d: dict) -> dict:
+    """The items of `d` mirrored left-right: crops and masks flipped (train.mirror_some: exact
+    in crop NDC) and the labelled points' x negated, labels unchanged."""
+    pts = d["points"].clone()
+    pts[..., 0] = -pts[..., 0]
+    return {**d, "rgb": d["rgb"].flip(-1), "mask": d["mask"].flip(-1), "points": pts}
+
+
+GROSS_BINS = 8  # of 64 over zeta [-1, 1]: 0.25 zeta
+
 COARSE_SHIFTS = torch.linspace(-0.2, 0.2, 9)  # zeta, then refined in 0.01 steps
 
 
@@ -55,7 +68,12 @@ def ray_parts(pred: torch.Tensor, truth: torch.Tensor, k: int, level: float = 0.
                 (zeta, within +-0.2 to 0.01, coarse to fine; what placement alone would buy);
       sil_iou   the silhouette IoU (pixels with any bin occupied);
       ray_iou   the IoU over the pixels inside both silhouettes (the surfaces along rays);
-      thick_pred, thick_true  mean occupied bins per ray there."""
+      thick_pred, thick_true  mean occupied bins per ray there;
+      front_err, back_err  mean absolute error (bins) there of the nearest occupied bin (the
+                visible surface; z toward the camera) and of the farthest (the hidden one);
+      front_bias, back_bias  their mean signed errors (bins, + = prediction nearer the camera);
+      gross     the fraction of those rays with either surface off by more than GROSS_BINS
+                (a limb put on the wrong side of the body: depth order, not surface detail)."""
     z = torch.linspace(-1 + 1 / bins, 1 - 1 / bins, bins, dtype=pred.dtype)
     basis = FO.basis(z, k)  # [bins, 2K+1]
     vol = lambda c: torch.einsum("bchw,zc->bhwz", c[:, : FO.channels(k)], basis) > level
@@ -76,6 +94,13 @@ def ray_parts(pred: torch.Tensor, truth: torch.Tensor, k: int, level: float = 0.
     search(torch.linspace(-0.04, 0.04, 9), best_shift.clone())
     sp, st = vp.any(-1), vt.any(-1)
     both = (sp & st).unsqueeze(-1)
+    nb = both.squeeze(-1).sum((1, 2)).clamp(min=1).float()
+    idx = torch.arange(bins)
+    # nearest occupied bin = the largest index; farthest = the smallest (z toward the camera)
+    front = lambda v: torch.where(v, idx, -1).amax(-1).float()
+    back = lambda v: torch.where(v, idx, bins).amin(-1).float()
+    per_img = lambda e: (e * both.squeeze(-1)).sum((1, 2)) / nb
+    df, db = front(vp) - front(vt), back(vp) - back(vt)
     return {
         "iou": iou,
         "best_iou": best,
@@ -84,6 +109,11 @@ def ray_parts(pred: torch.Tensor, truth: torch.Tensor, k: int, level: float = 0.
         "ray_iou": _iou(vp & both, vt & both, dims),
         "thick_pred": (vp & both).sum(dims).float() / both.sum(dims).clamp(min=1).float(),
         "thick_true": (vt & both).sum(dims).float() / both.sum(dims).clamp(min=1).float(),
+        "front_err": per_img(df.abs()),
+        "back_err": per_img(db.abs()),
+        "front_bias": per_img(df),
+        "back_bias": per_img(db),
+        "gross": per_img(((df.abs() > GROSS_BINS) | (db.abs() > GROSS_BINS)).float()),
     }
 
 
@@ -110,6 +140,7 @@ def main(argv=None):
     ap.add_argument("--split", default="val")
     ap.add_argument("--levels", default="0.5,0.55")
     ap.add_argument("--seg", type=Path, default=None, help="also score the whole bodies with this ONNX segmentation model's masks and crops (the engine's input; seg_masks)")
+    ap.add_argument("--mirrored", action="store_true", help="also score the whole bodies mirrored left-right (true masks)")
     ap.add_argument("--ray-parts", action="store_true", help="also split a volumetric IoU of the whole bodies (true masks) into silhouette, placement and surfaces along rays (ray_parts)")
     args = ap.parse_args(argv)
     levels = [float(v) for v in args.levels.split(",")]
@@ -119,6 +150,8 @@ def main(argv=None):
         sets[f"whole, {args.seg.stem} masks"] = fourier_cached(args.data, args.split, k, args.seg)
     for d in sets.values():
         FO.centre_depth(d["coeff"], d["points"], k)
+    if args.mirrored:
+        sets["whole, mirrored"] = mirrored(sets["whole"])
     for ck in args.ckpt:
         net = load(ck, args.variant)
         for name, d in sets.items():

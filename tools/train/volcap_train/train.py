@@ -152,6 +152,36 @@ def fourier_cached(root: Path, split: str, k: int, seg: Path | None = None):
     return out
 
 
+def fourier_union(roots: list[Path], split: str, k: int, seg: Path | None = None):
+    """`fourier_cached` of the same split of several datasets as one set of items, in the order
+    given. Each dataset's cache is built (or read) on its own and memory-mapped, then copied
+    into tensors sized for the union, so the peak is the union plus one dataset's pages, not
+    two copies of everything (two 32-pose datasets hold ~10 GB of items). `keep` indexes the
+    concatenated images."""
+    if len(roots) == 1:
+        return fourier_cached(roots[0], split, k, seg)
+    parts = []
+    for r in roots:
+        fourier_cached(r, split, k, seg)  # builds the cache if missing
+        cache = r / (f"fourier-{split}-k{k}-v2.pt" if seg is None else f"fourier-{split}-k{k}-seg-{seg.stem}-v1.pt")
+        parts.append(torch.load(cache, mmap=True))
+    out = {"k": k}
+    for name, v in parts[0].items():
+        if not torch.is_tensor(v):
+            continue
+        shapes = {tuple(p[name].shape[1:]) for p in parts}
+        if len(shapes) != 1:
+            raise ValueError(f"{name}: the datasets {', '.join(map(str, roots))} disagree on its shape per item ({sorted(shapes)})")
+        t = torch.empty((sum(len(p[name]) for p in parts), *v.shape[1:]), dtype=v.dtype)
+        at, offset = 0, 0
+        for p in parts:
+            t[at : at + len(p[name])] = p[name] + offset if name == "keep" else p[name]
+            at += len(p[name])
+            offset += len(p["rgb"])
+        out[name] = t
+    return out
+
+
 UPPER_KEEP = (0.3, 0.75)
 
 
@@ -463,7 +493,9 @@ def train_fourier(args):
     k, width, shift = fourier_variant(args.variant)
     # --seg: the crops and mask channels from the product's segmentation (what the engine
     # feeds the encoder), for training and validation alike; targets stay the ground truth's.
-    tr = fourier_cached(args.data, "train", k, args.seg)
+    # --more-data: further datasets' training images (same subjects' split), one set of items;
+    # validation stays --data's.
+    tr = fourier_union([args.data, *args.more_data], "train", k, args.seg)
     va = fourier_cached(args.data, "val", k, args.seg)
     if args.upper_every:
         # Upper bodies cut by the frame's lower edge (a webcam at a desk): added to the
@@ -563,6 +595,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog="volcap_train.train")
     ap.add_argument("task", choices=["seg", "shape", "color", "fourier"])
     ap.add_argument("--data", type=Path, required=True)
+    ap.add_argument("--more-data", type=Path, nargs="*", default=[], help="fourier: more datasets (same subjects' split, e.g. new poses or lighting) whose training images join --data's (fourier_union); validation stays --data's")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--variant", default="compact")
     ap.add_argument("--ohem", default="P+I", choices=["none", "P", "P+I"])
