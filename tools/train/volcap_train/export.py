@@ -389,11 +389,12 @@ def int8_drift(f32: Path, int8: Path, x: torch.Tensor, pts: torch.Tensor, k: int
     return (occ(int8) - occ(f32)).abs().mean().item()
 
 
-def calib_row(seg: Path | None, upper_every: int) -> str:
-    """The model card's int8 calibration row."""
+def calib_row(seg: Path | None, upper_every: int, fine: bool = False) -> str:
+    """The model card's int8 calibration row (`fine`: quantize(fine=True)'s scheme)."""
     masks = "the product's masks" if seg is not None else "true masks"
     upper = ", half of them upper bodies" if upper_every > 0 else ""
-    return f"weights per output channel, activation ranges (0.001-99.999 percentiles, per tensor) from {INT8_CALIB_IMAGES} training images, {masks}{upper}"
+    scheme = "weights per output channel, activation ranges (0.001-99.999 percentiles, per tensor)" if fine else "activation ranges (MinMax, per tensor)"
+    return f"{scheme} from {INT8_CALIB_IMAGES} training images, {masks}{upper}"
 
 
 def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, common, gen, va: Split, data: Path, level: str = "auto") -> dict:
@@ -422,16 +423,32 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     # of point IoU (mean |occ - f32| 0.082 against 0.013 with these; the model card).
     upper_every = int(budget.get("args", {}).get("upper_every", 0) or 0)
     int8_path = out / f"{base}.fourier.int8.onnx"
-    quantize(path, int8_path, fourier_calib(data, k, seg, upper_every), fine=True)
-    calib = calib_row(seg, upper_every)
-    drift = int8_drift(path, int8_path, x, pts, k)
+    # Both schemes are tried and the one that reads the golden query's occupancy closer to f32
+    # is kept: per-channel weights with percentile ranges took run 8 of fourier-small from 0.063
+    # to 0.009, but fourier-medium from 0.034 to 0.100 (its model cards).
+    feeds = fourier_calib(data, k, seg, upper_every)
+    tried = {}
+    for fine in (False, True):
+        quantize(path, int8_path, feeds, fine=fine)
+        tried[fine] = int8_drift(path, int8_path, x, pts, k)
+        shutil.copyfile(int8_path, out / f"{base}.fourier.int8.{'fine' if fine else 'minmax'}.tmp")
+    fine = tried[True] < tried[False]
+    for f in (False, True):
+        tmp = out / f"{base}.fourier.int8.{'fine' if f else 'minmax'}.tmp"
+        if f == fine:
+            shutil.move(tmp, int8_path)
+        else:
+            tmp.unlink()
+    drift = tried[fine]
+    scheme = calib_row(seg, upper_every, fine)
+    calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the other scheme {tried[not fine]:.3f})"
     if drift < INT8_MAX_DRIFT:
         files.append(int8_path.name)
     else:
         # An int8 file that reads the occupancy this far from its f32 is not shipped (and the
         # tests would refuse it): `NAME@int8` is then refused at load, naming the file.
         int8_path.unlink()
-        calib = f"none shipped: {calib} read the golden query's occupancy {drift:.3f} off f32 on average (limit {INT8_MAX_DRIFT})"
+        calib = f"none shipped: {scheme} read the golden query's occupancy {drift:.3f} off f32 on average (limit {INT8_MAX_DRIFT}; the other scheme {tried[not fine]:.3f})"
     with torch.no_grad():
         coeff = net(x)
         occ = (FO.decode(sample_features(coeff, pts[None, :, :2])[0], pts[:, 2] * FO.ZETA_SCALE, k) + (0.5 - iso)).clamp(0.0, 1.0)
