@@ -48,17 +48,23 @@ def test_shape_round_trip(tmp_path, variant):
     np.testing.assert_allclose(run(tmp_path / "m.onnx", {"feat": fb.numpy(), "z": zb.numpy()}), oc, rtol=1e-5, atol=1e-5)
 
 
-@pytest.mark.parametrize("shift", [False, True])
-def test_fourier_round_trip(tmp_path, shift):
+def fresh_fourier(seed, shift, draw):
+    """A seeded small FourierNet with non-trivial batch-norm statistics (three training-mode
+    batches drawn by `draw`), in eval mode."""
     from volcap_train.nets import FourierNet
 
-    torch.manual_seed(2)
+    torch.manual_seed(seed)
     net = FourierNet(k=7, c=6, shift=shift)
     net.train()
     with torch.no_grad():
         for _ in range(3):
-            net(torch.randn(2, 4, 256, 256))
-    net.eval()
+            net(draw(2, 4, 256, 256))
+    return net.eval()
+
+
+@pytest.mark.parametrize("shift", [False, True])
+def test_fourier_round_trip(tmp_path, shift):
+    net = fresh_fourier(2, shift, torch.randn)
     x = torch.randn(1, 4, 256, 256)
     export(net, (x,), ["image"], ["coeff"], tmp_path / "f.onnx", {"kind": "shape-fourier"}, False)
     with torch.no_grad():
@@ -173,15 +179,8 @@ def test_both_int8_schemes_run_and_fine_quantizes_weights_per_channel(tmp_path):
     output channel (the export keeps whichever reads the occupancy closer to f32). Both files
     run and stay near their f32 on a fresh net."""
     from volcap_train.export import quantize
-    from volcap_train.nets import FourierNet
 
-    torch.manual_seed(3)
-    net = FourierNet(k=7, c=6, shift=False)
-    net.train()
-    with torch.no_grad():
-        for _ in range(3):
-            net(torch.rand(2, 4, 256, 256))
-    net.eval()
+    net = fresh_fourier(3, False, torch.rand)
     x = torch.rand(1, 4, 256, 256)
     export(net, (x,), ["image"], ["coeff"], tmp_path / "f.onnx", {"kind": "shape-fourier"}, False)
     feeds = [{"image": torch.rand(1, 4, 256, 256).numpy()} for _ in range(4)] + [{"image": x.numpy()}]

@@ -82,9 +82,8 @@ def export(module, inputs, names_in, names_out, path: Path, meta: dict, dynamic_
 
 def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False):
     """int8 QDQ export of `src`. `fine`: weights per output channel and activation ranges at the
-    0.001 / 99.999 percentiles of the calibration histogram (the Fourier nets: MinMax per tensor
-    read run 8's occupancy 0.05-0.11 off f32, this 0.008-0.009, five held-out images); else
-    weights per tensor and MinMax ranges (the MLP family's files as committed)."""
+    0.001 / 99.999 percentiles of the calibration histogram; else weights per tensor and MinMax
+    ranges (the MLP family's files). The Fourier export tries both (export_fourier)."""
     from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 
     class Reader(CalibrationDataReader):
@@ -427,18 +426,14 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     # is kept: per-channel weights with percentile ranges took run 8 of fourier-small from 0.063
     # to 0.009, but fourier-medium from 0.034 to 0.100 (its model cards).
     feeds = fourier_calib(data, k, seg, upper_every)
+    cand = {fine: out / f"{base}.fourier.int8.{'fine' if fine else 'minmax'}.tmp" for fine in (False, True)}
     tried = {}
-    for fine in (False, True):
-        quantize(path, int8_path, feeds, fine=fine)
-        tried[fine] = int8_drift(path, int8_path, x, pts, k)
-        shutil.copyfile(int8_path, out / f"{base}.fourier.int8.{'fine' if fine else 'minmax'}.tmp")
+    for fine, tmp in cand.items():
+        quantize(path, tmp, feeds, fine=fine)
+        tried[fine] = int8_drift(path, tmp, x, pts, k)
     fine = tried[True] < tried[False]
-    for f in (False, True):
-        tmp = out / f"{base}.fourier.int8.{'fine' if f else 'minmax'}.tmp"
-        if f == fine:
-            shutil.move(tmp, int8_path)
-        else:
-            tmp.unlink()
+    shutil.move(cand[fine], int8_path)
+    cand[not fine].unlink()
     drift = tried[fine]
     scheme = calib_row(seg, upper_every, fine)
     calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the other scheme {tried[not fine]:.3f})"
