@@ -13,12 +13,15 @@
 #   DATA_LIGHT: the same identities and split in 32 new poses, each under its own light rig
 #   (fourier-small's stage 8 trains on it and DATA_POSES2 together), e.g.
 #   cargo run --release -p volcap -- sim dataset --subjects 48 --poses 32 --views 3 --val-fraction 0.15 --seed 11 --pose-seed 12 --lighting varied --out /work/data/ds5
+#   DATA_LIGHT2: as DATA_LIGHT in 32 more new poses (fourier-small's stage 9 trains on the three), e.g.
+#   cargo run --release -p volcap -- sim dataset --subjects 48 --poses 32 --views 3 --val-fraction 0.15 --seed 11 --pose-seed 13 --lighting varied --out /work/data/ds6
 set -euo pipefail
 cd "$(dirname "$0")"
 DATA=${DATA:?set DATA to a volcap sim dataset folder}
 DATA_POSES=${DATA_POSES:?set DATA_POSES to a volcap sim dataset folder of the same identities in more poses}
 DATA_POSES2=${DATA_POSES2:?set DATA_POSES2 to a volcap sim dataset folder of the same identities in twice DATA_POSES poses}
 DATA_LIGHT=${DATA_LIGHT:?set DATA_LIGHT to a volcap sim dataset folder of the same identities in new poses under varied light}
+DATA_LIGHT2=${DATA_LIGHT2:?set DATA_LIGHT2 to a volcap sim dataset folder like DATA_LIGHT in other new poses}
 RUNS=${RUNS:-runs}
 PY=${PY:-python3}
 ABL=${ABL_STEPS:-250}
@@ -56,7 +59,10 @@ $T fourier --data "$DATA_POSES" --out "$RUNS/stages/fourier-small-6" --variant f
 $T fourier --data "$DATA_POSES2" --out "$RUNS/stages/fourier-small-7" --variant fourier-small --steps 10000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-6/ckpt.pt"
 # (8) resumed on DATA_POSES2 and DATA_LIGHT together (--more-data: 32 new poses under varied
 # light; held-out 257^3 Chamfer / P2S / IoU 2.34 / 1.09 / 0.655 -> 2.22 / 0.98 / 0.667).
-$T fourier --data "$DATA_POSES2" --more-data "$DATA_LIGHT" --out "$RUNS/fourier-small" --variant fourier-small --steps 7000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-7/ckpt.pt"
+$T fourier --data "$DATA_POSES2" --more-data "$DATA_LIGHT" --out "$RUNS/stages/fourier-small-8" --variant fourier-small --steps 7000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-7/ckpt.pt"
+# (9) resumed on the three together (DATA_LIGHT2: 32 more new poses under varied light; peak RAM
+# about 21 GB; held-out 257^3 2.22 / 0.98 / 0.667 -> 2.17 / 0.96 / 0.667).
+$T fourier --data "$DATA_POSES2" --more-data "$DATA_LIGHT" "$DATA_LIGHT2" --out "$RUNS/fourier-small" --variant fourier-small --steps 10000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-8/ckpt.pt"
 # fourier-medium: fourier-small widened from c = 8 to 12 without changing its function
 # (volcap_train.widen: the new channels start unread), then trained on as fourier-small's last
 # stage (more capacity without starting over).

@@ -198,3 +198,31 @@ def test_both_int8_schemes_run_and_fine_quantizes_weights_per_channel(tmp_path):
         out = run(q, {"image": x.numpy()})
         assert np.isfinite(out).all()
         assert np.abs(out - ref).mean() < 0.1 * np.abs(ref).mean() + 1e-3
+
+
+def test_fine_int8_percentile_sets_the_activation_ranges(tmp_path):
+    """export.quantize(fine=True, percentile=p): activation ranges come from the p-th percentile,
+    so a lower percentile clips more and gives no larger activation scale on any tensor and a
+    smaller one on some; the export's candidates (FOURIER_INT8_SCHEMES) are distinct schemes."""
+    from volcap_train.export import FOURIER_INT8_SCHEMES, quantize
+
+    net = fresh_fourier(3, False, torch.rand)
+    x = torch.rand(1, 4, 256, 256)
+    export(net, (x,), ["image"], ["coeff"], tmp_path / "f.onnx", {"kind": "shape-fourier"}, False)
+    feeds = [{"image": torch.rand(1, 4, 256, 256).numpy()} for _ in range(4)]
+
+    def act_scales(pct):
+        q = tmp_path / f"q{pct}.onnx"
+        quantize(tmp_path / "f.onnx", q, feeds, fine=True, percentile=pct)
+        m = onnx.load(str(q))
+        inits = {i.name: onnx.numpy_helper.to_array(i) for i in m.graph.initializer}
+        # Activations: QuantizeLinear nodes fed by a tensor that is not an initializer.
+        return {n.input[0]: float(inits[n.input[1]]) for n in m.graph.node if n.op_type == "QuantizeLinear" and n.input[0] not in inits}
+
+    lo, hi = act_scales(99.0), act_scales(99.99999)
+    assert lo.keys() == hi.keys() and lo
+    assert all(lo[t] <= hi[t] * (1 + 1e-6) for t in lo)
+    assert any(lo[t] < 0.9 * hi[t] for t in lo)
+    names = [s[0] for s in FOURIER_INT8_SCHEMES]
+    assert len(set(names)) == len(names)
+    assert len({(f, p) for _, f, p in FOURIER_INT8_SCHEMES}) == len(FOURIER_INT8_SCHEMES)

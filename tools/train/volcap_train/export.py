@@ -80,10 +80,11 @@ def export(module, inputs, names_in, names_out, path: Path, meta: dict, dynamic_
     onnx.save(m, str(path))
 
 
-def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False):
+def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False, percentile: float = 99.999):
     """int8 QDQ export of `src`. `fine`: weights per output channel and activation ranges at the
-    0.001 / 99.999 percentiles of the calibration histogram; else weights per tensor and MinMax
-    ranges (the MLP family's files). The Fourier export tries both (export_fourier)."""
+    (100 - `percentile`) / `percentile` percentiles of the calibration histogram; else weights
+    per tensor and MinMax ranges (the MLP family's files). The Fourier export tries several
+    (export_fourier, FOURIER_INT8_SCHEMES)."""
     from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 
     class Reader(CalibrationDataReader):
@@ -94,7 +95,8 @@ def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False):
             return next(self.it, None)
 
     method = CalibrationMethod.Percentile if fine else CalibrationMethod.MinMax
-    quantize_static(str(src), str(dst), Reader(), quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv", "MatMul", "Gemm"], per_channel=fine, calibrate_method=method, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8)
+    extra = {"CalibPercentile": percentile} if fine else {}
+    quantize_static(str(src), str(dst), Reader(), quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv", "MatMul", "Gemm"], per_channel=fine, calibrate_method=method, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, extra_options=extra)
     m = onnx.load(str(dst))
     src_meta = {p.key: p.value for p in onnx.load(str(src)).metadata_props}
     del m.metadata_props[:]
@@ -388,12 +390,25 @@ def int8_drift(f32: Path, int8: Path, x: torch.Tensor, pts: torch.Tensor, k: int
     return (occ(int8) - occ(f32)).abs().mean().item()
 
 
-def calib_row(seg: Path | None, upper_every: int, fine: bool = False) -> str:
-    """The model card's int8 calibration row (`fine`: quantize(fine=True)'s scheme)."""
+# The Fourier export's int8 candidates, (name, quantize's fine, its percentile): the one that
+# reads the golden query's occupancy closest to f32 is kept. The best percentile differs from
+# run to run and is not monotone in the drift (fourier-small run 9, mean |occ - f32| on five
+# held-out images: 99.999 0.10-0.20, 99.9997 0.09-0.19, 99.9999 0.015-0.021, 99.99995
+# 0.010-0.015, 99.99999 0.05-0.10, MinMax 0.05-0.10; run 8: 99.999 0.008-0.009).
+FOURIER_INT8_SCHEMES = [("minmax", False, 0.0), ("p99.999", True, 99.999), ("p99.9999", True, 99.9999), ("p99.99995", True, 99.99995)]
+
+
+def scheme_text(fine: bool, percentile: float) -> str:
+    if not fine:
+        return "activation ranges (MinMax, per tensor)"
+    return f"weights per output channel, activation ranges ({100 - percentile:.5g}-{percentile:.8g} percentiles, per tensor)"
+
+
+def calib_row(seg: Path | None, upper_every: int, fine: bool = False, percentile: float = 99.999) -> str:
+    """The model card's int8 calibration row (`fine`: quantize(fine=True, percentile)'s scheme)."""
     masks = "the product's masks" if seg is not None else "true masks"
     upper = ", half of them upper bodies" if upper_every > 0 else ""
-    scheme = "weights per output channel, activation ranges (0.001-99.999 percentiles, per tensor)" if fine else "activation ranges (MinMax, per tensor)"
-    return f"{scheme} from {INT8_CALIB_IMAGES} training images, {masks}{upper}"
+    return f"{scheme_text(fine, percentile)} from {INT8_CALIB_IMAGES} training images, {masks}{upper}"
 
 
 def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, common, gen, va: Split, data: Path, level: str = "auto") -> dict:
@@ -422,28 +437,34 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     # of point IoU (mean |occ - f32| 0.082 against 0.013 with these; the model card).
     upper_every = int(budget.get("args", {}).get("upper_every", 0) or 0)
     int8_path = out / f"{base}.fourier.int8.onnx"
-    # Both schemes are tried and the one that reads the golden query's occupancy closer to f32
-    # is kept: per-channel weights with percentile ranges took run 8 of fourier-small from 0.063
-    # to 0.009, but fourier-medium from 0.034 to 0.100 (its model cards).
+    # Every scheme of FOURIER_INT8_SCHEMES is tried and the one that reads the golden query's
+    # occupancy closest to f32 is kept: per-channel weights with percentile ranges took run 8 of
+    # fourier-small from 0.063 to 0.009, but fourier-medium from 0.034 to 0.100 (its model
+    # cards), and the percentile that works differs between runs.
     feeds = fourier_calib(data, k, seg, upper_every)
-    cand = {fine: out / f"{base}.fourier.int8.{'fine' if fine else 'minmax'}.tmp" for fine in (False, True)}
     tried = {}
-    for fine, tmp in cand.items():
-        quantize(path, tmp, feeds, fine=fine)
-        tried[fine] = int8_drift(path, tmp, x, pts, k)
-    fine = tried[True] < tried[False]
-    shutil.move(cand[fine], int8_path)
-    cand[not fine].unlink()
-    drift = tried[fine]
-    scheme = calib_row(seg, upper_every, fine)
-    calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the other scheme {tried[not fine]:.3f})"
+    for name_, fine, pct in FOURIER_INT8_SCHEMES:
+        tmp = out / f"{base}.fourier.int8.{name_}.tmp"
+        quantize(path, tmp, feeds, fine=fine, percentile=pct)
+        tried[name_] = (int8_drift(path, tmp, x, pts, k), tmp)
+    best = min(tried, key=lambda n: tried[n][0])
+    for name_, (_, tmp) in tried.items():
+        if name_ == best:
+            shutil.move(tmp, int8_path)
+        else:
+            tmp.unlink()
+    drift = tried[best][0]
+    _, fine, pct = next(s for s in FOURIER_INT8_SCHEMES if s[0] == best)
+    scheme = calib_row(seg, upper_every, fine, pct)
+    others = "; ".join(f"{scheme_text(f, p)} {tried[n][0]:.3f}" for n, f, p in FOURIER_INT8_SCHEMES if n != best)
+    calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the others: {others})"
     if drift < INT8_MAX_DRIFT:
         files.append(int8_path.name)
     else:
         # An int8 file that reads the occupancy this far from its f32 is not shipped (and the
         # tests would refuse it): `NAME@int8` is then refused at load, naming the file.
         int8_path.unlink()
-        calib = f"none shipped: {scheme} read the golden query's occupancy {drift:.3f} off f32 on average (limit {INT8_MAX_DRIFT}; the other scheme {tried[not fine]:.3f})"
+        calib = f"none shipped: {scheme} read the golden query's occupancy {drift:.3f} off f32 on average (limit {INT8_MAX_DRIFT}; the others: {others})"
     with torch.no_grad():
         coeff = net(x)
         occ = (FO.decode(sample_features(coeff, pts[None, :, :2])[0], pts[:, 2] * FO.ZETA_SCALE, k) + (0.5 - iso)).clamp(0.0, 1.0)
