@@ -174,15 +174,21 @@ def test_committed_fourier_int8_stays_near_its_f32(name):
     assert (int8 - f32).abs().mean().item() < INT8_MAX_DRIFT
 
 
+def fresh_fourier_onnx(path):
+    """fresh_fourier(3, ...) exported as f32 ONNX to `path`; returns its trace input."""
+    net = fresh_fourier(3, False, torch.rand)
+    x = torch.rand(1, 4, 256, 256)
+    export(net, (x,), ["image"], ["coeff"], path, {"kind": "shape-fourier"}, False)
+    return x
+
+
 def test_both_int8_schemes_run_and_fine_quantizes_weights_per_channel(tmp_path):
     """export.quantize: the default scheme has one scale per weight tensor; `fine=True` one per
     output channel (the export keeps whichever reads the occupancy closer to f32). Both files
     run and stay near their f32 on a fresh net."""
     from volcap_train.export import quantize
 
-    net = fresh_fourier(3, False, torch.rand)
-    x = torch.rand(1, 4, 256, 256)
-    export(net, (x,), ["image"], ["coeff"], tmp_path / "f.onnx", {"kind": "shape-fourier"}, False)
+    x = fresh_fourier_onnx(tmp_path / "f.onnx")
     feeds = [{"image": torch.rand(1, 4, 256, 256).numpy()} for _ in range(4)] + [{"image": x.numpy()}]
     ref = run(tmp_path / "f.onnx", {"image": x.numpy()})
     for fine in (False, True):
@@ -206,9 +212,7 @@ def test_fine_int8_percentile_sets_the_activation_ranges(tmp_path):
     smaller one on some; the export's candidates (FOURIER_INT8_SCHEMES) are distinct schemes."""
     from volcap_train.export import FOURIER_INT8_SCHEMES, quantize
 
-    net = fresh_fourier(3, False, torch.rand)
-    x = torch.rand(1, 4, 256, 256)
-    export(net, (x,), ["image"], ["coeff"], tmp_path / "f.onnx", {"kind": "shape-fourier"}, False)
+    fresh_fourier_onnx(tmp_path / "f.onnx")
     feeds = [{"image": torch.rand(1, 4, 256, 256).numpy()} for _ in range(4)]
 
     def act_scales(pct):

@@ -390,11 +390,10 @@ def int8_drift(f32: Path, int8: Path, x: torch.Tensor, pts: torch.Tensor, k: int
     return (occ(int8) - occ(f32)).abs().mean().item()
 
 
-# The Fourier export's int8 candidates, (name, quantize's fine, its percentile): the one that
-# reads the golden query's occupancy closest to f32 is kept. The best percentile differs from
-# run to run and is not monotone in the drift (fourier-small run 9, mean |occ - f32| on five
-# held-out images: 99.999 0.10-0.20, 99.9997 0.09-0.19, 99.9999 0.015-0.021, 99.99995
-# 0.010-0.015, 99.99999 0.05-0.10, MinMax 0.05-0.10; run 8: 99.999 0.008-0.009).
+# The Fourier export's int8 candidates, (file tag, quantize's fine, its percentile; unused for
+# MinMax): the one that reads the golden query's occupancy closest to f32 is kept. The best
+# scheme differs from run to run and the drift is not monotone in the percentile (figures in
+# models/README.md and each model card's int8 row).
 FOURIER_INT8_SCHEMES = [("minmax", False, 0.0), ("p99.999", True, 99.999), ("p99.9999", True, 99.9999), ("p99.99995", True, 99.99995)]
 
 
@@ -437,26 +436,20 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     # of point IoU (mean |occ - f32| 0.082 against 0.013 with these; the model card).
     upper_every = int(budget.get("args", {}).get("upper_every", 0) or 0)
     int8_path = out / f"{base}.fourier.int8.onnx"
-    # Every scheme of FOURIER_INT8_SCHEMES is tried and the one that reads the golden query's
-    # occupancy closest to f32 is kept: per-channel weights with percentile ranges took run 8 of
-    # fourier-small from 0.063 to 0.009, but fourier-medium from 0.034 to 0.100 (its model
-    # cards), and the percentile that works differs between runs.
+    # Every scheme of FOURIER_INT8_SCHEMES is tried; the one closest to f32 is kept.
     feeds = fourier_calib(data, k, seg, upper_every)
-    tried = {}
-    for name_, fine, pct in FOURIER_INT8_SCHEMES:
-        tmp = out / f"{base}.fourier.int8.{name_}.tmp"
+    tried = []  # (drift, fine, percentile, file)
+    for tag, fine, pct in FOURIER_INT8_SCHEMES:
+        tmp = out / f"{base}.fourier.int8.{tag}.tmp"
         quantize(path, tmp, feeds, fine=fine, percentile=pct)
-        tried[name_] = (int8_drift(path, tmp, x, pts, k), tmp)
-    best = min(tried, key=lambda n: tried[n][0])
-    for name_, (_, tmp) in tried.items():
-        if name_ == best:
-            shutil.move(tmp, int8_path)
-        else:
-            tmp.unlink()
-    drift = tried[best][0]
-    _, fine, pct = next(s for s in FOURIER_INT8_SCHEMES if s[0] == best)
+        tried.append((int8_drift(path, tmp, x, pts, k), fine, pct, tmp))
+    drift, fine, pct, best = min(tried, key=lambda t: t[0])
+    rest = [t for t in tried if t[3] != best]
+    shutil.move(best, int8_path)
+    for *_, tmp in rest:
+        tmp.unlink()
     scheme = calib_row(seg, upper_every, fine, pct)
-    others = "; ".join(f"{scheme_text(f, p)} {tried[n][0]:.3f}" for n, f, p in FOURIER_INT8_SCHEMES if n != best)
+    others = "; ".join(f"{scheme_text(f, p)} {d:.3f}" for d, f, p, _ in rest)
     calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the others: {others})"
     if drift < INT8_MAX_DRIFT:
         files.append(int8_path.name)
