@@ -130,6 +130,18 @@ pub struct RenderConfig {
     /// Oracle voxel size in metres.
     #[serde(default = "d_voxel")]
     pub oracle_voxel_m: f32,
+    /// Side of the published image in pixels: the render at display resolution (more rays
+    /// than grid columns, the localized field interpolated between them; no extra field
+    /// evaluation), [`DISPLAY_SIZES`]; 0 publishes the grid's own `resolution` pixels.
+    #[serde(default = "d_display")]
+    pub display_size: usize,
+}
+
+/// Accepted `render.display_size` values besides 0.
+pub const DISPLAY_SIZES: std::ops::RangeInclusive<usize> = 64..=1024;
+
+fn d_display() -> usize {
+    512
 }
 
 fn d_bg() -> [f32; 4] {
@@ -147,6 +159,7 @@ impl Default for RenderConfig {
             background: d_bg(),
             field: None,
             oracle_voxel_m: d_voxel(),
+            display_size: d_display(),
         }
     }
 }
@@ -183,7 +196,26 @@ pub struct HttpConfig {
     /// the `Host` header; any other name is refused (DNS rebinding).
     #[serde(default)]
     pub allowed_hosts: Vec<String>,
+    /// Addresses for which [`RESERVED_CONNECTIONS`] of the server's connections are kept
+    /// free: hosts on the LAN can fill the rest, never these (default: this machine itself,
+    /// `127.0.0.1` and `::1`, so a local viewer and health checks always get in). Add a
+    /// monitoring host's address here.
+    #[serde(default = "d_reserved_for")]
+    pub reserved_for: Vec<std::net::IpAddr>,
 }
+
+/// Connections kept for [`HttpConfig::reserved_for`].
+pub const RESERVED_CONNECTIONS: usize = 8;
+
+fn d_reserved_for() -> Vec<std::net::IpAddr> {
+    vec![
+        std::net::IpAddr::from([127, 0, 0, 1]),
+        std::net::IpAddr::from(std::net::Ipv6Addr::LOCALHOST),
+    ]
+}
+
+/// Largest config file read (a board config is a few kB).
+pub const MAX_CONFIG_BYTES: u64 = 256 * 1024;
 
 fn d_write_timeout() -> u64 {
     10
@@ -213,6 +245,7 @@ impl Default for HttpConfig {
             write_timeout_s: d_write_timeout(),
             per_address_limit: d_per_address(),
             allowed_hosts: Vec::new(),
+            reserved_for: d_reserved_for(),
         }
     }
 }
@@ -440,8 +473,13 @@ impl Config {
         Ok(c)
     }
 
+    /// Read and parse a config file: a regular file of at most [`MAX_CONFIG_BYTES`], opened
+    /// without blocking (a FIFO, a device or a huge file is refused at once, naming it).
     pub fn load(file: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(file).map_err(|e| format!("{}: {e}", file.display()))?;
+        let bytes = volcap_sim::files::read_regular(file, MAX_CONFIG_BYTES)
+            .map_err(|e| format!("{}: {e}", file.display()))?;
+        let text = String::from_utf8(bytes)
+            .map_err(|e| format!("{}: not UTF-8 text: {e}", file.display()))?;
         Self::parse(&text, file)
     }
 
@@ -516,8 +554,18 @@ impl Config {
         if let Err(e) = crate::pipeline::Live::from_config(self).check() {
             return bad(format!("render.{}", e.field), e.msg);
         }
-        if self.http.token.as_deref().is_some_and(|t| t.len() < 8) {
-            return bad("http.token", "must be at least 8 characters");
+        if let Some(t) = self.http.token.as_deref() {
+            if let Some(c) = t.chars().find(|c| !c.is_ascii_graphic()) {
+                return bad(
+                    "http.token",
+                    format!(
+                        "contains {c:?}: a token is sent in an Authorization header, so it must be visible ASCII without spaces or line breaks"
+                    ),
+                );
+            }
+            if t.len() < 8 {
+                return bad("http.token", "must be at least 8 characters");
+            }
         }
         Ok(())
     }

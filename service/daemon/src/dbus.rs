@@ -26,6 +26,8 @@ pub struct Control {
     /// Command-line overrides, applied to every reloaded file too.
     pub http_override: Option<std::net::SocketAddr>,
     pub bus_override: Option<Bus>,
+    /// A reload is running (SIGHUP and D-Bus `Reload` do not start a second one beside it).
+    pub reloading: std::sync::atomic::AtomicBool,
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -37,6 +39,16 @@ impl Control {
     /// (file, line, key). What can change live changes; the rest is named as needing a
     /// restart.
     pub fn reload(&self) -> Result<String, String> {
+        if self.reloading.swap(true, Ordering::SeqCst) {
+            return Err("a reload is already in progress; try again when it ends".into());
+        }
+        struct Done<'a>(&'a std::sync::atomic::AtomicBool);
+        impl Drop for Done<'_> {
+            fn drop(&mut self) {
+                self.0.store(false, Ordering::SeqCst);
+            }
+        }
+        let _done = Done(&self.reloading);
         let file = lock(&self.config).file.clone();
         let mut new = Config::load(&file)?;
         if let Some(a) = self.http_override {
@@ -99,6 +111,9 @@ impl Control {
         if new.http.allowed_hosts != old.http.allowed_hosts {
             restart.push("http.allowed_hosts");
         }
+        if new.http.reserved_for != old.http.reserved_for {
+            restart.push("http.reserved_for");
+        }
         if new.compute.threads != old.compute.threads {
             restart.push("compute.threads");
         }
@@ -109,6 +124,7 @@ impl Control {
         keep.http.write_timeout_s = old.http.write_timeout_s;
         keep.http.per_address_limit = old.http.per_address_limit;
         keep.http.allowed_hosts = old.http.allowed_hosts.clone();
+        keep.http.reserved_for = old.http.reserved_for.clone();
         keep.compute.threads = old.compute.threads;
         keep.render.field = old.render.field;
         keep.render.oracle_voxel_m = old.render.oracle_voxel_m;
@@ -163,6 +179,7 @@ pub struct Snapshot {
     pub p50: f64,
     pub p99: f64,
     pub processed: u64,
+    pub superseded: u64,
     pub dropped: u64,
     pub clients: u32,
 }
@@ -183,10 +200,15 @@ impl Control {
             p50: p50.round(),
             p99: p99.round(),
             processed: sh.e2e.frames.load(Ordering::Relaxed),
+            superseded: sh
+                .stats
+                .iter()
+                .map(|s| s.superseded.load(Ordering::Relaxed))
+                .sum(),
             dropped: sh
                 .stats
                 .iter()
-                .map(|s| s.dropped.load(Ordering::Relaxed))
+                .map(|s| s.lost.load(Ordering::Relaxed))
                 .sum(),
             clients: self.app.clients.load(Ordering::SeqCst) as u32,
         }
@@ -253,10 +275,17 @@ impl Capture1 {
         self.ctl.snapshot().processed
     }
 
-    /// Frames overwritten in a latest-wins slot, all stages.
+    /// Frames a stage failed on (an error), all stages: frames lost.
     #[zbus(property)]
     fn frames_dropped(&self) -> u64 {
         self.ctl.snapshot().dropped
+    }
+
+    /// Frames replaced in a latest-wins slot by a newer one before the next stage needed
+    /// them, all stages: work nobody needed, not frames lost.
+    #[zbus(property)]
+    fn frames_superseded(&self) -> u64 {
+        self.ctl.snapshot().superseded
     }
 
     /// Connected stream clients.
@@ -282,7 +311,7 @@ impl Capture1 {
         self.ctl
             .shared
             .update_live(|l| {
-                l.yaw = (yaw as f32).rem_euclid(360.0);
+                l.set_yaw(yaw as f32);
                 l.pitch = pitch as f32;
                 l.distance = distance as f32;
             })
@@ -426,6 +455,9 @@ pub async fn serve(ctl: Arc<Control>, bus: Bus) {
             }
             if now.dropped != last.dropped {
                 i.frames_dropped_changed(e).await?;
+            }
+            if now.superseded != last.superseded {
+                i.frames_superseded_changed(e).await?;
             }
             if now.clients != last.clients {
                 i.clients_changed(e).await?;

@@ -30,8 +30,12 @@ pub struct App {
     pub hosts: HostAllow,
     /// Wrong-token back-off per address.
     pub backoff: Backoff,
+    /// The server listens on a loopback address only: without a token, the view controls
+    /// are open to this machine's own clients (the local user), see [`App::controls`].
+    pub loopback_bind: bool,
     /// One mesh computation at a time ([`MESH_CONCURRENCY`]); others get 503.
-    pub mesh_gate: tokio::sync::Semaphore,
+    /// Shared with the computation, whose permit is released only when it ends.
+    pub mesh_gate: Arc<tokio::sync::Semaphore>,
     /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can
     /// never share its address), resolution, coarse level, and the bytes.
     pub mesh_cache: Mutex<Option<MeshCache>>,
@@ -45,6 +49,7 @@ impl App {
         client_limit: usize,
         token: Option<String>,
         allowed_hosts: &[String],
+        loopback_bind: bool,
     ) -> Self {
         Self {
             shared,
@@ -55,8 +60,42 @@ impl App {
             next_id: AtomicU64::new(1),
             hosts: HostAllow::new(allowed_hosts),
             backoff: Backoff::default(),
-            mesh_gate: tokio::sync::Semaphore::new(MESH_CONCURRENCY),
+            loopback_bind,
+            mesh_gate: mesh::mesh_gate(),
             mesh_cache: Mutex::new(None),
+        }
+    }
+
+    /// The cached mesh of `field` at (`res`, `coarse`), if it is the one in the cache.
+    fn cached_mesh(
+        &self,
+        field: &Arc<volcap_sim::oracle::SceneField>,
+        res: usize,
+        coarse: u32,
+    ) -> Option<axum::body::Bytes> {
+        self.mesh_cache
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+            .filter(|(k, r, c, _)| k.as_ptr() == Arc::as_ptr(field) && (*r, *c) == (res, coarse))
+            .map(|(_, _, _, b)| b.clone())
+    }
+
+    /// Who may use the view controls: `token` (a token is configured: whoever sends it),
+    /// `local` (no token, the server bound to loopback: only this machine can reach it, and
+    /// its user may turn the view) or `off` (no token on a LAN bind).
+    pub fn controls(&self) -> &'static str {
+        if self
+            .token
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .is_some()
+        {
+            "token"
+        } else if self.loopback_bind {
+            "local"
+        } else {
+            "off"
         }
     }
 
@@ -94,28 +133,63 @@ pub fn router(app: Arc<App>) -> Router {
 }
 
 /// Refuse requests whose `Host` names another site (DNS rebinding: a page on the LAN
-/// resolving its own name to this appliance).
+/// resolving its own name to this appliance), and requests whose host is ambiguous: two
+/// `Host` headers, none on HTTP/1.1 (RFC 9112 3.2: 400), or an absolute-form target naming
+/// a host that is not this appliance's (its authority is the request's host then, and the
+/// `Host` header is checked as well).
 async fn check_host(
     State(app): State<Arc<App>>,
     req: axum::extract::Request,
     next: axum::middleware::Next,
 ) -> Response {
-    let host = req
-        .headers()
-        .get(header::HOST)
-        .map(|h| h.to_str().unwrap_or("\u{fffd}"));
-    if !app.hosts.allows(host) {
-        return (
+    match host_verdict(&app.hosts, &req) {
+        Ok(()) => next.run(req).await,
+        Err((status, why)) => (status, why).into_response(),
+    }
+}
+
+/// The `Host` rule of [`check_host`] on a request: `Err((status, message))` when refused.
+pub fn host_verdict<B>(
+    hosts: &HostAllow,
+    req: &axum::http::Request<B>,
+) -> Result<(), (StatusCode, String)> {
+    let mut all = req.headers().get_all(header::HOST).iter();
+    let host = all.next().map(|h| h.to_str().unwrap_or("\u{fffd}"));
+    if all.next().is_some() {
+        return Err((
+            StatusCode::BAD_REQUEST,
+            "more than one Host header\n".into(),
+        ));
+    }
+    if host.is_none() && req.version() >= axum::http::Version::HTTP_11 {
+        return Err((
+            StatusCode::BAD_REQUEST,
+            "HTTP/1.1 request without a Host header\n".into(),
+        ));
+    }
+    let refuse = |what: &str, name: &str| {
+        Err((
             StatusCode::MISDIRECTED_REQUEST,
             format!(
-                "host {:?} is not this appliance's (allowed: IP addresses, {}; config http.allowed_hosts)\n",
-                host.unwrap_or_default(),
-                app.hosts.names().join(", ")
+                "{what} {name:?} is not this appliance's (allowed: IP addresses, {}; config http.allowed_hosts)\n",
+                hosts.names().join(", ")
             ),
-        )
-            .into_response();
+        ))
+    };
+    if let Some(authority) = req.uri().authority() {
+        let name = authority.host();
+        let name = match authority.port_u16() {
+            Some(p) => format!("{name}:{p}"),
+            None => name.to_string(),
+        };
+        if !hosts.allows(Some(&name)) {
+            return refuse("target host", &name);
+        }
     }
-    next.run(req).await
+    if !hosts.allows(host) {
+        return refuse("host", host.unwrap_or_default());
+    }
+    Ok(())
 }
 
 mod mesh;
@@ -241,6 +315,9 @@ async fn snapshot_png(State(app): State<Arc<App>>) -> Response {
     }
 }
 
+/// What `superseded` counts, said where it is shown (`/state`, `/metrics`).
+pub const SUPERSEDED_NOTE: &str = "frames replaced by a newer one before the next stage needed them (latest frame wins: nothing queues, the next stage takes the newest); not lost";
+
 /// `/state`; stream clients' addresses only with the token (`details`), counts to anyone.
 fn state_json(app: &App, details: bool) -> serde_json::Value {
     let sh = &app.shared;
@@ -251,7 +328,7 @@ fn state_json(app: &App, details: bool) -> serde_json::Value {
         .zip(&sh.stats)
         .map(|(n, s)| {
             let (p50, p99) = s.percentiles();
-            (n.to_string(), serde_json::json!({"p50_ms": p50, "p99_ms": p99, "frames": s.frames.load(Ordering::Relaxed), "dropped": s.dropped.load(Ordering::Relaxed)}))
+            (n.to_string(), serde_json::json!({"p50_ms": p50, "p99_ms": p99, "frames": s.frames.load(Ordering::Relaxed), "superseded": s.superseded.load(Ordering::Relaxed), "lost": s.lost.load(Ordering::Relaxed)}))
         })
         .collect();
     let (l50, l99) = sh.e2e.percentiles();
@@ -292,16 +369,22 @@ fn state_json(app: &App, details: bool) -> serde_json::Value {
         },
         "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
         "resolution": live.resolution,
+        "display_size": live.out_size(),
         "paused": live.paused,
         "frames_published": published,
         "fps": if up > 0.0 { published as f64 / up } else { 0.0 },
         "latency_ms": {"p50": l50, "p99": l99},
         "stages": stages,
+        "stage_notes": {
+            "superseded": SUPERSEDED_NOTE,
+            "lost": "frames a stage failed on (an error): frames lost",
+        },
         "camera": camera,
         "showing_placeholder": sh.published.borrow().as_ref().is_some_and(|f| f.placeholder),
         "clients": app.clients.load(Ordering::SeqCst),
         "per_client": per_client,
         "client_limit": app.client_limit.load(Ordering::SeqCst),
+        "controls": app.controls(),
         "view": {"yaw": live.yaw, "pitch": live.pitch, "distance": live.distance},
         "uptime_s": up,
     })
@@ -329,31 +412,33 @@ fn peer_ip(peer: &Option<axum::Extension<ConnectInfo<SocketAddr>>>) -> Option<st
     peer.as_ref().map(|axum::Extension(ConnectInfo(a))| a.ip())
 }
 
-/// The bearer token, with the per-address back-off: `None` when it is right; else the
-/// refusal: 403 when no token is configured, 429 (Retry-After) while the address must wait,
-/// 401 on a wrong token.
+/// The bearer token, with the per-address back-off: `None` when it is right (or not needed:
+/// controls `local` and a loopback client); else the refusal: 403 when controls are off, 429
+/// (Retry-After) while the address must wait, 401 on a wrong token.
 fn token_refusal(app: &App, headers: &HeaderMap, ip: Option<std::net::IpAddr>) -> Option<Response> {
-    let configured = app
-        .token
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .is_some();
-    if !configured {
-        return Some(
-            (
-                StatusCode::FORBIDDEN,
-                "controls are off: set http.token in the config\n",
-            )
-                .into_response(),
-        );
+    match app.controls() {
+        "local" if ip.is_some_and(|ip| ip.to_canonical().is_loopback()) => return None,
+        "token" => {}
+        _ => {
+            return Some(
+                (
+                    StatusCode::FORBIDDEN,
+                    "controls are off: set http.token in the config (or bind to loopback only for local control)\n",
+                )
+                    .into_response(),
+            );
+        }
     }
-    if let Some(wait) = ip.and_then(|ip| app.backoff.wait(ip)) {
+    if let Some(wait) = ip
+        .and_then(|ip| app.backoff.wait(ip))
+        .or_else(|| app.backoff.global_wait())
+    {
         let secs = wait.as_secs_f64().ceil().max(1.0) as u64;
         return Some(
             (
                 StatusCode::TOO_MANY_REQUESTS,
                 [(header::RETRY_AFTER, secs.to_string())],
-                format!("too many wrong tokens from this address; retry in {secs} s\n"),
+                format!("too many wrong tokens; retry in {secs} s\n"),
             )
                 .into_response(),
         );
@@ -364,9 +449,7 @@ fn token_refusal(app: &App, headers: &HeaderMap, ip: Option<std::net::IpAddr>) -
         }
         None
     } else {
-        if let Some(ip) = ip {
-            app.backoff.failed(ip);
-        }
+        app.backoff.failed(ip);
         Some((StatusCode::UNAUTHORIZED, "bad or missing bearer token\n").into_response())
     }
 }
@@ -384,11 +467,20 @@ async fn metrics(State(app): State<Arc<App>>) -> Response {
         let (p50, p99) = st.percentiles();
         s.push_str(&format!("volcap_stage_ms{{stage=\"{n}\",quantile=\"0.5\"}} {p50}\nvolcap_stage_ms{{stage=\"{n}\",quantile=\"0.99\"}} {p99}\n"));
     }
-    s.push_str("# TYPE volcap_stage_dropped_total counter\n");
+    s.push_str(&format!(
+        "# HELP volcap_stage_superseded_total {SUPERSEDED_NOTE}\n# TYPE volcap_stage_superseded_total counter\n"
+    ));
     for (n, st) in STAGES.iter().zip(&sh.stats) {
         s.push_str(&format!(
-            "volcap_stage_dropped_total{{stage=\"{n}\"}} {}\n",
-            st.dropped.load(Ordering::Relaxed)
+            "volcap_stage_superseded_total{{stage=\"{n}\"}} {}\n",
+            st.superseded.load(Ordering::Relaxed)
+        ));
+    }
+    s.push_str("# HELP volcap_stage_lost_total frames a stage failed on (an error)\n# TYPE volcap_stage_lost_total counter\n");
+    for (n, st) in STAGES.iter().zip(&sh.stats) {
+        s.push_str(&format!(
+            "volcap_stage_lost_total{{stage=\"{n}\"}} {}\n",
+            st.lost.load(Ordering::Relaxed)
         ));
     }
     let (l50, l99) = sh.e2e.percentiles();
@@ -400,14 +492,21 @@ async fn metrics(State(app): State<Arc<App>>) -> Response {
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()
 }
 
-/// Constant-time comparison of the bearer token.
-fn token_ok(expected: &str, headers: &HeaderMap) -> bool {
-    let got = headers
+/// The token of an `Authorization: Bearer TOKEN` header (the scheme is case-insensitive,
+/// RFC 9110 11.1), or `""`.
+fn bearer(headers: &HeaderMap) -> &str {
+    headers
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .unwrap_or("");
-    let (a, b) = (expected.as_bytes(), got.as_bytes());
+        .and_then(|v| v.trim().split_once(' '))
+        .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+        .map(|(_, t)| t.trim())
+        .unwrap_or("")
+}
+
+/// Constant-time comparison of the bearer token.
+fn token_ok(expected: &str, headers: &HeaderMap) -> bool {
+    let (a, b) = (expected.as_bytes(), bearer(headers).as_bytes());
     let mut diff = (a.len() ^ b.len()) as u8;
     for (i, x) in a.iter().enumerate() {
         diff |= x ^ b.get(i).copied().unwrap_or(0);
@@ -450,7 +549,7 @@ async fn set_view(
         if let Some(bg) = background {
             l.background = bg;
         }
-        l.yaw = q.yaw.rem_euclid(360.0);
+        l.set_yaw(q.yaw);
         l.pitch = q.pitch;
         if let Some(d) = q.distance {
             l.distance = d;
@@ -489,7 +588,7 @@ pub fn parse_background(text: &str) -> Result<[f32; 4], String> {
 }
 
 /// Limits of the HTTP server: it binds only the configured address (the caller's listener).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Limits {
     /// Time for a client to send its request head; slower clients are dropped.
     pub header_timeout: std::time::Duration,
@@ -507,6 +606,9 @@ pub struct Limits {
     /// Kernel send buffer per connection: small, so that a slow stream client skips frames
     /// (latest wins) instead of queueing seconds of them, and stalls show up as such.
     pub send_buffer_bytes: usize,
+    /// Addresses that may open [`Limits::reserved`] connections past `max_connections`.
+    pub reserved_for: Vec<std::net::IpAddr>,
+    pub reserved: usize,
 }
 
 impl Limits {
@@ -519,6 +621,8 @@ impl Limits {
             per_address: http.per_address_limit,
             write_timeout: std::time::Duration::from_secs(http.write_timeout_s),
             send_buffer_bytes: 256 * 1024,
+            reserved_for: http.reserved_for.clone(),
+            reserved: crate::config::RESERVED_CONNECTIONS,
         }
     }
 }
@@ -531,7 +635,10 @@ pub async fn serve(
     shutdown: impl std::future::Future<Output = ()>,
 ) -> std::io::Result<()> {
     let router = router(app).layer(axum::extract::DefaultBodyLimit::max(limits.max_body_bytes));
+    // Everyone shares `max_connections`; the reserved addresses also have `reserved` more,
+    // which nobody else can take (LAN hosts filling the server leave them a way in).
     let permits = Arc::new(tokio::sync::Semaphore::new(limits.max_connections));
+    let reserve = Arc::new(tokio::sync::Semaphore::new(limits.reserved));
     let per_address = Arc::new(PerAddress::default());
     tokio::pin!(shutdown);
     loop {
@@ -552,20 +659,33 @@ pub async fn serve(
             drop(stream);
             continue;
         };
-        let Ok(permit) = permits.clone().try_acquire_owned() else {
-            drop(stream);
-            continue;
+        let permit = match permits.clone().try_acquire_owned() {
+            Ok(p) => p,
+            Err(_) if limits.reserved_for.contains(&peer.ip().to_canonical()) => {
+                match reserve.clone().try_acquire_owned() {
+                    Ok(p) => p,
+                    Err(_) => {
+                        drop(stream);
+                        continue;
+                    }
+                }
+            }
+            Err(_) => {
+                drop(stream);
+                continue;
+            }
         };
         let _ = stream.set_nodelay(true);
         let _ = socket2::SockRef::from(&stream).set_send_buffer_size(limits.send_buffer_bytes);
         let svc = router.clone().layer(axum::Extension(ConnectInfo(peer)));
         let svc = hyper_util::service::TowerToHyperService::new(svc);
         let io = WriteTimeout::new(stream, limits.write_timeout);
+        let (header_timeout, max_header_bytes) = (limits.header_timeout, limits.max_header_bytes);
         tokio::spawn(async move {
             let conn = hyper::server::conn::http1::Builder::new()
                 .timer(hyper_util::rt::TokioTimer::new())
-                .header_read_timeout(limits.header_timeout)
-                .max_buf_size(limits.max_header_bytes.max(8192))
+                .header_read_timeout(header_timeout)
+                .max_buf_size(max_header_bytes.max(8192))
                 .max_headers(64)
                 .serve_connection(hyper_util::rt::TokioIo::new(io), svc);
             let _ = conn.await;
@@ -578,6 +698,43 @@ pub async fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn app(token: Option<&str>, loopback_bind: bool) -> App {
+        let cfg = crate::config::Config::parse(
+            "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n[dbus]\nbus = \"none\"\n",
+            std::path::Path::new("t.toml"),
+        )
+        .unwrap();
+        let (tx, _) = tokio::sync::watch::channel(None);
+        let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
+        App::new(shared, 4, token.map(String::from), &[], loopback_bind)
+    }
+
+    /// Issue #37, item 1: the main job's view could not be turned (403 without a token). On
+    /// a loopback bind the local user may; on a LAN bind the token rule stays.
+    #[test]
+    fn view_controls_are_local_on_loopback_and_need_the_token_elsewhere() {
+        let lo: std::net::IpAddr = "127.0.0.1".parse().unwrap();
+        let lo6: std::net::IpAddr = "::ffff:127.0.0.1".parse().unwrap();
+        let lan: std::net::IpAddr = "192.168.1.7".parse().unwrap();
+        let none = HeaderMap::new();
+        let a = app(None, true);
+        assert_eq!(a.controls(), "local");
+        assert!(token_refusal(&a, &none, Some(lo)).is_none());
+        assert!(token_refusal(&a, &none, Some(lo6)).is_none());
+        let status = |r: Option<Response>| r.map(|r| r.status().as_u16());
+        assert_eq!(status(token_refusal(&a, &none, Some(lan))), Some(403));
+        let a = app(None, false);
+        assert_eq!(a.controls(), "off");
+        assert_eq!(status(token_refusal(&a, &none, Some(lo))), Some(403));
+        let a = app(Some("the-token-1"), true);
+        assert_eq!(a.controls(), "token");
+        assert_eq!(status(token_refusal(&a, &none, Some(lo))), Some(401));
+        let mut h = HeaderMap::new();
+        h.insert(header::AUTHORIZATION, "Bearer the-token-1".parse().unwrap());
+        assert!(token_refusal(&a, &h, Some(lan)).is_none());
+        assert_eq!(state_json(&a, false)["controls"], "token");
+    }
 
     /// Hardening #14: loose lists were accepted as something else; `inf` was reported as NaN.
     #[test]
@@ -620,5 +777,23 @@ mod tests {
             "Bearer secret-token-longer".parse().unwrap(),
         );
         assert!(!token_ok("secret-token", &h));
+        // The scheme is case-insensitive (RFC 9110 11.1); the token is not.
+        for ok in [
+            "bearer secret-token",
+            "BEARER secret-token",
+            "Bearer  secret-token",
+        ] {
+            h.insert(header::AUTHORIZATION, ok.parse().unwrap());
+            assert!(token_ok("secret-token", &h), "{ok}");
+        }
+        for bad in [
+            "Basic secret-token",
+            "Bearersecret-token",
+            "secret-token",
+            "Bearer",
+        ] {
+            h.insert(header::AUTHORIZATION, bad.parse().unwrap());
+            assert!(!token_ok("secret-token", &h), "{bad}");
+        }
     }
 }

@@ -92,9 +92,30 @@ fn main() -> ExitCode {
     } else {
         None
     };
+    let summary = |source: &str| {
+        format!(
+            "{}: ok ({}; camera {source}, mode {mode}, model {} {:?}, bus {:?})",
+            cli.config.display(),
+            cfg.description,
+            cfg.model.name,
+            cfg.model.precision,
+            cfg.dbus.bus,
+        )
+    };
     let (factory, source) = match capture::factory(&cfg) {
         Ok(f) => f,
         Err(e) => {
+            // Everything else in the file is checked; a camera backend this build lacks is
+            // a note for the check, an error for a run.
+            if cli.check_config
+                && let Some(feature) = capture::missing_feature(cfg.camera.backend)
+            {
+                println!(
+                    "{}\nnote: this volcapd was built without the `{feature}` feature, so it cannot run this board's camera; build the daemon with `--features {feature}` for it",
+                    summary(cfg.camera.backend.name())
+                );
+                return ExitCode::SUCCESS;
+            }
             eprintln!(
                 "volcapd: camera {} ({}): {e}",
                 cfg.camera.backend.name(),
@@ -104,14 +125,7 @@ fn main() -> ExitCode {
         }
     };
     if cli.check_config {
-        println!(
-            "{}: ok ({}; camera {source}, mode {mode}, model {} {:?}, bus {:?})",
-            cli.config.display(),
-            cfg.description,
-            cfg.model.name,
-            cfg.model.precision,
-            cfg.dbus.bus,
-        );
+        println!("{}", summary(&source));
         return ExitCode::SUCCESS;
     }
     tracing::info!(config = %cli.config.display(), board = %cfg.description, "starting");
@@ -122,6 +136,7 @@ fn main() -> ExitCode {
         cfg.http.client_limit,
         cfg.http.token.clone(),
         &cfg.http.allowed_hosts,
+        cfg.http.bind.ip().is_loopback(),
     ));
     let ctl = Arc::new(dbus::Control {
         shared: shared.clone(),
@@ -131,6 +146,7 @@ fn main() -> ExitCode {
         make_camera: capture::factory,
         http_override: cli.http,
         bus_override: cli.bus.as_ref().map(|_| cfg.dbus.bus),
+        reloading: Default::default(),
     });
     if cli.print_introspection {
         print!("{}", dbus::introspection_xml(ctl));
@@ -150,11 +166,11 @@ fn main() -> ExitCode {
     let listener = match rt.block_on(tokio::net::TcpListener::bind(cfg.http.bind)) {
         Ok(l) => l,
         Err(e) => {
-            eprintln!(
-                "volcapd: cannot bind {} (http.bind in {}): {e}",
-                cfg.http.bind,
-                cli.config.display()
-            );
+            let from = match cli.http {
+                Some(_) => "--http on the command line".to_string(),
+                None => format!("http.bind in {}", cli.config.display()),
+            };
+            eprintln!("volcapd: cannot bind {} ({from}): {e}", cfg.http.bind);
             return ExitCode::from(EXIT_CONFIG);
         }
     };

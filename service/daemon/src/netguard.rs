@@ -145,8 +145,9 @@ impl<S: AsyncWrite + Unpin> AsyncWrite for WriteTimeout<S> {
 
 /// The `Host` header check against DNS rebinding: an IP literal (any port) is accepted (a
 /// page can only reach it under that same origin), as are `localhost`, this machine's host
-/// name (and `NAME.local`) and the configured names; any other name is refused. A request
-/// without `Host` (HTTP/1.0 tools) is accepted: browsers always send one.
+/// name (and `NAME.local`) and the configured names; any other name is refused. No `Host`
+/// at all passes here (HTTP/1.0 tools); `http::host_verdict` refuses it on HTTP/1.1, and
+/// refuses two `Host` headers.
 pub struct HostAllow {
     names: Vec<String>,
 }
@@ -190,13 +191,31 @@ impl HostAllow {
     }
 }
 
-/// Per-address back-off after wrong tokens: from the [`FREE_FAILURES`]th failure on, the
+/// Back-off after wrong tokens. Per address: from the [`FREE_FAILURES`]th failure on, the
 /// address waits 2^(n - FREE_FAILURES) seconds (at most [`MAX_BACKOFF`]) before any token of
-/// its is checked again; a right token clears its record.
-#[derive(Default)]
+/// its is checked again; a right token clears its record. For all addresses together: a
+/// budget of [`GLOBAL_BURST`] wrong tokens, refilled at [`GLOBAL_PER_S`] a second; while it
+/// is spent no token is checked (so guesses spread over many addresses gain nothing: 500
+/// take minutes, not milliseconds).
 pub struct Backoff {
     failures: Mutex<HashMap<IpAddr, (u32, Instant)>>,
+    /// Guesses left in the global budget, and when it was last refilled.
+    global: Mutex<(f64, Instant)>,
 }
+
+impl Default for Backoff {
+    fn default() -> Self {
+        Self {
+            failures: Mutex::default(),
+            global: Mutex::new((GLOBAL_BURST, Instant::now())),
+        }
+    }
+}
+
+/// Wrong tokens from all addresses together before the global budget runs dry.
+pub const GLOBAL_BURST: f64 = 30.0;
+/// Wrong tokens a second the global budget allows after that.
+pub const GLOBAL_PER_S: f64 = 1.0;
 
 /// Wrong tokens an address may send before it has to wait.
 pub const FREE_FAILURES: u32 = 5;
@@ -218,7 +237,27 @@ impl Backoff {
         (since < wait).then(|| wait - since)
     }
 
-    pub fn failed(&self, ip: IpAddr) {
+    /// `Some(wait)` while the global budget of wrong tokens is spent.
+    pub fn global_wait(&self) -> Option<Duration> {
+        let mut g = self.global.lock().unwrap_or_else(|p| p.into_inner());
+        Self::refill(&mut g);
+        (g.0 < 1.0).then(|| Duration::from_secs_f64((1.0 - g.0) / GLOBAL_PER_S))
+    }
+
+    fn refill(g: &mut (f64, Instant)) {
+        let now = Instant::now();
+        g.0 = (g.0 + (now - g.1).as_secs_f64() * GLOBAL_PER_S).min(GLOBAL_BURST);
+        g.1 = now;
+    }
+
+    /// A wrong token (from `ip` where known): counted for the address and the global budget.
+    pub fn failed(&self, ip: impl Into<Option<IpAddr>>) {
+        {
+            let mut g = self.global.lock().unwrap_or_else(|p| p.into_inner());
+            Self::refill(&mut g);
+            g.0 = (g.0 - 1.0).max(0.0);
+        }
+        let Some(ip) = ip.into() else { return };
         let mut m = self.failures.lock().unwrap_or_else(|p| p.into_inner());
         if m.len() >= MAX_TRACKED
             && !m.contains_key(&ip)
@@ -300,5 +339,29 @@ mod tests {
         assert!(b.wait(ip).unwrap() <= MAX_BACKOFF);
         b.succeeded(ip);
         assert!(b.wait(ip).is_none());
+    }
+
+    #[test]
+    fn wrong_tokens_from_many_addresses_spend_one_global_budget() {
+        let b = Backoff::default();
+        assert!(b.global_wait().is_none());
+        // One wrong token from each of many addresses: no address reaches its own limit,
+        // yet the budget runs dry after about GLOBAL_BURST of them.
+        let mut checked = 0;
+        for i in 0..200u32 {
+            if b.global_wait().is_some() {
+                continue;
+            }
+            checked += 1;
+            b.failed(IpAddr::from(std::net::Ipv4Addr::from(0x0a00_0000 + i)));
+        }
+        assert!(
+            (GLOBAL_BURST as usize..=GLOBAL_BURST as usize + 2).contains(&checked),
+            "{checked} checked"
+        );
+        let w = b.global_wait().expect("the budget is spent");
+        assert!(w <= Duration::from_secs_f64(1.0 / GLOBAL_PER_S) && w > Duration::ZERO);
+        std::thread::sleep(w + Duration::from_millis(20));
+        assert!(b.global_wait().is_none(), "refilled with time");
     }
 }

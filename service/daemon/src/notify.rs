@@ -69,6 +69,9 @@ pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>
         })
 }
 
+/// Running without a published frame this long is reported as stalled.
+pub const STALL_AFTER: Duration = Duration::from_secs(2);
+
 /// One line for `systemctl status`.
 pub fn status_line(shared: &Shared) -> String {
     let (state, reason) = shared
@@ -78,6 +81,18 @@ pub fn status_line(shared: &Shared) -> String {
         .name_reason();
     let (p50, _) = shared.e2e.percentiles();
     let fps = shared.e2e.recent_fps();
+    let quiet = shared.e2e.since_last().filter(|d| *d >= STALL_AFTER);
+    if state == "running"
+        && let Some(quiet) = quiet
+        && !shared.live().paused
+    {
+        // Threads may be turning (no watchdog stall) while no frame comes out.
+        return format!(
+            "stalled: no frame published for {:.1} s ({})",
+            quiet.as_secs_f64(),
+            shared.mode
+        );
+    }
     if reason.is_empty() {
         format!(
             "{state}: {fps:.1} fps, latency p50 {p50:.0} ms ({})",
@@ -85,5 +100,37 @@ pub fn status_line(shared: &Shared) -> String {
         )
     } else {
         format!("{state}: {reason}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::PipelineState;
+
+    /// Hardening round two, #5: STATUS said "running: 0.0 fps" while no frame came out
+    /// (threads turning, so no watchdog stall). Now it says stalled, and for how long.
+    #[test]
+    fn running_without_frames_is_reported_as_stalled() {
+        let cfg = crate::config::Config::parse(
+            "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n[dbus]\nbus = \"none\"\n",
+            std::path::Path::new("t.toml"),
+        )
+        .unwrap();
+        let (tx, _) = tokio::sync::watch::channel(None);
+        let shared = Shared::new(&cfg, "test".into(), tx);
+        shared.set_state(PipelineState::Running);
+        shared.e2e.record(10.0);
+        shared.e2e.record(10.0);
+        assert!(
+            status_line(&shared).starts_with("running: "),
+            "{}",
+            status_line(&shared)
+        );
+        std::thread::sleep(STALL_AFTER + Duration::from_millis(100));
+        let s = status_line(&shared);
+        assert!(s.starts_with("stalled: no frame published for 2."), "{s}");
+        shared.e2e.record(10.0);
+        assert!(status_line(&shared).starts_with("running: "));
     }
 }

@@ -81,7 +81,7 @@ impl Published {
 pub struct CameraStatus {
     /// Backend and device.
     pub source: String,
-    /// opening, running, lost, stopped.
+    /// opening, running, skipping (open, frames arrive, none decodes), lost, stopped.
     pub state: &'static str,
     /// Typed reason while lost/stopped (no-device, busy, no-signal, unplugged, ...).
     pub fault: &'static str,
@@ -275,6 +275,11 @@ fn camera_status_from(sup: &Supervisor<dyn Camera>, st: &mut CameraStatus) {
     let (state, fault, reason) = match sup.state() {
         CameraState::Opening => ("opening", "", String::new()),
         CameraState::Running => ("running", "", String::new()),
+        CameraState::Skipping { in_a_row, last } => (
+            "skipping",
+            "undecodable",
+            format!("{in_a_row} frames in a row did not decode (last: {last})"),
+        ),
         CameraState::Lost { fault, retry_in } => (
             "lost",
             fault.kind(),
@@ -303,18 +308,26 @@ fn render_field(
         background: live.background,
         shade: false,
     };
-    match renderer.render(field, colors, spec, &opts) {
+    let r = renderer.render(field, colors, spec, &opts);
+    match r {
         Ok(st) => {
             let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
             sh.evaluations.fetch_add(n, Ordering::Relaxed);
         }
         Err(e) => {
+            sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
             sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
             return None;
         }
     }
+    let size = live.out_size();
+    let rgba = if size == live.resolution {
+        renderer.rgba().to_vec()
+    } else {
+        renderer.render_display(size, live.background).to_vec()
+    };
     sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
-    Some(renderer.rgba().to_vec())
+    Some(rgba)
 }
 
 pub use field_stage::FieldOutcome;

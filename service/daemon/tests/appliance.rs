@@ -9,7 +9,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{Proc, have, root};
+use common::{Proc, have, root, skip};
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_volcapd")
@@ -305,11 +305,7 @@ fn dbus_policy_on_a_system_like_bus() {
         .status
         .success();
     if !(is_root && has_user) {
-        assert!(
-            std::env::var("CI").is_err(),
-            "CI runs as root with the volcap user"
-        );
-        eprintln!("skipping: needs root and the volcap user");
+        skip("needs root and the volcap user (systemd-sysusers systemd/volcap.sysusers)");
         return;
     }
     let dir = tmp("policy");
@@ -679,12 +675,69 @@ fn every_shipped_board_config_checks_out() {
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
+        let out = String::from_utf8_lossy(&o.stdout);
+        // Issue #37, item 2: a board whose camera this build lacks is still checked whole
+        // (exit 0); the missing feature is a note, not a failure.
+        assert!(o.status.success(), "{}: {err}", p.display());
+        assert!(out.contains(": ok ("), "{}: {out}", p.display());
         if text.contains("backend = \"v4l2\"") && !cfg!(feature = "v4l2") {
-            assert_eq!(o.status.code(), Some(2), "{}", p.display());
-            assert!(err.contains("--features v4l2"), "{}: {err}", p.display());
-        } else {
-            assert!(o.status.success(), "{}: {err}", p.display());
+            assert!(
+                out.contains("note:") && out.contains("--features v4l2"),
+                "{}: {out}",
+                p.display()
+            );
         }
     }
     assert!(n >= 5, "sim, x86-cpu, jetson-orin, rpi5, oak-uvc at least");
+    // The note does not hide real errors in such a config.
+    let dir = std::env::temp_dir().join(format!("volcapd-v4l2-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("b.toml");
+    std::fs::write(
+        &bad,
+        "[camera]\nbackend = \"v4l2\"\ndevice = \"/dev/video0\"\nformat = \"h264\"\n[dbus]\nbus = \"none\"\n",
+    )
+    .unwrap();
+    let o = Command::new(bin())
+        .args(["--check-config", "--config"])
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{o:?}");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("h264"), "{o:?}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Issue #37, item 8: a test whose prerequisite was missing passed by doing nothing. Now it
+/// fails under `CI` and, elsewhere, says it was skipped where the run's output shows it.
+#[test]
+fn a_missing_prerequisite_fails_in_ci_and_shows_as_skipped_elsewhere() {
+    let me = std::env::current_exe().unwrap();
+    let run = |ci: bool| {
+        let mut c = Command::new(&me);
+        c.args([
+            "--exact",
+            "systemd_unit_verifies_clean_and_is_hardened",
+            "--test-threads",
+            "1",
+        ])
+        .env("PATH", "/nonexistent");
+        if ci {
+            c.env("CI", "1");
+        } else {
+            c.env_remove("CI");
+        }
+        c.output().unwrap()
+    };
+    let o = run(true);
+    assert!(!o.status.success(), "a skip under CI must fail: {o:?}");
+    let o = run(false);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{o:?}");
+    assert!(
+        err.contains(
+            "SKIPPED systemd_unit_verifies_clean_and_is_hardened: systemd-analyze is not installed"
+        ),
+        "{err}"
+    );
 }

@@ -31,7 +31,9 @@ fn endpoints_serve_the_oracle_render() {
     assert_eq!(st, 200);
     assert!(head.contains("image/jpeg"));
     let img = image::load_from_memory(&jpg).unwrap();
-    assert_eq!((img.width(), img.height()), (129, 129));
+    // Rendered at 129^3, published at the display size (512 px: more rays than columns).
+    assert_eq!((img.width(), img.height()), (512, 512));
+    assert_eq!(s["display_size"], 512);
     let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
     assert_eq!(st, 200);
     let png = image::load_from_memory(&png).unwrap().to_rgba8();
@@ -40,8 +42,31 @@ fn endpoints_serve_the_oracle_render() {
     let (_, _, viewer) = request(&d.addr, "GET", "/", "");
     let viewer = String::from_utf8(viewer).unwrap();
     assert!(viewer.contains("/stream.mjpg") && viewer.contains("oracle"));
+    // Issue #37, item 5: frames a latest-wins slot replaced are "superseded", explained
+    // where they are shown; "dropped"/"lost" is kept for frames lost.
+    let st = state(&d.addr);
+    for stage in ["capture", "segment", "field", "render", "encode"] {
+        let v = &st["stages"][stage];
+        assert!(
+            v["superseded"].is_u64() && v["lost"].is_u64() && v.get("dropped").is_none(),
+            "{st}"
+        );
+    }
+    assert_eq!(st["stages"]["render"]["lost"], 0, "{st}");
+    assert!(
+        st["stage_notes"]["superseded"]
+            .as_str()
+            .unwrap()
+            .contains("latest frame wins"),
+        "{st}"
+    );
     let (_, _, m) = request(&d.addr, "GET", "/metrics", "");
     let m = String::from_utf8(m).unwrap();
+    assert!(
+        m.contains("# HELP volcap_stage_superseded_total")
+            && m.contains("volcap_stage_lost_total{stage=\"render\"} 0"),
+        "{m}"
+    );
     assert!(
         m.contains("volcap_frames_published_total")
             && m.contains("volcap_stage_ms{stage=\"render\",quantile=\"0.99\"}")
@@ -54,8 +79,13 @@ fn endpoints_serve_the_oracle_render() {
         "{} bytes",
         glb.len()
     );
-    // View controls are off without a token.
-    assert_eq!(request(&d.addr, "POST", "/view?yaw=90&pitch=0", "").0, 403);
+    // On a loopback bind without a token, this machine's user turns the view.
+    assert_eq!(s["controls"], "local");
+    let (st, _, body) = request(&d.addr, "POST", "/view?yaw=90&pitch=10", "");
+    assert_eq!(st, 200, "{}", String::from_utf8_lossy(&body));
+    wait_for(&d.addr, "the view turned", Duration::from_secs(5), |s| {
+        s["view"]["yaw"] == 90.0 && s["view"]["pitch"] == 10.0
+    });
     assert_eq!(request(&d.addr, "GET", "/nope", "").0, 404);
 }
 
@@ -82,7 +112,7 @@ fn real_clients_decode_the_stream() {
             .unwrap();
         let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(j["streams"][0]["codec_name"], "mjpeg");
-        assert_eq!(j["streams"][0]["width"], 129);
+        assert_eq!(j["streams"][0]["width"], 512);
     }
     if have("ffmpeg") {
         let o = Command::new("ffmpeg")
@@ -102,7 +132,7 @@ fn real_clients_decode_the_stream() {
             .output()
             .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        assert_eq!(o.stdout.len(), 5 * 129 * 129 * 3, "five decoded frames");
+        assert_eq!(o.stdout.len(), 5 * 512 * 512 * 3, "five decoded frames");
     }
 }
 
@@ -113,7 +143,7 @@ fn token_enables_view_controls_and_client_limit_holds() {
     std::fs::create_dir_all(&dir).unwrap();
     let cfg = dir.join("b.toml");
     let scene = root().join("tests/scenes/front-walk.toml");
-    std::fs::write(&cfg, format!("[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[http]\nclient_limit = 2\ntoken = \"s3cret-token\"\n", scene.display())).unwrap();
+    std::fs::write(&cfg, format!("[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\ndisplay_size = 0\n[http]\nclient_limit = 2\ntoken = \"s3cret-token\"\n", scene.display())).unwrap();
     let d = start(&cfg);
     wait_for(&d.addr, "frames", Duration::from_secs(30), |s| {
         s["frames_published"].as_u64() > Some(1)
@@ -219,7 +249,7 @@ fn unplug_is_a_state_and_the_camera_recovers() {
     .unwrap();
     std::fs::write(
         dir.join("b.toml"),
-        "[camera]\nbackend = \"sim\"\nscene = \"scene.toml\"\n[render]\nresolution = 65\n",
+        "[camera]\nbackend = \"sim\"\nscene = \"scene.toml\"\n[render]\nresolution = 65\ndisplay_size = 0\n",
     )
     .unwrap();
     let d = start(&dir.join("b.toml"));
@@ -293,6 +323,39 @@ fn bad_config_and_bad_scene_exit_with_a_clear_error() {
         .output()
         .unwrap();
     assert!(o.status.success());
+    // A port clash names where the address came from: the --http option when it was given,
+    // the config file's http.bind otherwise.
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
+        .current_dir(root())
+        .args(["--config", "board-config/sim.toml", "--http"])
+        .arg(format!("127.0.0.1:{port}"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains(&format!("127.0.0.1:{port}")) && e.contains("--http on the command line"),
+        "{e}"
+    );
+    assert!(!e.contains("http.bind"), "{e}");
+    let sim = std::fs::read_to_string(root().join("board-config/sim.toml")).unwrap();
+    let clash = dir.join("clash.toml");
+    std::fs::write(
+        &clash,
+        sim.replace("../tests/", &format!("{}/tests/", root().display()))
+            .replace("127.0.0.1:8080", &format!("127.0.0.1:{port}")),
+    )
+    .unwrap();
+    let o = run(&clash);
+    assert_eq!(o.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("http.bind in") && e.contains("clash.toml"),
+        "{e}"
+    );
+    drop(taken);
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -390,7 +453,7 @@ fn model_mode_renders_network_output() {
     std::fs::write(
         dir.join("b.toml"),
         format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\n[model]\ndir = \"{}\"\n",
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\ndisplay_size = 0\n[model]\ndir = \"{}\"\n",
             scene.display(),
             root().join("models").display()
         ),
@@ -480,7 +543,7 @@ fn file_backend_counts_and_skips_bad_frames() {
     std::fs::write(dir.join("rec.mjpg"), &rec).unwrap();
     std::fs::write(
         dir.join("b.toml"),
-        "[camera]\nbackend = \"file\"\npath = \"rec.mjpg\"\nfps = 30\n[render]\nresolution = 129\nfield = \"camera\"\n",
+        "[camera]\nbackend = \"file\"\npath = \"rec.mjpg\"\nfps = 30\n[render]\nresolution = 129\nfield = \"camera\"\ndisplay_size = 0\n",
     )
     .unwrap();
     let d = start(&dir.join("b.toml"));
@@ -519,12 +582,16 @@ fn check_config(path: &std::path::Path) -> (Option<i32>, String) {
         .unwrap();
     (
         o.status.code(),
-        String::from_utf8_lossy(&o.stderr).to_string(),
+        format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stderr),
+            String::from_utf8_lossy(&o.stdout)
+        ),
     )
 }
 
-/// Backends that are not built in, and bad camera keys, are configuration errors (exit 2)
-/// that say what to do.
+/// Bad camera keys are configuration errors (exit 2) that say what to do; a backend this
+/// build lacks is checked whole and named in a note (issue #37, item 2).
 #[test]
 fn camera_config_errors_are_clear() {
     let _serial = serial();
@@ -549,11 +616,9 @@ fn camera_config_errors_are_clear() {
     assert!(e.contains("line 7") && e.contains("h264"), "{e}");
     let v4l2 = "[camera]\nbackend = \"v4l2\"\ndevice = \"/dev/video0\"\nwidth = 640\nheight = 480\nfps = 30\n";
     let (code, e) = run(v4l2);
-    if cfg!(feature = "v4l2") {
-        assert_eq!(code, Some(0), "{e}");
-    } else {
-        assert_eq!(code, Some(2));
-        assert!(e.contains("--features v4l2"), "{e}");
+    assert_eq!(code, Some(0), "{e}");
+    if !cfg!(feature = "v4l2") {
+        assert!(e.contains("note:") && e.contains("--features v4l2"), "{e}");
     }
     std::fs::remove_dir_all(&dir).ok();
 }

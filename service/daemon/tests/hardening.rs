@@ -4,45 +4,13 @@
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{Proc, launch, request, root, serial, state, wait_for};
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("volcapd-hard-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// A sim config at `resolution` with `extra` TOML appended, written to `dir/b.toml`.
-fn sim_config(dir: &Path, resolution: usize, extra: &str) -> PathBuf {
-    let scene = root().join("tests/scenes/front-walk.toml");
-    let p = dir.join("b.toml");
-    std::fs::write(
-        &p,
-        format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nresolution = {resolution}\n[dbus]\nbus = \"none\"\n{extra}",
-            scene.display()
-        ),
-    )
-    .unwrap();
-    p
-}
-
-fn signal(p: &Proc, sig: &str) {
-    let ok = std::process::Command::new("kill")
-        .args([&format!("-{sig}"), &p.0.id().to_string()])
-        .status()
-        .unwrap()
-        .success();
-    assert!(ok, "kill -{sig}");
-}
-
-fn alive(p: &mut Proc) -> bool {
-    p.0.try_wait().unwrap().is_none()
-}
+use common::{
+    alive, connect_from, launch, launch_publishing, proc_status, request, root, serial, signal,
+    sim_config, state, tmp, wait_for,
+};
 
 /// #4: SIGHUP killed the daemon (exit 129, nothing logged, no restart); SIGUSR1 too.
 #[test]
@@ -50,10 +18,7 @@ fn sighup_reloads_the_config_and_sigusr1_is_survived() {
     let _s = serial();
     let dir = tmp("hup");
     let cfg = sim_config(&dir, 65, "");
-    let (mut p, addr) = launch(&cfg, &[], &[], false);
-    wait_for(&addr, "frames", Duration::from_secs(30), |s| {
-        s["frames_published"].as_u64() > Some(1)
-    });
+    let (mut p, addr) = launch_publishing(&cfg, 1);
     // A new resolution in the file, then SIGHUP: applied, still running.
     sim_config(&dir, 33, "");
     signal(&p, "HUP");
@@ -85,31 +50,6 @@ fn sighup_reloads_the_config_and_sigusr1_is_survived() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-fn proc_status(p: &Proc, key: &str) -> u64 {
-    std::fs::read_to_string(format!("/proc/{}/status", p.0.id()))
-        .unwrap()
-        .lines()
-        .find(|l| l.starts_with(key))
-        .and_then(|l| l.split_whitespace().nth(1))
-        .and_then(|v| v.parse().ok())
-        .unwrap()
-}
-
-/// A TCP connection to `addr` from the loopback address `from` (127.0.0.x), with a small
-/// receive buffer when `rcvbuf` is given.
-fn connect_from(addr: &str, from: &str, rcvbuf: Option<usize>) -> std::io::Result<TcpStream> {
-    use socket2::{Domain, Socket, Type};
-    let to: std::net::SocketAddr = addr.parse().unwrap();
-    let s = Socket::new(Domain::IPV4, Type::STREAM, None)?;
-    if let Some(n) = rcvbuf {
-        s.set_recv_buffer_size(n)?;
-    }
-    let local: std::net::SocketAddr = format!("{from}:0").parse().unwrap();
-    s.bind(&local.into())?;
-    s.connect_timeout(&to.into(), Duration::from_secs(2))?;
-    Ok(s.into())
-}
-
 /// #1: `/mesh.glb` ran unbounded, one blocking thread per request, and kept running after
 /// the client left (800 requests: 219 threads, 2.8 GB). Now one computation at a time, HEAD
 /// computes nothing.
@@ -118,10 +58,7 @@ fn mesh_requests_are_bounded_and_head_computes_nothing() {
     let _s = serial();
     let dir = tmp("mesh");
     let cfg = sim_config(&dir, 129, "[http]\nper_address_limit = 1000\n");
-    let (p, addr) = launch(&cfg, &[], &[], false);
-    wait_for(&addr, "frames", Duration::from_secs(30), |s| {
-        s["frames_published"].as_u64() > Some(2)
-    });
+    let (p, addr) = launch_publishing(&cfg, 2);
     let fps = |secs: f64| {
         let a = state(&addr)["frames_published"].as_u64().unwrap();
         std::thread::sleep(Duration::from_secs_f64(secs));
@@ -198,10 +135,7 @@ fn one_address_cannot_take_every_connection() {
         33,
         "[http]\nper_address_limit = 4\nheader_timeout_s = 30\n",
     );
-    let (p, addr) = launch(&cfg, &[], &[], false);
-    wait_for(&addr, "frames", Duration::from_secs(30), |s| {
-        s["frames_published"].as_u64() > Some(0)
-    });
+    let (p, addr) = launch_publishing(&cfg, 0);
     // 100 connections from 127.0.0.2 trickling a request head (one byte, then nothing).
     let hog: Vec<TcpStream> = (0..100)
         .filter_map(|_| {
@@ -260,10 +194,7 @@ fn stream_clients_that_never_read_are_dropped() {
     let _s = serial();
     let dir = tmp("wto");
     let cfg = sim_config(&dir, 129, "[http]\nclient_limit = 2\nwrite_timeout_s = 2\n");
-    let (p, addr) = launch(&cfg, &[], &[], false);
-    wait_for(&addr, "frames", Duration::from_secs(30), |s| {
-        s["frames_published"].as_u64() > Some(1)
-    });
+    let (p, addr) = launch_publishing(&cfg, 1);
     let stuck: Vec<TcpStream> = (0..2)
         .map(|_| {
             let mut s = connect_from(&addr, "127.0.0.1", Some(4096)).unwrap();
@@ -313,10 +244,7 @@ fn host_allow_list_state_privacy_and_token_backoff() {
         33,
         "[http]\ntoken = \"s3cret-token\"\nallowed_hosts = [\"volcap.lan\"]\n",
     );
-    let (p, addr) = launch(&cfg, &[], &[], false);
-    wait_for(&addr, "frames", Duration::from_secs(30), |s| {
-        s["frames_published"].as_u64() > Some(0)
-    });
+    let (p, addr) = launch_publishing(&cfg, 0);
     let port = addr.rsplit_once(':').unwrap().1;
     let with_host = |path: &str, host: &str| {
         let mut s = TcpStream::connect(&addr).unwrap();

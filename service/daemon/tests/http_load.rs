@@ -136,7 +136,9 @@ fn http_limits_hold() {
         head.is_empty() || head.starts_with("HTTP/1.1 431"),
         "{head}"
     );
-    // Connection cap: client_limit + 64 = 65 open at once; the rest are closed at accept.
+    // Connection cap: client_limit + 64 = 65 open at once, plus the 8 kept for this
+    // machine (`reserved_for`: these connections come from 127.0.0.1); the rest are closed
+    // at accept.
     let idle: Vec<TcpStream> = (0..80)
         .map(|_| TcpStream::connect(&d.addr).unwrap())
         .collect();
@@ -151,9 +153,9 @@ fn http_limits_hold() {
             matches!((&**s).read(&mut b), Ok(0))
         })
         .count();
-    println!("{closed} of 80 idle connections closed at accept (cap 65)");
+    println!("{closed} of 80 idle connections closed at accept (cap 65 + 8 reserved)");
     assert!(
-        (10..=20).contains(&closed),
+        (3..=12).contains(&closed),
         "{closed} of 80 closed at accept"
     );
     drop(idle);

@@ -189,7 +189,7 @@ impl MotionBlur {
     fn new(length: f32, angle_deg: f32) -> Self {
         let a = angle_deg.to_radians();
         Self {
-            length: length.min(256.0),
+            length: length.min(crate::scene::MAX_BLUR_PX),
             dir: (a.cos(), a.sin()),
             scratch: Vec::new(),
         }

@@ -15,6 +15,17 @@ use toml::Spanned;
 /// Largest scene file accepted (scenes are a few kB of TOML).
 pub const MAX_SCENE_BYTES: u64 = 1 << 20;
 
+/// What one frame of a scene may cost, checked at load (the byte cap above does not bound
+/// the work: 1,000 subjects fit in 217 kB). Subjects are posed, skinned, rasterized and
+/// (oracle mode) given an occupancy field each frame, ~0.1 s a subject on one core.
+pub const MAX_SUBJECTS: usize = 4;
+/// Effects a scene may declare (each runs once per frame).
+pub const MAX_EFFECTS: usize = 16;
+/// Pixels of the camera image (width x height): 2048 x 2048.
+pub const MAX_PIXELS: usize = 2048 * 2048;
+/// Longest motion blur, pixels (its cost per pixel grows with the length).
+pub const MAX_BLUR_PX: f32 = 64.0;
+
 /// A scene could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -449,6 +460,7 @@ impl Scene {
                 .map(|x| x.to_string_lossy().to_string())
                 .unwrap_or_default();
         }
+        s.check_budget()?;
         if let Some(sh) = &s.lighting.sh
             && sh.len() != 9
         {
@@ -473,6 +485,70 @@ impl Scene {
             message: format!("not UTF-8 text: {e}"),
         })?;
         Self::parse(&text, file)
+    }
+
+    /// The line of the `n`th (0-based) occurrence of `header` in the source (1 when absent).
+    fn line_of_nth(&self, header: &str, n: usize) -> usize {
+        let at = self
+            .source
+            .match_indices(header)
+            .nth(n)
+            .map_or(0, |(i, _)| i);
+        line_of(&self.source, at)
+    }
+
+    /// Refuse scenes whose per-frame work is beyond what a frame can afford
+    /// ([`MAX_SUBJECTS`], [`MAX_EFFECTS`], [`MAX_PIXELS`], [`MAX_BLUR_PX`]), naming the key.
+    fn check_budget(&self) -> Result<(), SceneError> {
+        let value = |line, key: &str, message: String| SceneError::Value {
+            file: self.file.clone(),
+            line,
+            key: key.to_string(),
+            message,
+        };
+        if self.subjects.len() > MAX_SUBJECTS {
+            return Err(value(
+                self.line_of_nth("[[subject]]", MAX_SUBJECTS),
+                "subject",
+                format!(
+                    "{} subjects; a scene may have at most {MAX_SUBJECTS} (each is posed, rasterized and given ground truth every frame)",
+                    self.subjects.len()
+                ),
+            ));
+        }
+        if self.effects.len() > MAX_EFFECTS {
+            return Err(value(
+                self.line_of_nth("[[effect]]", MAX_EFFECTS),
+                "effect",
+                format!(
+                    "{} effects; a scene may declare at most {MAX_EFFECTS}",
+                    self.effects.len()
+                ),
+            ));
+        }
+        let (w, h) = (self.camera.width.0, self.camera.height.0);
+        if w * h > MAX_PIXELS {
+            return Err(value(
+                self.line_of_nth("width", 0),
+                "camera.width",
+                format!(
+                    "{w} x {h} = {} pixels; at most {MAX_PIXELS} (2048 x 2048) a frame",
+                    w * h
+                ),
+            ));
+        }
+        for (i, e) in self.effects.iter().enumerate() {
+            if let EffectSpec::MotionBlur { length_px, .. } = e
+                && length_px.0 > MAX_BLUR_PX
+            {
+                return Err(value(
+                    self.line_of_nth("length_px", 0),
+                    &format!("effect[{i}].motion-blur.length_px"),
+                    format!("{} px; at most {MAX_BLUR_PX}", length_px.0),
+                ));
+            }
+        }
+        Ok(())
     }
 
     fn value_err(&self, span: std::ops::Range<usize>, key: String, message: String) -> SceneError {
@@ -588,6 +664,47 @@ mod tests {
         assert_eq!(s.camera.width.0, 512);
         assert_eq!(s.name, "x");
         assert!(s.effects.is_empty());
+    }
+
+    /// Hardening round two, #2: 1,000 subjects (217 kB) passed the check and took the
+    /// daemon past 8 GB with no frame. The work a frame declares is bounded at load.
+    #[test]
+    fn per_frame_work_is_bounded_at_load_naming_the_key() {
+        let subject = "[[subject]]\nid = \"a\"\nmotion = { kind = \"static\", pose = \"rest\" }\n";
+        assert!(parse(&subject.repeat(MAX_SUBJECTS)).is_ok());
+        let text = subject.repeat(1000);
+        assert!(text.len() < MAX_SCENE_BYTES as usize);
+        let t = std::time::Instant::now();
+        let e = parse(&text).unwrap_err().to_string();
+        assert!(t.elapsed() < std::time::Duration::from_secs(2));
+        let line = 3 * MAX_SUBJECTS + 1;
+        assert!(
+            e.contains("x.toml")
+                && e.contains(&format!(":{line}: subject:"))
+                && e.contains("1000 subjects"),
+            "{e}"
+        );
+        let effect = "[[effect]]\nvignetting = { strength = 0.1 }\n";
+        assert!(parse(&effect.repeat(MAX_EFFECTS)).is_ok());
+        let e = parse(&effect.repeat(MAX_EFFECTS + 1))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(": effect:") && e.contains("17 effects"), "{e}");
+        let e = parse("[camera]\nwidth = 4096\nheight = 4096\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(":2: camera.width:") && e.contains("4096 x 4096"),
+            "{e}"
+        );
+        assert!(parse("[camera]\nwidth = 2048\nheight = 2048\n").is_ok());
+        let e = parse("[[effect]]\nmotion-blur = { length_px = 200, angle_deg = 0 }\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("effect[0].motion-blur.length_px") && e.contains("200 px"),
+            "{e}"
+        );
     }
 
     #[test]

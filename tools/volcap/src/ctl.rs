@@ -82,19 +82,62 @@ trait Capture1 {
     fn snapshot(&self) -> zbus::Result<Vec<u8>>;
 }
 
+/// Connect to the bus `bus` names. A failure says which bus and address were tried, the
+/// cause once, and how to choose another.
 async fn connect(bus: &BusArgs) -> Result<zbus::Connection> {
+    let session_address = || {
+        std::env::var("DBUS_SESSION_BUS_ADDRESS").unwrap_or_else(|_| {
+            let dir = std::env::var("XDG_RUNTIME_DIR")
+                .unwrap_or_else(|_| format!("/run/user/{}", current_uid()));
+            format!("unix:path={dir}/bus (the default: DBUS_SESSION_BUS_ADDRESS is not set)")
+        })
+    };
     let (builder, what) = match (&bus.address, bus.system) {
-        (Some(a), _) => (zbus::connection::Builder::address(a.as_str()), a.clone()),
-        (None, true) => (zbus::connection::Builder::system(), "the system bus".into()),
+        (Some(a), _) => (
+            zbus::connection::Builder::address(a.as_str()),
+            format!("the bus at {a} (--address)"),
+        ),
+        (None, true) => (
+            zbus::connection::Builder::system(),
+            format!(
+                "the system bus at {}",
+                std::env::var("DBUS_SYSTEM_BUS_ADDRESS")
+                    .unwrap_or_else(|_| "unix:path=/run/dbus/system_bus_socket".into())
+            ),
+        ),
         (None, false) => (
             zbus::connection::Builder::session(),
-            "the session bus".into(),
+            format!("the session bus at {}", session_address()),
         ),
     };
-    builder
-        .build()
-        .await
-        .with_context(|| format!("cannot connect to {what}"))
+    let fail = |cause: String| {
+        anyhow::anyhow!(
+            "cannot connect to {what}: {cause}\nhint: volcapd serves org.volcap.Capture1 on the bus its config names ([dbus] bus); \
+             choose that one with --system (production) or --address ADDRESS, or set DBUS_SESSION_BUS_ADDRESS"
+        )
+    };
+    builder.build().await.map_err(|e| fail(root_cause(&e)))
+}
+
+/// The innermost cause of `e` (zbus wraps I/O errors and repeats their text).
+fn root_cause(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut cur = e;
+    while let Some(next) = cur.source() {
+        cur = next;
+    }
+    cur.to_string()
+}
+
+/// This process's user id, from /proc (no libc call needed).
+fn current_uid() -> String {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("Uid:"))
+                .and_then(|l| l.split_whitespace().nth(1).map(String::from))
+        })
+        .unwrap_or_else(|| "UID".into())
 }
 
 /// A D-Bus error as the daemon worded it.

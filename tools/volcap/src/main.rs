@@ -95,6 +95,10 @@ pub struct PipelineArgs {
         default_value = "129"
     )]
     pub segment_split: Vec<usize>,
+    /// Published image sides (`render.display_size`, comma-separated): 0 is the grid's own
+    /// resolution, 64..=1024 renders at that display size (the daemon's default is 512).
+    #[arg(long = "display-size", value_delimiter = ',', default_value = "0")]
+    pub display_sizes: Vec<usize>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,

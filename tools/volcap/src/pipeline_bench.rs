@@ -32,6 +32,8 @@ pub struct Row {
     pub threads: usize,
     /// `compute.segment_thread_up_to` of the run.
     pub segment_thread_up_to: usize,
+    /// `render.display_size` of the run (0: the grid's resolution).
+    pub display_size: usize,
     /// Frames published per second over the measured window.
     pub fps: f64,
     pub latency_p50_ms: f64,
@@ -82,14 +84,15 @@ fn frames(scene: &Path, n: usize) -> anyhow::Result<Vec<Still>> {
     Ok(out)
 }
 
-/// One configuration: model, precision, resolution, coarse level, threads, segment split.
-type Setup = (String, Precision, usize, u32, usize, usize);
+/// One configuration: model, precision, resolution, coarse level, threads, segment split,
+/// display size.
+type Setup = (String, Precision, usize, u32, usize, usize, usize);
 
 fn config(scene: &Path, models_dir: &Path, setup: &Setup) -> anyhow::Result<Config> {
-    let (name, prec, res, coarse, threads, split) = setup;
+    let (name, prec, res, coarse, threads, split, display) = setup;
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
-         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\n\
+         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
          [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\n[dbus]\nbus = \"none\"\n",
         match prec {
@@ -145,6 +148,7 @@ fn measure(
         coarse_level: cfg.render.coarse_level,
         threads: cfg.compute.threads,
         segment_thread_up_to: cfg.compute.segment_thread_up_to,
+        display_size: cfg.render.display_size,
         fps: published as f64 / wall,
         latency_p50_ms: l50,
         latency_p99_ms: l99,
@@ -185,8 +189,10 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         for &res in &a.res {
             for &c in &a.coarse_levels {
                 for &split in &a.segment_split {
-                    for &t in &a.threads {
-                        configs.push((name.clone(), prec, res, c, t, split));
+                    for &d in &a.display_sizes {
+                        for &t in &a.threads {
+                            configs.push((name.clone(), prec, res, c, t, split, d));
+                        }
                     }
                 }
             }
@@ -231,12 +237,12 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let base: Vec<(String, usize, u32, usize, f64)> = rows
+    let base: Vec<(String, usize, u32, usize, usize, f64)> = rows
         .iter()
         .filter(|r| r.threads == 1 && r.error.is_none())
         .map(|r| {
             let k = (r.model.clone(), r.resolution, r.coarse_level);
-            (k.0, k.1, k.2, r.segment_thread_up_to, r.fps)
+            (k.0, k.1, k.2, r.segment_thread_up_to, r.display_size, r.fps)
         })
         .collect();
     for r in &mut rows {
@@ -247,8 +253,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.1 == r.resolution
                     && b.2 == r.coarse_level
                     && b.3 == r.segment_thread_up_to
+                    && b.4 == r.display_size
             })
-            .map(|b| r.fps / b.4.max(1e-9));
+            .map(|b| r.fps / b.5.max(1e-9));
     }
     if a.json {
         let mut out = std::io::stdout().lock();
@@ -296,15 +303,20 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
 
 fn table(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| model | res | coarse | threads | segment thread | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| model | res | display px | coarse | threads | segment thread | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
             r.resolution,
+            if r.display_size == 0 {
+                r.resolution
+            } else {
+                r.display_size
+            },
             r.coarse_level,
             r.threads,
             if r.resolution <= r.segment_thread_up_to {
@@ -333,23 +345,23 @@ fn table(rows: &[Row]) -> String {
 /// A plotted quantity: its title and how to read it from a row.
 type Metric = (&'static str, fn(&Row) -> f64);
 
-/// fps and p99 latency over resolution, one line per (model, coarse level, threads).
+/// fps and p99 latency over resolution, one line per (model, coarse level, threads,
+/// segment split, display size).
 fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
     crate::plot::register_font();
     let root = BitMapBackend::new(path, (1100, 460)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     let (left, right) = root.split_horizontally(550);
-    let mut keys: Vec<(String, u32, usize, usize)> = rows
-        .iter()
-        .map(|r| {
-            (
-                r.model.clone(),
-                r.coarse_level,
-                r.threads,
-                r.segment_thread_up_to,
-            )
-        })
-        .collect();
+    let key = |r: &Row| {
+        (
+            r.model.clone(),
+            r.coarse_level,
+            r.threads,
+            r.segment_thread_up_to,
+            r.display_size,
+        )
+    };
+    let mut keys: Vec<(String, u32, usize, usize, usize)> = rows.iter().map(key).collect();
     keys.sort();
     keys.dedup();
     let xmax = rows.iter().map(|r| r.resolution).max().unwrap_or(257) as f64 * 1.3;
@@ -376,22 +388,25 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             let color = Palette99::pick(i).to_rgba();
             let mut pts: Vec<(f64, f64)> = rows
                 .iter()
-                .filter(|r| {
-                    r.error.is_none()
-                        && (
-                            r.model.clone(),
-                            r.coarse_level,
-                            r.threads,
-                            r.segment_thread_up_to,
-                        ) == *k
-                })
+                .filter(|r| r.error.is_none() && key(r) == *k)
                 .map(|r| (r.resolution as f64, f(r)))
                 .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             chart
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
                 .map_err(|e| anyhow!("{e}"))?
-                .label(format!("{} c{} x{} seg<={}", k.0, k.1, k.2, k.3))
+                .label(format!(
+                    "{} c{} x{} seg<={}{}",
+                    k.0,
+                    k.1,
+                    k.2,
+                    k.3,
+                    if k.4 == 0 {
+                        String::new()
+                    } else {
+                        format!(" {}px", k.4)
+                    }
+                ))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
                 });

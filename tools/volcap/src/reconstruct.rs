@@ -9,7 +9,7 @@
 //!
 //! Inputs: PNG or JPEG; greyscale, greyscale + alpha, RGBA and 16-bit images are converted to
 //! RGB8 (alpha dropped). Refused with a message naming the file: unreadable, non-regular or
-//! non-image files, files over [`MAX_FILE_BYTES`], and images over [`MAX_SIDE`] pixels a side or [`MAX_PIXELS`] pixels in all (the
+//! non-image files, files over [`MAX_FILE_BYTES`], and images over `preprocess::MAX_FRAME_SIDE` pixels a side or `MAX_FRAME_PIXELS` pixels in all (the daemon's limits, one rule for both; the
 //! header is read first; nothing that large is decoded). A failed image does not stop the
 //! others; the exit status is non-zero when any failed.
 
@@ -24,11 +24,6 @@ use volcap_engine::mesh::marching_cubes;
 use volcap_engine::model::preprocess::unletterbox_mask;
 use volcap_engine::model::{FrameError, FrameInfo, ModelView, Models, Precision};
 use volcap_engine::render::{RenderOptions, Renderer};
-
-/// Largest image side accepted, pixels.
-pub const MAX_SIDE: u32 = 8192;
-/// Largest image accepted, pixels in all (a 40 MP camera frame).
-pub const MAX_PIXELS: u64 = 40_000_000;
 
 #[derive(Args, Debug, Clone)]
 pub struct ReconstructArgs {
@@ -110,16 +105,8 @@ pub fn read_rgb(path: &Path) -> anyhow::Result<(Vec<u8>, u32, u32)> {
     let (w, h) = reader()?
         .into_dimensions()
         .map_err(|e| anyhow!("{}: not a readable {format:?} image: {e}", path.display()))?;
-    if w == 0 || h == 0 {
-        bail!("{}: empty image ({w}x{h})", path.display());
-    }
-    if w > MAX_SIDE || h > MAX_SIDE || w as u64 * h as u64 > MAX_PIXELS {
-        bail!(
-            "{}: {w}x{h} is too large (at most {MAX_SIDE} pixels a side and {} MP); downscale it first",
-            path.display(),
-            MAX_PIXELS / 1_000_000
-        );
-    }
+    volcap_engine::model::preprocess::check_frame_size(w as u64, h as u64)
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
     let img = reader()?
         .decode()
         .map_err(|e| anyhow!("{}: cannot decode: {e}", path.display()))?;

@@ -17,7 +17,7 @@ fn app() -> Arc<http::App> {
         .expect("fuzz config");
         let (tx, _) = tokio::sync::watch::channel(None);
         let shared = Arc::new(pipeline::Shared::new(&cfg, "fuzz".into(), tx));
-        Arc::new(http::App::new(shared, 4, cfg.http.token.clone(), &[]))
+        Arc::new(http::App::new(shared, 4, cfg.http.token.clone(), &[], true))
     })
     .clone()
 }

@@ -3,7 +3,13 @@
 use super::Skip;
 
 /// Largest frame side we decode; bigger headers are refused before any allocation.
-pub const MAX_SIDE: u32 = 8192;
+pub use volcap_engine::model::preprocess::MAX_FRAME_SIDE as MAX_SIDE;
+
+/// A frame's size against the limits shared with `volcap reconstruct` (side and pixels in
+/// all): a larger frame is `Corrupt`, refused before it is decoded.
+pub fn check_size(w: u64, h: u64) -> Result<(), Skip> {
+    volcap_engine::model::preprocess::check_frame_size(w, h).map_err(Skip::Corrupt)
+}
 
 /// Decode one MJPEG frame. A frame without its end-of-image marker is `Truncated` (drivers
 /// may pad with zero bytes after it, which is allowed); one that does not decode is `Corrupt`.
@@ -21,10 +27,14 @@ pub fn mjpeg(buf: &[u8]) -> Result<(Vec<u8>, usize, usize), Skip> {
             buf.len()
         )));
     }
-    let mut reader = image::ImageReader::with_format(
-        std::io::Cursor::new(&buf[..end]),
-        image::ImageFormat::Jpeg,
-    );
+    let reader = || {
+        image::ImageReader::with_format(std::io::Cursor::new(&buf[..end]), image::ImageFormat::Jpeg)
+    };
+    let (w, h) = reader()
+        .into_dimensions()
+        .map_err(|e| Skip::Corrupt(format!("JPEG header does not decode: {e}")))?;
+    check_size(w as u64, h as u64)?;
+    let mut reader = reader();
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(MAX_SIDE);
     limits.max_image_height = Some(MAX_SIDE);
@@ -63,6 +73,7 @@ pub fn yuyv(buf: &[u8], width: usize, height: usize) -> Result<Vec<u8>, Skip> {
             "YUYV needs an even, non-zero width; got {width}x{height}"
         )));
     }
+    check_size(width as u64, height as u64)?;
     let need = width * height * 2;
     if buf.len() < need {
         return Err(Skip::Truncated(format!(

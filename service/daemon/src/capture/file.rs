@@ -120,9 +120,18 @@ fn decode_image(p: &Path) -> Result<(Vec<u8>, usize, usize), Skip> {
             Skip::Corrupt(m) => Skip::Corrupt(format!("{}: {m}", p.display())),
         });
     }
-    let mut r = image::ImageReader::new(std::io::Cursor::new(bytes))
-        .with_guessed_format()
+    let reader = || {
+        image::ImageReader::new(std::io::Cursor::new(&bytes))
+            .with_guessed_format()
+            .map_err(|e| Skip::Corrupt(format!("{}: {e}", p.display())))
+    };
+    let (w, h) = reader()?
+        .into_dimensions()
         .map_err(|e| Skip::Corrupt(format!("{}: {e}", p.display())))?;
+    decode::check_size(w as u64, h as u64).map_err(|s| match s {
+        Skip::Truncated(m) | Skip::Corrupt(m) => Skip::Corrupt(format!("{}: {m}", p.display())),
+    })?;
+    let mut r = reader()?;
     let mut limits = image::Limits::default();
     limits.max_image_width = Some(decode::MAX_SIDE);
     limits.max_image_height = Some(decode::MAX_SIDE);

@@ -110,6 +110,12 @@ pub trait Camera {
 pub enum CameraState {
     Opening,
     Running,
+    /// Open, but what arrives does not decode: frames skipped `in_a_row` (from the start,
+    /// or [`SKIPPING_AFTER`] in a row after frames came), the last one's reason.
+    Skipping {
+        in_a_row: u64,
+        last: String,
+    },
     /// Lost with a typed reason; the next attempt is `retry_in` away.
     Lost {
         fault: Fault,
@@ -118,6 +124,9 @@ pub enum CameraState {
     /// A terminal fault (end of a recording without loop).
     Stopped(Fault),
 }
+
+/// Skipped frames in a row after which a running camera is said to be skipping.
+pub const SKIPPING_AFTER: u64 = 5;
 
 /// What one supervisor step produced.
 pub enum Step {
@@ -155,6 +164,7 @@ pub struct Supervisor<C: Camera + ?Sized> {
     pub frames: u64,
     pub skipped: u64,
     pub faults: u64,
+    skips_in_a_row: u64,
 }
 
 impl<C: Camera + ?Sized> Supervisor<C> {
@@ -169,6 +179,7 @@ impl<C: Camera + ?Sized> Supervisor<C> {
             frames: 0,
             skipped: 0,
             faults: 0,
+            skips_in_a_row: 0,
         }
     }
 
@@ -224,12 +235,26 @@ impl<C: Camera + ?Sized> Supervisor<C> {
         match self.cam.next() {
             Ok(Grab::Frame(f)) => {
                 self.frames += 1;
+                self.skips_in_a_row = 0;
                 self.delay = self.backoff.first;
                 self.state = CameraState::Running;
                 Step::Frame(f)
             }
             Ok(Grab::Skipped(s)) => {
                 self.skipped += 1;
+                self.skips_in_a_row += 1;
+                let opening = matches!(
+                    self.state,
+                    CameraState::Opening | CameraState::Skipping { .. }
+                );
+                if opening || self.skips_in_a_row >= SKIPPING_AFTER {
+                    self.state = CameraState::Skipping {
+                        in_a_row: self.skips_in_a_row,
+                        last: match &s {
+                            Skip::Truncated(m) | Skip::Corrupt(m) => m.clone(),
+                        },
+                    };
+                }
                 Step::Skipped(s)
             }
             Err(f) => self.lose(f),
@@ -302,6 +327,16 @@ pub fn factory(cfg: &Config) -> Result<(CameraFactory, String), String> {
         }
         Backend::V4l2 => v4l2_factory(cfg),
         Backend::Depthai => depthai_factory(cfg),
+    }
+}
+
+/// The build feature `backend` needs and this build lacks, if any: `--check-config` checks
+/// such a config whole and names the feature in a note instead of failing.
+pub fn missing_feature(backend: Backend) -> Option<&'static str> {
+    match backend {
+        Backend::V4l2 if !cfg!(feature = "v4l2") => Some("v4l2"),
+        Backend::Depthai if !cfg!(feature = "depthai") => Some("depthai"),
+        _ => None,
     }
 }
 

@@ -6,6 +6,8 @@ use axum::extract::State;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use volcap_engine::field::{FieldError, OccupancyField};
 
 /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can never
 /// share its address), resolution, coarse level, and the bytes.
@@ -21,70 +23,142 @@ pub type MeshCache = (
 /// hierarchical method.
 pub const MESH_CONCURRENCY: usize = 1;
 
+/// Niceness of the mesh thread: the pipeline's threads (nice 0) get about ten times its
+/// share of a contended core, so a mesh request never starves the render stage or the
+/// watchdog's heartbeats; on an idle core it runs at full speed.
+pub const MESH_NICE: i32 = 10;
+
+/// The gate of [`MESH_CONCURRENCY`] computations.
+pub fn mesh_gate() -> Arc<tokio::sync::Semaphore> {
+    Arc::new(tokio::sync::Semaphore::new(MESH_CONCURRENCY))
+}
+
+/// The field, refusing to be evaluated once `cancel` is set: a mesh whose client left
+/// stops at its next batch of points (every level of the localization is many batches)
+/// instead of running to the end for nobody.
+struct Cancellable<'a> {
+    field: &'a dyn OccupancyField,
+    cancel: &'a AtomicBool,
+}
+
+impl OccupancyField for Cancellable<'_> {
+    fn occupancy(&self, points: &[glam::Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        if self.cancel.load(Ordering::Relaxed) {
+            return Err(FieldError::Backend(CANCELLED.into()));
+        }
+        self.field.occupancy(points, out)
+    }
+}
+
+const CANCELLED: &str = "cancelled: the client left";
+
+/// Sets the flag when dropped: the handler's future is dropped when its client leaves.
+struct CancelOnDrop(Arc<AtomicBool>);
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+}
+
+/// Lower the calling thread's priority to [`MESH_NICE`] (Linux: a thread's niceness is
+/// its own). Best effort: a failure leaves it at the process's priority.
+fn lower_priority() {
+    // SAFETY: plain system calls on the calling thread's own id.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, MESH_NICE);
+    }
+}
+
+/// The mesh of `field` at `res` from `coarse`, stopping early when `cancel` is set.
+fn compute(
+    field: &volcap_sim::oracle::SceneField,
+    res: usize,
+    coarse: u32,
+    cancel: &AtomicBool,
+) -> Result<Bytes, String> {
+    let spec = volcap_engine::grid::GridSpec::from_resolution(res).map_err(|e| e.to_string())?;
+    let mut grid = volcap_engine::grid::Grid::new(spec);
+    let guarded = Cancellable { field, cancel };
+    volcap_engine::localize::Localizer::new()
+        .run(
+            volcap_engine::localize::Method::Hierarchical,
+            &guarded,
+            spec,
+            coarse,
+            &mut grid,
+        )
+        .map_err(|e| e.to_string())?;
+    if cancel.load(Ordering::Relaxed) {
+        return Err(CANCELLED.into());
+    }
+    let mut mesh = volcap_engine::mesh::marching_cubes(&grid);
+    drop(grid);
+    if cancel.load(Ordering::Relaxed) {
+        return Err(CANCELLED.into());
+    }
+    mesh.paint(field).map_err(|e| e.to_string())?;
+    Ok(Bytes::from(mesh.to_glb()))
+}
+
 /// The current frame as a coloured mesh: hierarchical localization at the render
-/// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms): it runs off
-/// the async runtime, [`MESH_CONCURRENCY`] at a time (others get 503 with Retry-After), and
-/// its bytes are cached for the frame, so a repeated request for the same frame costs
-/// nothing. A client that leaves does not cancel the computation, but it cannot start
-/// another one: the work in flight stays bounded and fills the cache.
+/// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms): it runs on
+/// a thread of its own at a lower priority ([`MESH_NICE`]), [`MESH_CONCURRENCY`] at a time
+/// (others get 503 with Retry-After), and its bytes are cached for the frame, so a repeated
+/// request for the same frame costs nothing. The gate's permit moves into the computation
+/// and is released only when it ends, so a client that leaves cannot let another one start
+/// beside it; leaving cancels the computation at its next batch of points (nobody else can
+/// be waiting for it: they were told 503).
 pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     let Some(field) = app.shared.latest_field() else {
         return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
     };
     let live = app.shared.live();
     let (res, coarse) = (live.resolution, live.coarse_level);
-    let key = Arc::downgrade(&field);
     let glb_response =
         |b: Bytes| ([(header::CONTENT_TYPE, "model/gltf-binary")], b).into_response();
-    let cached = |app: &App| {
-        app.mesh_cache
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .as_ref()
-            .filter(|(k, r, c, _)| k.as_ptr() == Arc::as_ptr(&field) && (*r, *c) == (res, coarse))
-            .map(|(_, _, _, b)| b.clone())
-    };
-    if let Some(b) = cached(&app) {
+    if let Some(b) = app.cached_mesh(&field, res, coarse) {
         return glb_response(b);
     }
-    let Ok(permit) = app.mesh_gate.try_acquire() else {
-        return (
+    let busy = || {
+        (
             StatusCode::SERVICE_UNAVAILABLE,
             [(header::RETRY_AFTER, "1")],
             "a mesh is being computed; retry in a second\n",
         )
-            .into_response();
+            .into_response()
+    };
+    let Ok(permit) = app.mesh_gate.clone().try_acquire_owned() else {
+        return busy();
     };
     // The frame may have been meshed while we waited for the gate.
-    if let Some(b) = cached(&app) {
+    if let Some(b) = app.cached_mesh(&field, res, coarse) {
         return glb_response(b);
     }
-    let app2 = app.clone();
-    let glb = tokio::task::spawn_blocking(move || -> Result<Bytes, String> {
-        let field = field;
-        let spec =
-            volcap_engine::grid::GridSpec::from_resolution(res).map_err(|e| e.to_string())?;
-        let mut grid = volcap_engine::grid::Grid::new(spec);
-        volcap_engine::localize::Localizer::new()
-            .run(
-                volcap_engine::localize::Method::Hierarchical,
-                field.as_ref(),
-                spec,
-                coarse,
-                &mut grid,
-            )
-            .map_err(|e| e.to_string())?;
-        let mut mesh = volcap_engine::mesh::marching_cubes(&grid);
-        drop(grid);
-        mesh.paint(field.as_ref()).map_err(|e| e.to_string())?;
-        let bytes = Bytes::from(mesh.to_glb());
-        *app2.mesh_cache.lock().unwrap_or_else(|p| p.into_inner()) =
-            Some((key, res, coarse, bytes.clone()));
-        Ok(bytes)
-    })
-    .await;
-    drop(permit);
-    match glb {
+    let cancel = Arc::new(AtomicBool::new(false));
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    let (app2, flag) = (app.clone(), cancel.clone());
+    let spawned = std::thread::Builder::new()
+        .name("volcap-mesh".into())
+        .spawn(move || {
+            // Held until the computation ends, whatever became of the request.
+            let _permit = permit;
+            lower_priority();
+            let key = Arc::downgrade(&field);
+            let r = compute(&field, res, coarse, &flag);
+            drop(field);
+            if let Ok(bytes) = &r {
+                *app2.mesh_cache.lock().unwrap_or_else(|p| p.into_inner()) =
+                    Some((key, res, coarse, bytes.clone()));
+            }
+            let _ = tx.send(r);
+        });
+    if let Err(e) = spawned {
+        tracing::warn!("mesh thread: {e}");
+        return busy();
+    }
+    let _cancel_if_gone = CancelOnDrop(cancel);
+    match rx.await {
         Ok(Ok(b)) => glb_response(b),
         Ok(Err(e)) => (
             StatusCode::INTERNAL_SERVER_ERROR,
@@ -95,11 +169,21 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     }
 }
 
-/// HEAD of the mesh: whether one can be had, computing nothing.
+/// HEAD of the mesh: whether one can be had, computing nothing. The length is stated only
+/// when the current frame's mesh is cached (a HEAD must not claim a length its GET would
+/// not send, and `0` is never the mesh's).
 pub(super) async fn mesh_head(State(app): State<Arc<App>>) -> Response {
-    if app.shared.latest_field().is_some() {
-        ([(header::CONTENT_TYPE, "model/gltf-binary")], "").into_response()
-    } else {
-        StatusCode::SERVICE_UNAVAILABLE.into_response()
+    let Some(field) = app.shared.latest_field() else {
+        return StatusCode::SERVICE_UNAVAILABLE.into_response();
+    };
+    let live = app.shared.live();
+    match app.cached_mesh(&field, live.resolution, live.coarse_level) {
+        Some(b) => ([(header::CONTENT_TYPE, "model/gltf-binary")], b).into_response(),
+        None => Response::builder()
+            .header(header::CONTENT_TYPE, "model/gltf-binary")
+            .body(axum::body::Body::from_stream(
+                futures_util::stream::empty::<Result<Bytes, std::io::Error>>(),
+            ))
+            .unwrap_or_else(|_| StatusCode::INTERNAL_SERVER_ERROR.into_response()),
     }
 }

@@ -66,7 +66,7 @@ pub(super) fn spawn(
                         }
                         sh.stats[stage::CAPTURE].record(f.at.elapsed().as_secs_f64() * 1e3);
                         if out.put(f) {
-                            sh.stats[stage::CAPTURE].dropped.fetch_add(1, Ordering::Relaxed);
+                            sh.stats[stage::CAPTURE].superseded.fetch_add(1, Ordering::Relaxed);
                         }
                     }
                     Step::Skipped(s) => {
@@ -96,12 +96,12 @@ pub(super) fn spawn(
                                     index: 0,
                                     at: Instant::now(),
                                     rgba: crate::placeholder::frame(
-                                        live.resolution,
+                                        live.out_size(),
                                         live.background,
                                         "NO USABLE FRAME",
                                         &why,
                                     ),
-                                    size: live.resolution,
+                                    size: live.out_size(),
                                     placeholder: true,
                                 });
                             }
@@ -131,7 +131,7 @@ pub(super) fn spawn(
                         {
                             last_placeholder = Some(Instant::now());
                             let live = sh.live();
-                            let (size, bg) = (live.resolution, live.background);
+                            let (size, bg) = (live.out_size(), live.background);
                             placeholders.put(Rendered {
                                 index: 0,
                                 at: Instant::now(),

@@ -98,7 +98,7 @@ pub(super) fn spawn_segment(
                 let seg = segment(&sh, &models, &f, threads);
                 if out.put((f, seg)) {
                     sh.stats[stage::SEGMENT]
-                        .dropped
+                        .superseded
                         .fetch_add(1, Ordering::Relaxed);
                 }
             }
@@ -180,7 +180,7 @@ pub(super) fn spawn(
                 });
                 if out.put((f, outcome)) {
                     sh.stats[stage::FIELD]
-                        .dropped
+                        .superseded
                         .fetch_add(1, Ordering::Relaxed);
                 }
             }

@@ -16,18 +16,21 @@ pub struct Live {
     /// RGBA in [0, 1]; alpha 0 gives transparent PNG snapshots.
     pub background: [f32; 4],
     pub paused: bool,
+    /// Side of the published image (`render.display_size`; 0: the grid's `resolution`).
+    pub display_size: usize,
 }
 
 impl Live {
     pub fn from_config(cfg: &Config) -> Self {
         Self {
-            yaw: cfg.render.yaw.rem_euclid(360.0),
+            yaw: wrap_yaw(cfg.render.yaw),
             pitch: cfg.render.pitch,
             distance: cfg.render.distance,
             resolution: cfg.render.resolution.0,
             coarse_level: cfg.render.coarse_level,
             background: cfg.render.background,
             paused: false,
+            display_size: cfg.render.display_size,
         }
     }
 
@@ -74,10 +77,36 @@ impl Live {
                 ),
             );
         }
+        if self.display_size != 0 && !crate::config::DISPLAY_SIZES.contains(&self.display_size) {
+            return bad(
+                "display_size",
+                format!(
+                    "display_size {}: 0 (the grid's resolution) or {}..={} pixels",
+                    self.display_size,
+                    crate::config::DISPLAY_SIZES.start(),
+                    crate::config::DISPLAY_SIZES.end()
+                ),
+            );
+        }
         if self.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
             return bad("background", "values must be in [0, 1]".into());
         }
         Ok(())
+    }
+
+    /// Side of the published image in pixels.
+    pub fn out_size(&self) -> usize {
+        if self.display_size == 0 {
+            self.resolution
+        } else {
+            self.display_size
+        }
+    }
+
+    /// Set the yaw, wrapped into [0, 360) (a value that is not finite is kept as it is, for
+    /// [`Live::check`] to refuse by its own name: `inf` stays `inf`, not NaN).
+    pub fn set_yaw(&mut self, yaw: f32) {
+        self.yaw = wrap_yaw(yaw);
     }
 
     /// Change the grid resolution, bringing the coarse level into range for it.
@@ -85,6 +114,14 @@ impl Live {
         self.resolution = resolution;
         let levels = (resolution.max(2) - 1).trailing_zeros();
         self.coarse_level = self.coarse_level.min(levels.saturating_sub(1));
+    }
+}
+
+fn wrap_yaw(yaw: f32) -> f32 {
+    if yaw.is_finite() {
+        yaw.rem_euclid(360.0)
+    } else {
+        yaw
     }
 }
 

@@ -29,7 +29,7 @@ pub(super) fn spawn(
                     placeholder: true,
                 }) {
                     sh.stats[stage::RENDER]
-                        .dropped
+                        .superseded
                         .fetch_add(1, Ordering::Relaxed);
                 }
             };
@@ -51,7 +51,7 @@ pub(super) fn spawn(
                     sh.set_state(PipelineState::Paused);
                     continue;
                 }
-                let (size, bg) = (live.resolution, live.background);
+                let (size, bg) = (live.out_size(), live.background);
                 let rgba = match mode {
                     FieldMode::Camera => {
                         let t = Instant::now();
@@ -63,6 +63,9 @@ pub(super) fn spawn(
                         let field = match outcome {
                             Some(Ok(field)) => field,
                             Some(Err(why)) => {
+                                if why.starts_with("model:") {
+                                    sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
+                                }
                                 degraded(why, &f, size, bg);
                                 continue;
                             }
@@ -124,7 +127,7 @@ pub(super) fn spawn(
                     placeholder: false,
                 }) {
                     sh.stats[stage::RENDER]
-                        .dropped
+                        .superseded
                         .fetch_add(1, Ordering::Relaxed);
                 }
                 // Running only while the camera is: a frame captured before the

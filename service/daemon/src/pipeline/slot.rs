@@ -62,7 +62,12 @@ impl<T> Slot<T> {
 pub struct StageStats {
     samples: Mutex<std::collections::VecDeque<(Instant, f64)>>,
     pub frames: AtomicU64,
-    pub dropped: AtomicU64,
+    /// Items this stage put into its latest-wins slot that were replaced by a newer one
+    /// before the next stage took them: work nobody needed (latest frame wins, nothing
+    /// queues), not frames lost.
+    pub superseded: AtomicU64,
+    /// Frames this stage failed on (an error, not "no person in view"): frames lost.
+    pub lost: AtomicU64,
 }
 
 impl StageStats {
@@ -73,6 +78,12 @@ impl StageStats {
         }
         s.push_back((Instant::now(), ms));
         self.frames.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Time since the last sample (`None` before the first).
+    pub fn since_last(&self) -> Option<Duration> {
+        let s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
+        s.back().map(|(t, _)| t.elapsed())
     }
 
     /// Frames per second over the last 5 s (0 when none).

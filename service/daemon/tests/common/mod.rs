@@ -59,7 +59,7 @@ pub fn launch(
     (Proc(child), addr)
 }
 
-/// A tool a test needs: on the PATH, or (outside CI) the test is skipped with a message.
+/// A tool a test needs: on the PATH, or the test is skipped ([`skip`]: a failure in CI).
 pub fn have(tool: &str) -> bool {
     let ok = Command::new("sh")
         .args(["-c", &format!("command -v {tool}")])
@@ -67,13 +67,24 @@ pub fn have(tool: &str) -> bool {
         .status()
         .is_ok_and(|s| s.success());
     if !ok {
-        assert!(
-            std::env::var("CI").is_err(),
-            "{tool} is required in CI (.ci/run installs it)"
-        );
-        eprintln!("skipping: {tool} not installed");
+        skip(&format!("{tool} is not installed (.ci/run installs it)"));
     }
     ok
+}
+
+/// A test whose prerequisite is missing: under `CI` a failure; elsewhere it says so on
+/// the terminal, past the test harness's capture (which would hide an `eprintln!` of a
+/// passing test), so that the run's output shows what was not tested. The caller returns.
+pub fn skip(why: &str) {
+    let name = std::thread::current()
+        .name()
+        .unwrap_or("this test")
+        .to_string();
+    assert!(
+        std::env::var("CI").is_err(),
+        "{name}: required in CI, but {why}"
+    );
+    let _ = writeln!(std::io::stderr().lock(), "SKIPPED {name}: {why}");
 }
 
 /// Minimal HTTP/1.1 request on loopback: (status, head, body; chunked bodies joined). A
@@ -160,4 +171,72 @@ static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 pub fn serial() -> std::sync::MutexGuard<'static, ()> {
     SERIAL.lock().unwrap_or_else(|p| p.into_inner())
+}
+pub fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("volcapd-hard-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A sim config at `resolution` with `extra` TOML appended, written to `dir/b.toml`.
+pub fn sim_config(dir: &Path, resolution: usize, extra: &str) -> PathBuf {
+    let scene = root().join("tests/scenes/front-walk.toml");
+    let p = dir.join("b.toml");
+    std::fs::write(
+        &p,
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nresolution = {resolution}\n[dbus]\nbus = \"none\"\n{extra}",
+            scene.display()
+        ),
+    )
+    .unwrap();
+    p
+}
+
+pub fn signal(p: &Proc, sig: &str) {
+    let ok = std::process::Command::new("kill")
+        .args([&format!("-{sig}"), &p.0.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok, "kill -{sig}");
+}
+
+pub fn alive(p: &mut Proc) -> bool {
+    p.0.try_wait().unwrap().is_none()
+}
+
+pub fn proc_status(p: &Proc, key: &str) -> u64 {
+    std::fs::read_to_string(format!("/proc/{}/status", p.0.id()))
+        .unwrap()
+        .lines()
+        .find(|l| l.starts_with(key))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse().ok())
+        .unwrap()
+}
+
+/// A TCP connection to `addr` from the loopback address `from` (127.0.0.x), with a small
+/// receive buffer when `rcvbuf` is given.
+pub fn connect_from(addr: &str, from: &str, rcvbuf: Option<usize>) -> std::io::Result<TcpStream> {
+    use socket2::{Domain, Socket, Type};
+    let to: std::net::SocketAddr = addr.parse().unwrap();
+    let s = Socket::new(Domain::IPV4, Type::STREAM, None)?;
+    if let Some(n) = rcvbuf {
+        s.set_recv_buffer_size(n)?;
+    }
+    let local: std::net::SocketAddr = format!("{from}:0").parse().unwrap();
+    s.bind(&local.into())?;
+    s.connect_timeout(&to.into(), Duration::from_secs(2))?;
+    Ok(s.into())
+}
+
+/// [`launch`] with no extra arguments, then wait (30 s at most) until more than `frames`
+/// frames were published.
+pub fn launch_publishing(config: &Path, frames: u64) -> (Proc, String) {
+    let (p, addr) = launch(config, &[], &[], false);
+    wait_for(&addr, "frames", Duration::from_secs(30), |s| {
+        s["frames_published"].as_u64() > Some(frames)
+    });
+    (p, addr)
 }

@@ -15,6 +15,28 @@ use glam::Vec3;
 
 /// Network input side in pixels.
 pub const INPUT_SIZE: usize = 256;
+
+/// Largest input frame side accepted anywhere (the daemon's cameras and `volcap
+/// reconstruct`), pixels.
+pub const MAX_FRAME_SIDE: u32 = 8192;
+/// Largest input frame accepted anywhere, pixels in all (a 40 MP camera frame): one limit
+/// for the daemon and `volcap reconstruct`, checked before anything is decoded.
+pub const MAX_FRAME_PIXELS: u64 = 40_000_000;
+
+/// Whether a `w` x `h` frame is within [`MAX_FRAME_SIDE`] and [`MAX_FRAME_PIXELS`]; the
+/// error says which limit and what to do.
+pub fn check_frame_size(w: u64, h: u64) -> Result<(), String> {
+    if w == 0 || h == 0 {
+        return Err(format!("empty image ({w}x{h})"));
+    }
+    if w > MAX_FRAME_SIDE as u64 || h > MAX_FRAME_SIDE as u64 || w * h > MAX_FRAME_PIXELS {
+        return Err(format!(
+            "{w}x{h} is too large (at most {MAX_FRAME_SIDE} pixels a side and {} MP); downscale it first",
+            MAX_FRAME_PIXELS / 1_000_000
+        ));
+    }
+    Ok(())
+}
 /// Fraction of the crop the person's larger bounding-box side fills.
 pub const FILL: f32 = 0.8;
 /// Smallest crop scale (a tiny subject is magnified at most 8x).
