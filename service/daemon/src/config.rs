@@ -1,6 +1,9 @@
 //! The daemon's configuration (one TOML per board under `board-config/`). Unknown keys and
 //! bad values are errors naming the file, line and key.
 
+mod live;
+pub use live::{Live, LiveError};
+
 use serde::Deserialize;
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -53,6 +56,17 @@ impl FieldMode {
     }
 }
 
+/// Which format to ask for: `auto` prefers MJPEG (a quarter of YUYV's USB bandwidth at the
+/// same size), then YUYV.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum FormatPref {
+    #[default]
+    Auto,
+    Mjpeg,
+    Yuyv,
+}
+
 /// The camera section. Which keys apply depends on the backend; a key given for another
 /// backend is an error, so a typo cannot silently do nothing.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -70,7 +84,7 @@ pub struct CameraConfig {
     /// first capture device whose name contains TEXT.
     pub device: Option<String>,
     /// `v4l2`: `auto` (MJPEG, else YUYV), `mjpeg` or `yuyv`.
-    pub format: Option<crate::capture::v4l2::FormatPref>,
+    pub format: Option<FormatPref>,
     /// `v4l2`, `depthai`: frame size.
     pub width: Option<u32>,
     pub height: Option<u32>,
@@ -403,8 +417,76 @@ pub struct Config {
     pub model: ModelConfig,
     #[serde(default)]
     pub compute: ComputeConfig,
+    #[serde(default)]
+    pub temporal: TemporalConfig,
     #[serde(skip)]
     pub file: PathBuf,
+}
+
+/// `[temporal]`: the model mode's temporal filter (`volcap_engine::model::temporal`): the
+/// mask, crop and maps held steady while the person is still, let go when they move. On by
+/// default; every key defaults to the engine's `TemporalSettings::default()`, chosen from
+/// `volcap bench temporal` (docs/eval-video).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TemporalConfig {
+    #[serde(default = "d_true")]
+    pub enabled: bool,
+    pub crop_min_cutoff_hz: Option<f32>,
+    pub crop_beta: Option<f32>,
+    pub mask_low: Option<f32>,
+    pub mask_high: Option<f32>,
+    pub mask_motion: Option<f32>,
+    pub map_min_cutoff_hz: Option<f32>,
+    pub map_beta: Option<f32>,
+    pub same_person_iou: Option<f32>,
+    pub max_gap_s: Option<f32>,
+}
+
+fn d_true() -> bool {
+    true
+}
+
+impl Default for TemporalConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            crop_min_cutoff_hz: None,
+            crop_beta: None,
+            mask_low: None,
+            mask_high: None,
+            mask_motion: None,
+            map_min_cutoff_hz: None,
+            map_beta: None,
+            same_person_iou: None,
+            max_gap_s: None,
+        }
+    }
+}
+
+impl TemporalConfig {
+    /// The filter's settings (`None` when `enabled = false`): the engine's defaults with the
+    /// keys given here.
+    pub fn settings(&self) -> Option<volcap_engine::model::temporal::TemporalSettings> {
+        self.enabled.then(|| self.values())
+    }
+
+    /// The settings whether enabled or not (checked either way: a bad value is never
+    /// silently kept for later).
+    pub fn values(&self) -> volcap_engine::model::temporal::TemporalSettings {
+        let d = volcap_engine::model::temporal::TemporalSettings::default();
+        volcap_engine::model::temporal::TemporalSettings {
+            crop_min_cutoff_hz: self.crop_min_cutoff_hz.unwrap_or(d.crop_min_cutoff_hz),
+            crop_beta: self.crop_beta.unwrap_or(d.crop_beta),
+            mask_low: self.mask_low.unwrap_or(d.mask_low),
+            mask_high: self.mask_high.unwrap_or(d.mask_high),
+            mask_motion: self.mask_motion.unwrap_or(d.mask_motion),
+            map_min_cutoff_hz: self.map_min_cutoff_hz.unwrap_or(d.map_min_cutoff_hz),
+            map_beta: self.map_beta.unwrap_or(d.map_beta),
+            same_person_iou: self.same_person_iou.unwrap_or(d.same_person_iou),
+            max_gap_s: self.max_gap_s.unwrap_or(d.max_gap_s),
+        }
+    }
 }
 
 /// A value that parsed but is not acceptable: the dotted key and why.
@@ -509,6 +591,9 @@ impl Config {
             " (seconds)",
         )?;
         in_range("compute.threads", self.compute.threads, &THREADS, "")?;
+        if let Err((key, msg)) = self.temporal.values().check() {
+            return bad(format!("temporal.{key}"), msg);
+        }
         in_range(
             "model.close_range_frames",
             self.model.close_range_frames,
@@ -551,7 +636,7 @@ impl Config {
                 format!("{} must be in [0.002, 0.05]", r.oracle_voxel_m),
             );
         }
-        if let Err(e) = crate::pipeline::Live::from_config(self).check() {
+        if let Err(e) = Live::from_config(self).check() {
             return bad(format!("render.{}", e.field), e.msg);
         }
         if let Some(t) = self.http.token.as_deref() {
@@ -641,7 +726,7 @@ impl Config {
             }
         }
         if c.backend == Backend::V4l2
-            && c.format == Some(crate::capture::v4l2::FormatPref::Yuyv)
+            && c.format == Some(FormatPref::Yuyv)
             && c.width.is_some_and(|w| !w.is_multiple_of(2))
         {
             return bad("camera.width", "must be even for format \"yuyv\"");

@@ -3,9 +3,10 @@
 //! registered before the name is requested (zbus's builder does it in that order). Without
 //! a bus the daemon keeps running: it logs once and health stays on HTTP.
 
+use crate::capture::CameraFactory;
 use crate::config::{Bus, Config};
 use crate::http::App;
-use crate::pipeline::{CameraFactory, Shared};
+use crate::pipeline::Shared;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use zbus::fdo;
@@ -66,8 +67,8 @@ impl Control {
             *lock(&self.backend) = source.clone();
             applied.push(format!("camera ({source})"));
         }
-        let render_new = crate::pipeline::Live::from_config(&new);
-        let render_old = crate::pipeline::Live::from_config(&old);
+        let render_new = crate::config::Live::from_config(&new);
+        let render_old = crate::config::Live::from_config(&old);
         if render_new != render_old {
             let paused = self.shared.live().paused;
             self.shared.update_live(|l| {
@@ -194,7 +195,7 @@ impl Control {
             reason,
             camera_connected: lock(&sh.camera).state == "running",
             backend: lock(&self.backend).clone(),
-            model: sh.mode.to_string(),
+            model: sh.field_label.clone(),
             resolution: sh.live().resolution as u32,
             fps: (sh.e2e.recent_fps() * 10.0).round() / 10.0,
             p50: p50.round(),
@@ -240,8 +241,8 @@ impl Capture1 {
         self.ctl.snapshot().backend
     }
 
-    /// What produces the field: a model name, or `oracle` / `camera` (labelled debugging
-    /// modes, not reconstructions).
+    /// What produces the field: `reconstruction: NAME (PRECISION)` (the trained networks), or
+    /// `oracle` / `camera` (labelled debugging modes, not reconstructions).
     #[zbus(property)]
     fn model(&self) -> String {
         self.ctl.snapshot().model

@@ -69,7 +69,7 @@ impl App {
     /// The cached mesh of `field` at (`res`, `coarse`), if it is the one in the cache.
     fn cached_mesh(
         &self,
-        field: &Arc<volcap_sim::oracle::SceneField>,
+        field: &Arc<dyn crate::pipeline::MeshField>,
         res: usize,
         coarse: u32,
     ) -> Option<axum::body::Bytes> {
@@ -77,7 +77,9 @@ impl App {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .as_ref()
-            .filter(|(k, r, c, _)| k.as_ptr() == Arc::as_ptr(field) && (*r, *c) == (res, coarse))
+            .filter(|(k, r, c, _)| {
+                std::ptr::addr_eq(k.as_ptr(), Arc::as_ptr(field)) && (*r, *c) == (res, coarse)
+            })
             .map(|(_, _, _, b)| b.clone())
     }
 
@@ -367,7 +369,11 @@ fn state_json(app: &App, details: bool) -> serde_json::Value {
             usize::MAX => serde_json::Value::Null,
             n => n.into(),
         },
+        "field": sh.field_label,
         "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
+        "temporal": sh.temporal.then(|| serde_json::json!({
+            "resets": sh.temporal_resets.load(Ordering::Relaxed),
+        })),
         "resolution": live.resolution,
         "display_size": live.out_size(),
         "paused": live.paused,

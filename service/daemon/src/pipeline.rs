@@ -5,13 +5,12 @@
 //! `encode_stage`). Stages are joined by bounded latest-wins slots, so latency never grows;
 //! every frame a slot overwrites is counted as a drop of the stage that produced it.
 
-use crate::capture::{Backoff, Camera, CameraState, Frame, Skip, Step, Supervisor};
+use crate::capture::{Backoff, Camera, CameraFactory, CameraState, Frame, Skip, Step, Supervisor};
 use crate::config::{Config, FieldMode};
 
 mod capture_stage;
 mod encode_stage;
 mod field_stage;
-mod live;
 mod render_stage;
 mod slot;
 use glam::{Quat, Vec3};
@@ -22,7 +21,7 @@ use volcap_engine::grid::GridSpec;
 use volcap_engine::render::{RenderOptions, Renderer};
 use volcap_sim::camera::Camera as SimView;
 
-pub use live::{Live, LiveError};
+pub use crate::config::{Live, LiveError};
 pub use slot::{Slot, StageStats};
 
 /// What the pipeline is doing, for /state and the viewer.
@@ -93,6 +92,16 @@ pub struct CameraStatus {
     pub opens: u64,
 }
 
+/// A frame's field that `/mesh.glb` can mesh and paint: the oracle's or the model's.
+pub trait MeshField:
+    volcap_engine::field::OccupancyField + volcap_engine::field::ColorField + Send + Sync
+{
+}
+impl<T: volcap_engine::field::OccupancyField + volcap_engine::field::ColorField + Send + Sync>
+    MeshField for T
+{
+}
+
 /// Shared between the pipeline threads, the HTTP server, D-Bus and the watchdog.
 pub struct Shared {
     pub stats: [StageStats; 5],
@@ -104,8 +113,11 @@ pub struct Shared {
     pub started: Instant,
     pub published: tokio::sync::watch::Sender<Option<Arc<Published>>>,
     pub mode: &'static str,
-    /// The latest frame's field (oracle mode), for meshes on request.
-    pub latest_field: Mutex<Option<Arc<volcap_sim::oracle::SceneField>>>,
+    /// What produces the field, as D-Bus `Model` says it: `reconstruction: NAME (PRECISION)`
+    /// in model mode, `oracle` / `camera` for the labelled debugging modes.
+    pub field_label: String,
+    /// The latest rendered frame's field (oracle or model mode), for meshes on request.
+    pub latest_field: Mutex<Option<Arc<dyn MeshField>>>,
     /// A new camera for the capture thread to switch to (config reload).
     pub camera_swap: Mutex<Option<CameraFactory>>,
     /// One counter per pipeline thread, bumped every loop turn (idle turns included): a
@@ -123,6 +135,11 @@ pub struct Shared {
     /// Occupancy-field evaluations of every frame rendered so far (localization, final
     /// level, normals), for the pipeline benchmark.
     pub evaluations: AtomicU64,
+    /// Model mode with `[temporal]` enabled: the field thread's filter is on...
+    pub temporal: bool,
+    /// ...and how often it started again (a new person, a people count change, a gap, a
+    /// close-range switch, a frame without a person).
+    pub temporal_resets: AtomicU64,
 }
 
 pub const THREADS: [&str; 5] = ["capture", "render", "encode", "field", "segment"];
@@ -156,6 +173,17 @@ impl Shared {
             started: Instant::now(),
             published,
             mode: cfg.field().name(),
+            field_label: match cfg.field() {
+                FieldMode::Model => format!(
+                    "reconstruction: {} ({})",
+                    cfg.model.name,
+                    match cfg.model.precision {
+                        crate::config::Precision::F32 => "f32",
+                        crate::config::Precision::Int8 => "int8",
+                    }
+                ),
+                other => other.name().to_string(),
+            },
             latest_field: Mutex::new(None),
             camera_swap: Mutex::new(None),
             beats: Default::default(),
@@ -163,11 +191,13 @@ impl Shared {
             close_range_model: cfg.field() == FieldMode::Model && cfg.model.close_range.is_some(),
             close_range: AtomicBool::new(false),
             evaluations: AtomicU64::new(0),
+            temporal: cfg.field() == FieldMode::Model && cfg.temporal.enabled,
+            temporal_resets: AtomicU64::new(0),
         }
     }
 
     /// The latest frame's oracle field, if any.
-    pub fn latest_field(&self) -> Option<Arc<volcap_sim::oracle::SceneField>> {
+    pub fn latest_field(&self) -> Option<Arc<dyn MeshField>> {
         self.latest_field
             .lock()
             .unwrap_or_else(|p| p.into_inner())
@@ -210,9 +240,6 @@ pub mod stage {
     pub const RENDER: usize = 3;
     pub const ENCODE: usize = 4;
 }
-
-/// Builds the camera on the capture thread (DepthAI handles cannot move between threads).
-pub type CameraFactory = Box<dyn FnOnce() -> Result<Box<dyn Camera>, String> + Send>;
 
 struct Rendered {
     index: u64,
@@ -375,6 +402,7 @@ pub fn start(
                 threads: cfg.compute.threads,
                 split_up_to: cfg.compute.segment_thread_up_to,
                 close_frames: cfg.model.close_range_frames,
+                temporal: cfg.temporal.settings(),
             },
         ));
     }

@@ -9,8 +9,61 @@ use std::time::{Duration, Instant};
 mod common;
 use common::{have, request, root, serial, start, state, wait_for};
 
+/// The sim board in its debugging mode (the oracle at 129^3): the endpoint tests check the
+/// server, not the networks, and run at the oracle's cheaper rate.
 fn sim_config() -> PathBuf {
-    root().join("board-config/sim.toml")
+    let text = std::fs::read_to_string(root().join("board-config/sim.toml")).unwrap();
+    let oracle = text
+        .replace("../tests/", &format!("{}/tests/", root().display()))
+        .replace("field = \"model\"", "field = \"oracle\"")
+        .replace("resolution = 257", "resolution = 129")
+        .replace("coarse_level = 4", "coarse_level = 3");
+    assert!(oracle.contains("field = \"oracle\"") && oracle.contains("resolution = 129"));
+    let p = std::env::temp_dir().join(format!("volcapd-sim-oracle-{}.toml", std::process::id()));
+    std::fs::write(&p, oracle).unwrap();
+    p
+}
+
+/// The main job (README's first command, `board-config/sim.toml` as shipped): the
+/// reconstruction, labelled as one, at 257^3 with the temporal filter on, and its mesh.
+#[test]
+fn the_main_job_shows_the_reconstruction() {
+    let _serial = serial();
+    let d = start(&root().join("board-config/sim.toml"));
+    let s = wait_for(&d.addr, "model frames", Duration::from_secs(60), |s| {
+        s["state"] == "running" && s["frames_published"].as_u64() > Some(5)
+    });
+    assert_eq!(s["mode"], "model", "{s}");
+    assert!(
+        s["mode_note"].as_str().unwrap().contains("reconstruction"),
+        "{s}"
+    );
+    assert_eq!(s["people"], 1, "{s}");
+    assert_eq!(s["resolution"], 257, "{s}");
+    assert!(s["temporal"]["resets"].as_u64() >= Some(1), "{s}");
+    let (_, _, viewer) = request(&d.addr, "GET", "/", "");
+    assert!(
+        String::from_utf8(viewer)
+            .unwrap()
+            .contains("reconstruction by the trained networks")
+    );
+    let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
+    assert_eq!(st, 200);
+    let png = image::load_from_memory(&png).unwrap().to_rgba8();
+    assert_eq!(png.width(), 512);
+    let opaque = png.pixels().filter(|p| p[3] == 255).count();
+    assert!(
+        (5_000..512 * 512 / 2).contains(&opaque),
+        "the reconstructed person covers {opaque} pixels"
+    );
+    // The model's field is meshed on request too (it was the oracle's only).
+    let (st, head, glb) = request(&d.addr, "GET", "/mesh.glb", "");
+    assert_eq!(st, 200, "{head}");
+    assert!(
+        glb.starts_with(b"glTF") && glb.len() > 10_000,
+        "{} bytes",
+        glb.len()
+    );
 }
 
 #[test]
@@ -345,6 +398,7 @@ fn bad_config_and_bad_scene_exit_with_a_clear_error() {
     std::fs::write(
         &clash,
         sim.replace("../tests/", &format!("{}/tests/", root().display()))
+            .replace("\"../models\"", &format!("\"{}/models\"", root().display()))
             .replace("127.0.0.1:8080", &format!("127.0.0.1:{port}")),
     )
     .unwrap();

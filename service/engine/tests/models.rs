@@ -329,7 +329,9 @@ fn hard_frames_give_finite_fields_or_no_person() {
     }
 }
 
-fn hard_frames(models: &Models) {
+/// The hard frames (black, white, saturated noise, the golden person, a tiny subject, the
+/// person cut by the edge, an odd size): (name, RGB8, width, height).
+fn hard_frame_list() -> Vec<(&'static str, Vec<u8>, usize, usize)> {
     let s = 256;
     let g = Golden::load("shape-compact");
     let person = g.u8("image_u8");
@@ -378,6 +380,13 @@ fn hard_frames(models: &Models) {
         320,
         90,
     ));
+    frames
+}
+
+fn hard_frames(models: &Models) {
+    let s = 256;
+    let frames = hard_frame_list();
+    let person = frames[3].1.clone();
     let spec = GridSpec::from_resolution(33).unwrap();
     let mut loc = Localizer::new();
     let mut grid = Grid::new(spec);
@@ -651,4 +660,81 @@ fn fourier_surface_level_metadata_is_checked_and_applied() {
     }
     assert!(moved > 10, "only {moved} points inside the clamp range");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Issue 32: the temporal filter on a stream of hard frames (black, white, noise, cut,
+/// tiny, odd sizes, the person between them, and the person twice in a row): every field
+/// stays finite and in [0, 1] across its resets; a frame showing a person elsewhere (the
+/// cut frame moves them half a frame) starts the filter again, so its field equals the
+/// unfiltered one: two people are never blended.
+#[test]
+fn the_temporal_filter_stays_finite_and_never_blends_two_people() {
+    use volcap_engine::model::temporal::{ResetCause, Step, Temporal, TemporalSettings};
+    let models = Models::load(&models_dir(), "fourier-small", Precision::F32)
+        .expect("committed models load");
+    let frames = hard_frame_list();
+    let person = frames[3].1.clone();
+    let mut stream: Vec<(&str, Vec<u8>, usize, usize)> = Vec::new();
+    for f in &frames {
+        stream.push(f.clone());
+        stream.push(("person", person.clone(), 256, 256));
+        stream.push(("person again", person.clone(), 256, 256));
+    }
+    let spec = GridSpec::from_resolution(33).unwrap();
+    let (mut loc, mut grid, mut plain) = (Localizer::new(), Grid::new(spec), Grid::new(spec));
+    let mut t = Temporal::new(TemporalSettings::default());
+    let (mut continued, mut new_person) = (0, 0);
+    for (i, (what, rgb, w, h)) in stream.iter().enumerate() {
+        let mut info = volcap_engine::model::FrameInfo::default();
+        let Ok((img, mut mask, crop)) = models.prepare(rgb, *w, *h, &mut info) else {
+            t.reset();
+            continue;
+        };
+        let raw_mask = mask.clone();
+        let (steady, step) = t.steady_input(i as f64 / 30.0, info.people, &mut mask, crop);
+        let Some(steady) = steady else { continue };
+        assert!(
+            [steady.s, steady.tx, steady.ty]
+                .iter()
+                .all(|v| v.is_finite())
+                && steady.s > 0.0,
+            "{what}: crop {steady:?}"
+        );
+        assert!(
+            mask.iter()
+                .all(|m| m.is_finite() && (0.0..=1.0).contains(m)),
+            "{what}"
+        );
+        let field = models
+            .encode_steady(&img, &mask, steady, ModelView::default(), Some(&mut t))
+            .unwrap_or_else(|e| panic!("{what}: {e}"));
+        loc.run(Method::Dense, &field, spec, 3, &mut grid)
+            .unwrap_or_else(|e| panic!("{what}: {e}"));
+        assert!(
+            grid.values
+                .iter()
+                .all(|x| x.is_finite() && (0.0..=1.0).contains(x)),
+            "{what}: a value out of [0, 1]"
+        );
+        match step {
+            Step::Continued => continued += 1,
+            Step::Reset(cause) => {
+                // Started again: nothing of the last frame is in this one.
+                let alone = models
+                    .encode(&img, &raw_mask, crop, ModelView::default())
+                    .unwrap();
+                loc.run(Method::Dense, &alone, spec, 3, &mut plain).unwrap();
+                assert_eq!(
+                    grid.values, plain.values,
+                    "{what} after a reset ({cause:?})"
+                );
+                new_person += (cause == ResetCause::NewPerson) as usize;
+            }
+        }
+    }
+    assert!(
+        continued >= 5,
+        "the person twice in a row continues: {continued}"
+    );
+    assert!(new_person >= 1, "the cut frame's person is another person");
 }

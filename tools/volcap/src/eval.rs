@@ -27,6 +27,7 @@ use volcap_sim::sim::Simulator;
 mod framing;
 mod report;
 mod turntable;
+pub mod video;
 pub use framing::Framing;
 use framing::{OracleInCrop, ToCamera, in_frame};
 use report::{plot, report};
@@ -403,13 +404,32 @@ fn run_case(
     )?;
     row.iou = iou_bits(&grid.binarized(), &truth.binarized());
     let t = Instant::now();
-    let mut mesh = marching_cubes(grid);
+    let mesh = marching_cubes(grid);
     row.mesh_ms = t.elapsed().as_secs_f64() * 1e3;
-    if mesh.triangles.is_empty() {
-        row.status = "empty surface".into();
-        return Ok(row);
+    match surface_distances(mesh, crop, to_cam, &c.oracle, &c.gt_mesh) {
+        Some((ch, p2s)) => {
+            row.chamfer_cm = ch;
+            row.p2s_cm = p2s;
+        }
+        None => row.status = "empty surface".into(),
     }
-    let cam = c.oracle.camera.projector();
+    Ok(row)
+}
+
+/// Chamfer and point-to-surface distance (cm) of a mesh in the model's crop NDC against
+/// the ground-truth world mesh, both where the frame shows them (10,000 samples each);
+/// `None` for an empty surface.
+fn surface_distances(
+    mut mesh: Mesh,
+    crop: volcap_engine::model::preprocess::Crop,
+    to_cam: ToCamera,
+    oracle: &volcap_sim::oracle::SceneField,
+    gt_mesh: &Mesh,
+) -> Option<(f64, f64)> {
+    if mesh.triangles.is_empty() {
+        return None;
+    }
+    let cam = oracle.camera.projector();
     for v in &mut mesh.vertices {
         *v = cam.ndc_to_world(to_cam.apply(crop.to_input(*v)));
     }
@@ -419,17 +439,17 @@ fn run_case(
         .into_iter()
         .filter(shown)
         .collect();
-    let gt: Vec<_> = sample_surface(&c.gt_mesh, 10_000, 2)
+    let gt: Vec<_> = sample_surface(gt_mesh, 10_000, 2)
         .into_iter()
         .filter(shown)
         .collect();
     if pred.is_empty() {
-        row.status = "empty surface".into();
-        return Ok(row);
+        return None;
     }
-    row.chamfer_cm = chamfer(&pred, &gt) * 100.0;
-    row.p2s_cm = point_to_surface(&pred, &c.gt_mesh) * 100.0;
-    Ok(row)
+    Some((
+        chamfer(&pred, &gt) * 100.0,
+        point_to_surface(&pred, gt_mesh) * 100.0,
+    ))
 }
 
 fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, Option<u64>) {

@@ -55,6 +55,10 @@ enum BenchCmd {
     Pipeline(PipelineArgs),
     /// The point MLP's throughput (fused and on tract) against the machine's SGEMM peak.
     Mlp(MlpArgs),
+    /// The live model path frame by frame on simulated scenes per temporal-filter setting:
+    /// flicker on still people, accuracy, jitter and lag on moving ones. Writes a table and
+    /// a plot (docs/eval-video).
+    Temporal(eval::video::TemporalArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -99,6 +103,10 @@ pub struct PipelineArgs {
     /// resolution, 64..=1024 renders at that display size (the daemon's default is 512).
     #[arg(long = "display-size", value_delimiter = ',', default_value = "0")]
     pub display_sizes: Vec<usize>,
+    /// The `[temporal]` filter off and/or on (comma-separated booleans; the daemon's default
+    /// is on).
+    #[arg(long, value_delimiter = ',', default_value = "true")]
+    pub temporal: Vec<bool>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,
@@ -188,6 +196,7 @@ fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
         Cmd::Bench(BenchCmd::Pipeline(a)) => pipeline_bench::run(&a),
         Cmd::Bench(BenchCmd::Mlp(a)) => mlp_bench::run(&a),
+        Cmd::Bench(BenchCmd::Temporal(a)) => eval::video::run(&a),
         Cmd::Eval(a) => eval::eval(&a),
         Cmd::Reconstruct(a) => reconstruct::reconstruct(&a),
         Cmd::Sim(c) => simcmd::run(c),

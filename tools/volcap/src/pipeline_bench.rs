@@ -34,6 +34,8 @@ pub struct Row {
     pub segment_thread_up_to: usize,
     /// `render.display_size` of the run (0: the grid's resolution).
     pub display_size: usize,
+    /// `[temporal] enabled` of the run.
+    pub temporal: bool,
     /// Frames published per second over the measured window.
     pub fps: f64,
     pub latency_p50_ms: f64,
@@ -85,16 +87,17 @@ fn frames(scene: &Path, n: usize) -> anyhow::Result<Vec<Still>> {
 }
 
 /// One configuration: model, precision, resolution, coarse level, threads, segment split,
-/// display size.
-type Setup = (String, Precision, usize, u32, usize, usize, usize);
+/// display size, temporal filter on.
+type Setup = (String, Precision, usize, u32, usize, usize, usize, bool);
 
 fn config(scene: &Path, models_dir: &Path, setup: &Setup) -> anyhow::Result<Config> {
-    let (name, prec, res, coarse, threads, split, display) = setup;
+    let (name, prec, res, coarse, threads, split, display, temporal) = setup;
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
-         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\n[dbus]\nbus = \"none\"\n",
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\n[dbus]\nbus = \"none\"\n\
+         [temporal]\nenabled = {temporal}\n",
         match prec {
             Precision::F32 => "f32",
             Precision::Int8 => "int8",
@@ -114,7 +117,7 @@ fn measure(
 ) -> Row {
     let (tx, _rx) = tokio::sync::watch::channel(None);
     let shared = Arc::new(Shared::new(cfg, "replay".into(), tx));
-    let factory: pipeline::CameraFactory =
+    let factory: volcapd::capture::CameraFactory =
         Box::new(move || Ok(Box::new(ReplayCamera::new(stills, fps)) as Box<dyn Camera>));
     let threads = pipeline::start(cfg, factory, shared.clone(), Some(models));
     std::thread::sleep(Duration::from_secs_f64(warmup));
@@ -149,6 +152,7 @@ fn measure(
         threads: cfg.compute.threads,
         segment_thread_up_to: cfg.compute.segment_thread_up_to,
         display_size: cfg.render.display_size,
+        temporal: cfg.temporal.enabled,
         fps: published as f64 / wall,
         latency_p50_ms: l50,
         latency_p99_ms: l99,
@@ -190,8 +194,10 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             for &c in &a.coarse_levels {
                 for &split in &a.segment_split {
                     for &d in &a.display_sizes {
-                        for &t in &a.threads {
-                            configs.push((name.clone(), prec, res, c, t, split, d));
+                        for &tf in &a.temporal {
+                            for &t in &a.threads {
+                                configs.push((name.clone(), prec, res, c, t, split, d, tf));
+                            }
                         }
                     }
                 }
@@ -237,12 +243,20 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let base: Vec<(String, usize, u32, usize, usize, f64)> = rows
+    let base: Vec<(String, usize, u32, usize, usize, bool, f64)> = rows
         .iter()
         .filter(|r| r.threads == 1 && r.error.is_none())
         .map(|r| {
             let k = (r.model.clone(), r.resolution, r.coarse_level);
-            (k.0, k.1, k.2, r.segment_thread_up_to, r.display_size, r.fps)
+            (
+                k.0,
+                k.1,
+                k.2,
+                r.segment_thread_up_to,
+                r.display_size,
+                r.temporal,
+                r.fps,
+            )
         })
         .collect();
     for r in &mut rows {
@@ -254,8 +268,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.2 == r.coarse_level
                     && b.3 == r.segment_thread_up_to
                     && b.4 == r.display_size
+                    && b.5 == r.temporal
             })
-            .map(|b| r.fps / b.5.max(1e-9));
+            .map(|b| r.fps / b.6.max(1e-9));
     }
     if a.json {
         let mut out = std::io::stdout().lock();
@@ -303,13 +318,13 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
 
 fn table(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| model | res | display px | coarse | threads | segment thread | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| model | res | display px | coarse | threads | segment thread | temporal | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
             r.resolution,
             if r.display_size == 0 {
@@ -324,6 +339,7 @@ fn table(rows: &[Row]) -> String {
             } else {
                 "no"
             },
+            if r.temporal { "on" } else { "off" },
             r.fps,
             r.speedup_vs_1_thread
                 .map(|x| format!("{x:.2}"))
@@ -359,9 +375,10 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             r.threads,
             r.segment_thread_up_to,
             r.display_size,
+            r.temporal,
         )
     };
-    let mut keys: Vec<(String, u32, usize, usize, usize)> = rows.iter().map(key).collect();
+    let mut keys: Vec<(String, u32, usize, usize, usize, bool)> = rows.iter().map(key).collect();
     keys.sort();
     keys.dedup();
     let xmax = rows.iter().map(|r| r.resolution).max().unwrap_or(257) as f64 * 1.3;
@@ -396,7 +413,7 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
                 .map_err(|e| anyhow!("{e}"))?
                 .label(format!(
-                    "{} c{} x{} seg<={}{}",
+                    "{} c{} x{} seg<={}{}{}",
                     k.0,
                     k.1,
                     k.2,
@@ -405,7 +422,8 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                         String::new()
                     } else {
                         format!(" {}px", k.4)
-                    }
+                    },
+                    if k.5 { "" } else { " no-temporal" }
                 ))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))

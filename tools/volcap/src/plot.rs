@@ -121,3 +121,70 @@ pub fn accuracy_vs_time(rows: &[Row], scene: &str, path: &Path) -> anyhow::Resul
     root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }
+
+/// One labelled point of a [`scatter`] plot, with an optional horizontal bar from `x_bar`
+/// to `x` (a range, e.g. worst to mean).
+pub struct Labelled {
+    pub label: String,
+    pub x: f64,
+    pub y: f64,
+    pub x_bar: Option<f64>,
+}
+
+/// Axes of a [`scatter`] plot: caption, axis titles and ranges, picture size.
+pub struct Axes<'a> {
+    pub caption: &'a str,
+    pub x_desc: &'a str,
+    pub y_desc: &'a str,
+    pub x: std::ops::Range<f64>,
+    pub y: std::ops::Range<f64>,
+    pub size: (u32, u32),
+}
+
+/// A scatter plot with one legend entry per point (the trade-off plots of `eval` and
+/// `bench temporal`).
+pub fn scatter(path: &Path, axes: &Axes, points: &[Labelled]) -> anyhow::Result<()> {
+    register_font();
+    let root = BitMapBackend::new(path, axes.size).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(axes.caption, ("sans-serif", 18))
+        .margin(14)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(axes.x.clone(), axes.y.clone())
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc(axes.x_desc)
+        .y_desc(axes.y_desc)
+        .label_style(("sans-serif", 12))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    for (i, p) in points.iter().enumerate() {
+        let c = Palette99::pick(i).to_rgba();
+        if let Some(lo) = p.x_bar {
+            chart
+                .draw_series([PathElement::new(
+                    vec![(lo, p.y), (p.x, p.y)],
+                    c.stroke_width(2),
+                )])
+                .map_err(|e| anyhow!("{e}"))?;
+        }
+        chart
+            .draw_series([Circle::new((p.x, p.y), 6, c.filled())])
+            .map_err(|e| anyhow!("{e}"))?
+            .label(p.label.clone())
+            .legend(move |(x, y)| Circle::new((x, y), 5, c.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 12))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}

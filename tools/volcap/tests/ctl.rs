@@ -106,8 +106,9 @@ fn cli_reads_status_and_controls_the_daemon() {
         );
         std::thread::sleep(Duration::from_millis(200));
     };
-    assert_eq!(status["Model"], "oracle");
-    assert_eq!(status["Resolution"], 129);
+    // The main job's board: the reconstruction, named as one.
+    assert_eq!(status["Model"], "reconstruction: fourier-small (f32)");
+    assert_eq!(status["Resolution"], 257);
     let table = volcap(&addr, &["status"]);
     let table = String::from_utf8_lossy(&table.stdout);
     assert!(

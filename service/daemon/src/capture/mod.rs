@@ -270,7 +270,9 @@ impl<C: Camera + ?Sized> Supervisor<C> {
 }
 
 use crate::config::{Backend, Config};
-use crate::pipeline::CameraFactory;
+
+/// Builds the camera on the capture thread (DepthAI handles cannot move between threads).
+pub type CameraFactory = Box<dyn FnOnce() -> Result<Box<dyn Camera>, String> + Send>;
 use std::sync::Arc;
 
 /// The configured camera backend, checked as far as it can be before the thread starts (the

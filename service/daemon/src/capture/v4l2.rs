@@ -34,16 +34,7 @@ impl PixelFormat {
     }
 }
 
-/// Which format to ask for: `auto` prefers MJPEG (a quarter of YUYV's USB bandwidth at the
-/// same size), then YUYV.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum FormatPref {
-    #[default]
-    Auto,
-    Mjpeg,
-    Yuyv,
-}
+pub use crate::config::FormatPref;
 
 /// One format a device offers and its frame sizes (`None`: any size, stepwise).
 #[derive(Debug, Clone, PartialEq, Eq)]

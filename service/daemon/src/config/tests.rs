@@ -135,3 +135,46 @@ fn errors_name_file_line_and_key() {
     .unwrap_err();
     assert!(e.contains("token"), "{e}");
 }
+
+/// `[temporal]`: on by default with the engine's defaults; a key out of its range names
+/// the key, its line and value, on or off; `enabled = false` turns the filter off.
+#[test]
+fn temporal_section_defaults_bounds_and_off() {
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    let c = Config::parse(base, Path::new("b.toml")).unwrap();
+    assert_eq!(
+        c.temporal.settings(),
+        Some(volcap_engine::model::temporal::TemporalSettings::default())
+    );
+    let c = Config::parse(
+        &format!("{base}[temporal]\nmap_beta = 2.5\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c.temporal.settings().unwrap().map_beta, 2.5);
+    for (extra, key) in [
+        ("mask_low = 0.9", "temporal.mask_low"),
+        ("mask_high = 1.0", "temporal.mask_high"),
+        ("crop_min_cutoff_hz = 0", "temporal.crop_min_cutoff_hz"),
+        ("map_beta = -1", "temporal.map_beta"),
+        ("max_gap_s = nan", "temporal.max_gap_s"),
+    ] {
+        let e = Config::parse(&format!("{base}[temporal]\n{extra}\n"), Path::new("b.toml"))
+            .unwrap_err();
+        assert!(e.contains("line 5") && e.contains(key), "{extra}: {e}");
+    }
+    let c = Config::parse(
+        &format!("{base}[temporal]\nenabled = false\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c.temporal.settings(), None);
+    // Off, a bad value is still an error (it would surface when the filter is turned on).
+    assert!(
+        Config::parse(
+            &format!("{base}[temporal]\nenabled = false\nmask_low = 0.9\n"),
+            Path::new("b.toml"),
+        )
+        .is_err()
+    );
+}

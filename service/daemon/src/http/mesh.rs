@@ -12,7 +12,7 @@ use volcap_engine::field::{FieldError, OccupancyField};
 /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can never
 /// share its address), resolution, coarse level, and the bytes.
 pub type MeshCache = (
-    std::sync::Weak<volcap_sim::oracle::SceneField>,
+    std::sync::Weak<dyn crate::pipeline::MeshField>,
     usize,
     u32,
     Bytes,
@@ -72,7 +72,7 @@ fn lower_priority() {
 
 /// The mesh of `field` at `res` from `coarse`, stopping early when `cancel` is set.
 fn compute(
-    field: &volcap_sim::oracle::SceneField,
+    field: &dyn crate::pipeline::MeshField,
     res: usize,
     coarse: u32,
     cancel: &AtomicBool,
@@ -145,7 +145,7 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
             let _permit = permit;
             lower_priority();
             let key = Arc::downgrade(&field);
-            let r = compute(&field, res, coarse, &flag);
+            let r = compute(field.as_ref(), res, coarse, &flag);
             drop(field);
             if let Ok(bytes) = &r {
                 *app2.mesh_cache.lock().unwrap_or_else(|p| p.into_inner()) =

@@ -6,7 +6,10 @@
 //! `compute.segment_thread_up_to` (default 129) the field thread segments too (two compute
 //! stages for two cores). With `compute.threads` > 1 the networks' matrix
 //! products use that many threads (tract's pool), so the field stage can take the core the
-//! render stage leaves idle at lower resolutions.
+//! render stage leaves idle at lower resolutions. The field thread also holds the temporal
+//! filter (`[temporal]`, `volcap_engine::model::temporal`): the person's mask and crop are
+//! steadied before the encoders run and their maps blended with the last frame's after;
+//! a frame without a person resets it.
 
 use super::{PipelineState, Shared, Slot, stage};
 use crate::capture::Frame;
@@ -14,6 +17,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 use volcap_engine::model::preprocess::{CloseRangeSwitch, Crop};
+use volcap_engine::model::temporal::{Step, Temporal, TemporalSettings};
 use volcap_engine::model::{FrameError, FrameInfo, ModelField, ModelView, Models};
 
 /// What the field thread hands the render thread: the model's field of a frame, or why
@@ -34,26 +38,34 @@ fn model_view(live: &super::Live) -> ModelView {
     }
 }
 
-/// A frame's person, segmented and cropped (the letterboxed input, the person's mask and
-/// crop), or why there is none.
-pub type Segmented = Result<(Vec<f32>, Vec<f32>, Crop), String>;
+/// A frame's person, segmented and cropped, or why there is none.
+pub type Segmented = Result<Person, String>;
+
+/// A segmented frame: the letterboxed input, the person's soft mask, its crop and the
+/// people in view.
+pub struct Person {
+    img: Vec<f32>,
+    mask: Vec<f32>,
+    crop: Crop,
+    people: usize,
+}
 
 /// Segment one frame, recording the stage's time and the people count.
-fn segment(
-    sh: &Shared,
-    models: &Models,
-    f: &Frame,
-    threads: usize,
-) -> Result<(Vec<f32>, Vec<f32>, Crop), String> {
+fn segment(sh: &Shared, models: &Models, f: &Frame, threads: usize) -> Segmented {
     let t = Instant::now();
     let mut info = FrameInfo::default();
     match volcap_engine::model::with_threads(threads, || {
         models.prepare(&f.rgb, f.width, f.height, &mut info)
     }) {
-        Ok(p) => {
+        Ok((img, mask, crop)) => {
             sh.people.store(info.people, Ordering::Relaxed);
             sh.stats[stage::SEGMENT].record(t.elapsed().as_secs_f64() * 1e3);
-            Ok(p)
+            Ok(Person {
+                img,
+                mask,
+                crop,
+                people: info.people,
+            })
         }
         Err(FrameError::NoPerson) => {
             sh.people.store(0, Ordering::Relaxed);
@@ -106,12 +118,57 @@ pub(super) fn spawn_segment(
         .expect("spawning the segment thread")
 }
 
+/// Encode one segmented person: the close-range choice, the temporal filter (when on) and
+/// the networks; the stage's time covers all three.
+#[allow(clippy::too_many_arguments)]
+fn encode(
+    sh: &Shared,
+    models: &Models,
+    p: Person,
+    view: ModelView,
+    t_s: f64,
+    switch: &mut CloseRangeSwitch,
+    temporal: Option<&mut Temporal>,
+    threads: usize,
+) -> FieldOutcome {
+    let Person {
+        img,
+        mut mask,
+        mut crop,
+        people,
+    } = p;
+    if models.close_range.is_some() {
+        crop.cut_by_frame = switch.update(crop.cut_by_frame);
+        sh.close_range.store(crop.cut_by_frame, Ordering::Relaxed);
+    }
+    let t = Instant::now();
+    let (crop, temporal) = match temporal {
+        Some(tf) => {
+            let (steady, step) = tf.steady_input(t_s, people, &mut mask, crop);
+            if let Step::Reset(_) = step {
+                sh.temporal_resets.fetch_add(1, Ordering::Relaxed);
+            }
+            (steady.ok_or("no person in view")?, Some(tf))
+        }
+        None => (crop, None),
+    };
+    let r = volcap_engine::model::with_threads(threads, || {
+        models.encode_steady(&img, &mask, crop, view, temporal)
+    })
+    .map_err(|e| format!("model: {e}"));
+    if r.is_ok() {
+        sh.stats[stage::FIELD].record(t.elapsed().as_secs_f64() * 1e3);
+    }
+    r
+}
+
 /// The field thread's settings from the config: `compute.threads`,
-/// `compute.segment_thread_up_to`, `model.close_range_frames`.
+/// `compute.segment_thread_up_to`, `model.close_range_frames`, `[temporal]` (none: off).
 pub(super) struct FieldSettings {
     pub threads: usize,
     pub split_up_to: usize,
     pub close_frames: u32,
+    pub temporal: Option<TemporalSettings>,
 }
 
 /// Start the field thread: segmented frames from `segmented` (or, above `split_up_to`,
@@ -131,11 +188,16 @@ pub(super) fn spawn(
         threads,
         split_up_to,
         close_frames,
+        temporal,
     } = settings;
     std::thread::Builder::new()
         .name("field".into())
         .spawn(move || {
             let mut switch = CloseRangeSwitch::new(close_frames);
+            // The temporal filter lives here, on the one thread that encodes; frame times
+            // are seconds since this thread started.
+            let mut temporal = temporal.map(Temporal::new);
+            let epoch = Instant::now();
             while !sh.stop.load(Ordering::Relaxed) {
                 sh.beat(3);
                 // One field in flight: compute the next only once the render thread
@@ -163,21 +225,25 @@ pub(super) fn spawn(
                     continue;
                 }
                 let view = model_view(&live);
-                let outcome = seg.and_then(|(img, mask, mut crop)| {
-                    if models.close_range.is_some() {
-                        crop.cut_by_frame = switch.update(crop.cut_by_frame);
-                        sh.close_range.store(crop.cut_by_frame, Ordering::Relaxed);
+                let t_s = f.at.saturating_duration_since(epoch).as_secs_f64();
+                let outcome = match seg {
+                    Ok(p) => encode(
+                        &sh,
+                        &models,
+                        p,
+                        view,
+                        t_s,
+                        &mut switch,
+                        temporal.as_mut(),
+                        threads,
+                    ),
+                    Err(e) => {
+                        if let Some(t) = temporal.as_mut() {
+                            t.reset();
+                        }
+                        Err(e)
                     }
-                    let t = Instant::now();
-                    let r = volcap_engine::model::with_threads(threads, || {
-                        models.encode(&img, &mask, crop, view)
-                    })
-                    .map_err(|e| format!("model: {e}"));
-                    if r.is_ok() {
-                        sh.stats[stage::FIELD].record(t.elapsed().as_secs_f64() * 1e3);
-                    }
-                    r
-                });
+                };
                 if out.put((f, outcome)) {
                     sh.stats[stage::FIELD]
                         .superseded

@@ -74,7 +74,11 @@ pub(super) fn spawn(
                                 continue;
                             }
                         };
-                        let Some(rgba) = render_field(&mut renderer, &sh, &field, &field, &live)
+                        let field = Arc::new(field);
+                        *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
+                            Some(field.clone());
+                        let Some(rgba) =
+                            render_field(&mut renderer, &sh, field.as_ref(), field.as_ref(), &live)
                         else {
                             continue;
                         };

@@ -134,6 +134,12 @@ impl FourierMaps {
         self.zeta_scale
     }
 
+    /// Every pixel's coefficients, pixel-interleaved (`[pixel][2K + 1]`, pixel `j * size +
+    /// i`), for filters that work on the maps ([`super::temporal`]).
+    pub fn coefficients_mut(&mut self) -> &mut [f32] {
+        &mut self.data
+    }
+
     /// The coefficients of pixel `(i, j)`.
     pub fn pixel(&self, i: usize, j: usize) -> &[f32] {
         let c = 2 * self.k + 1;

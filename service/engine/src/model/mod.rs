@@ -23,6 +23,7 @@ mod threads;
 pub use threads::with_threads;
 pub mod preprocess;
 pub mod sample;
+pub mod temporal;
 
 use crate::field::FieldError;
 use crate::softz::{SOFTZ_BINS, soft_z};
@@ -475,18 +476,54 @@ impl Models {
         crop: Crop,
         view: ModelView,
     ) -> Result<ModelField, ModelError> {
+        self.encode_steady(img, mask, crop, view, None)
+    }
+
+    /// [`Models::encode`], the shape maps and colour features blended with the last frame's
+    /// by `temporal` ([`temporal::Temporal::steady_maps`]; `mask` and `crop` are the ones its
+    /// `steady_input` gave).
+    pub fn encode_steady(
+        &self,
+        img: &[f32],
+        mask: &[f32],
+        crop: Crop,
+        view: ModelView,
+        temporal: Option<&mut temporal::Temporal>,
+    ) -> Result<ModelField, ModelError> {
         let s = INPUT_SIZE;
         let rgb_c = crop.apply(img, 3, s);
         let mask_c = crop.apply(mask, 1, s);
         let x = preprocess::encoder_input(&rgb_c, &mask_c, s);
-        let shape = match self.shape_for(&crop) {
+        let mut shape = match self.shape_for(&crop) {
             ShapeModel::Mlp(nets) => ShapeState::Mlp {
                 feat: nets.features(&x)?,
                 nets: nets.clone(),
             },
             ShapeModel::Fourier(net) => ShapeState::Fourier(net.maps(&x)?),
         };
-        let color_feat = self.color.encoder.run(&[(&[1, 4, s, s], &x)])?;
+        let mut color_feat = self.color.encoder.run(&[(&[1, 4, s, s], &x)])?;
+        if let Some(t) = temporal {
+            let planar = |channels| temporal::MapLayout {
+                channels,
+                size: FEATURE_SIZE,
+                interleaved: false,
+            };
+            let color = Some((planar(self.color.channels), color_feat.as_mut_slice()));
+            match &mut shape {
+                ShapeState::Mlp { nets, feat } => {
+                    let l = planar(nets.channels);
+                    t.steady_maps(crop, (l, feat.as_mut_slice()), color);
+                }
+                ShapeState::Fourier(maps) => {
+                    let l = temporal::MapLayout {
+                        channels: 2 * maps.k() + 1,
+                        size: maps.size(),
+                        interleaved: true,
+                    };
+                    t.steady_maps(crop, (l, maps.coefficients_mut()), color);
+                }
+            }
+        }
         // The colour MLP's pixel input, as in training: the masked RGB back in [0, 1].
         let image: Vec<f32> = x[..3 * s * s].iter().map(|v| v * 0.5 + 0.5).collect();
         Ok(ModelField::new(

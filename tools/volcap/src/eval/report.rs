@@ -2,8 +2,6 @@
 //! Chamfer-vs-time plot.
 
 use super::{EvalArgs, Framing, ImageRow, ModelRow};
-use anyhow::anyhow;
-use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -139,47 +137,31 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
 }
 
 pub(super) fn plot(summary: &[ModelRow], path: &Path) -> anyhow::Result<()> {
-    crate::plot::register_font();
     let pts: Vec<&ModelRow> = summary
         .iter()
         .filter(|m| m.chamfer_cm.is_finite())
         .collect();
-    let root = BitMapBackend::new(path, (760, 480)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     let xmax = pts.iter().map(|m| m.frame_ms).fold(1.0, f64::max) * 1.25;
     let ymax = pts.iter().map(|m| m.chamfer_cm).fold(0.1, f64::max) * 1.25;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            "Accuracy vs time per frame (volcap eval)",
-            ("sans-serif", 20),
-        )
-        .margin(14)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0.0..xmax, 0.0..ymax)
-        .map_err(|e| anyhow!("{e}"))?;
-    chart
-        .configure_mesh()
-        .x_desc("ms per frame (segment + encode + localize)")
-        .y_desc("Chamfer cm (lower is better)")
-        .label_style(("sans-serif", 12))
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    for (i, m) in pts.iter().enumerate() {
-        let c = Palette99::pick(i).to_rgba();
-        chart
-            .draw_series([Circle::new((m.frame_ms, m.chamfer_cm), 6, c.filled())])
-            .map_err(|e| anyhow!("{e}"))?
-            .label(m.model.clone())
-            .legend(move |(x, y)| Circle::new((x, y), 5, c.filled()));
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 12))
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
-    Ok(())
+    let points: Vec<crate::plot::Labelled> = pts
+        .iter()
+        .map(|m| crate::plot::Labelled {
+            label: m.model.clone(),
+            x: m.frame_ms,
+            y: m.chamfer_cm,
+            x_bar: None,
+        })
+        .collect();
+    crate::plot::scatter(
+        path,
+        &crate::plot::Axes {
+            caption: "Accuracy vs time per frame (volcap eval)",
+            x_desc: "ms per frame (segment + encode + localize)",
+            y_desc: "Chamfer cm (lower is better)",
+            x: 0.0..xmax,
+            y: 0.0..ymax,
+            size: (760, 480),
+        },
+        &points,
+    )
 }

@@ -1,6 +1,6 @@
 //! The settings that can change while running, validated in one place.
 
-use crate::config::Config;
+use super::Config;
 
 /// What can be changed while running (HTTP view controls, D-Bus, config reload).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -58,7 +58,7 @@ impl Live {
                 ),
             );
         }
-        if !crate::config::GRID_RESOLUTIONS.contains(&self.resolution) {
+        if !super::GRID_RESOLUTIONS.contains(&self.resolution) {
             return bad(
                 "resolution",
                 format!(
@@ -77,14 +77,14 @@ impl Live {
                 ),
             );
         }
-        if self.display_size != 0 && !crate::config::DISPLAY_SIZES.contains(&self.display_size) {
+        if self.display_size != 0 && !super::DISPLAY_SIZES.contains(&self.display_size) {
             return bad(
                 "display_size",
                 format!(
                     "display_size {}: 0 (the grid's resolution) or {}..={} pixels",
                     self.display_size,
-                    crate::config::DISPLAY_SIZES.start(),
-                    crate::config::DISPLAY_SIZES.end()
+                    super::DISPLAY_SIZES.start(),
+                    super::DISPLAY_SIZES.end()
                 ),
             );
         }

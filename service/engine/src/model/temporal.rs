@@ -1,0 +1,793 @@
+//! A steady live render: the person's mask, crop and the networks' maps held still while the
+//! person is still, and let go as soon as they move.
+//!
+//! Every frame of a live camera is reconstructed from scratch, so sensor noise in the mask's
+//! edge, the crop box and the encoder's maps reaches the screen as flicker (hands and the
+//! arm's outline appear and vanish). Three filters, in the order a frame meets them, all in
+//! the camera's frame (nothing here depends on the render view, so turning the view needs no
+//! reset):
+//!
+//! 1. **Mask hysteresis** ([`Temporal::steady_input`]): where the person does not move, a
+//!    pixel of the letterboxed soft mask turns person only above `mask_high` and stops
+//!    being one only below `mask_low`; while the new value is inside the band on the other
+//!    side of 0.5, the pixel keeps the value it had. Where the person moves (a
+//!    [`MOTION_BLOCK`]^2 block, or one beside it, with more than `mask_motion` of its pixels
+//!    changed side since the last frame: sensor noise flips scattered pixels along the
+//!    outline, a raised arm a band of them) the mask follows the segmenter at once.
+//! 2. **Crop** (same call): the segmenter's crop box goes through a One Euro filter (Casiez
+//!    et al., CHI 2012) on its centre and scale: a low cutoff while the box is still, opened
+//!    by its speed, so a walking person is followed without lag. (A box from the held mask
+//!    would trail a raised hand's tip and shrink the whole reconstruction with it.)
+//! 3. **Maps** ([`Temporal::steady_maps`]): the shape maps (Fourier coefficients or MLP
+//!    features) and the colour features are blended with the last frame's, per map pixel,
+//!    after undoing the crop change (the last maps are resampled into this frame's crop).
+//!    Each pixel's blend weight is a One Euro weight from its own change: a pixel whose maps
+//!    moved (a raised arm) takes the new value at once, a pixel that only trembles is
+//!    averaged over frames.
+//!
+//! The state resets on a new person (the steady and the new mask overlap less than
+//! `same_person_iou`), a change in the people count, a close-range model switch, a gap in
+//! time (a camera reconnect, a pause) or a frame without a person. Every output is finite
+//! whatever the input (non-finite inputs reset the state and pass through as they came).
+
+use super::preprocess::Crop;
+
+/// The filter's settings (`[temporal]` in volcapd's config).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TemporalSettings {
+    /// The crop's cutoff when still, Hz (lower: steadier, slower to settle).
+    pub crop_min_cutoff_hz: f32,
+    /// How the crop's cutoff opens with its speed: Hz per crop-NDC unit per second.
+    pub crop_beta: f32,
+    /// The mask's hysteresis band: a pixel turns person above `mask_high` and stops being
+    /// one below `mask_low` (`0 < low <= 0.5 <= high < 1`).
+    pub mask_low: f32,
+    pub mask_high: f32,
+    /// Motion in the mask: where more than this fraction of a [`MOTION_BLOCK`]^2 block (or
+    /// of a block beside it) changed side of 0.5 since the last frame, the person moves
+    /// there and the mask follows the segmenter at once; elsewhere hysteresis holds the
+    /// edge. Sensor noise flips scattered pixels along the outline; a raised arm flips a
+    /// band of them.
+    pub mask_motion: f32,
+    /// The maps' cutoff when still, Hz.
+    pub map_min_cutoff_hz: f32,
+    /// How a map pixel's cutoff opens with its change: Hz per unit of relative change per
+    /// second (the change over the maps' mean magnitude).
+    pub map_beta: f32,
+    /// Below this IoU between the steady mask and the new one, the frame shows another
+    /// person (or the same one after a jump): the filter starts again.
+    pub same_person_iou: f32,
+    /// A longer gap between frames (seconds) starts again too.
+    pub max_gap_s: f32,
+}
+
+/// Chosen with `volcap bench temporal` (docs/eval-video/temporal.md): low cutoffs while
+/// still (0.3 Hz), opened fully by real motion (a map pixel that changes by its own size in
+/// a frame passes at ~0.9 at once); the mask held where fewer than 8 % of a block's pixels
+/// change side.
+impl Default for TemporalSettings {
+    fn default() -> Self {
+        Self {
+            crop_min_cutoff_hz: 0.3,
+            crop_beta: 40.0,
+            mask_low: 0.2,
+            mask_high: 0.8,
+            mask_motion: 0.08,
+            map_min_cutoff_hz: 0.3,
+            map_beta: 1.0,
+            same_person_iou: 0.5,
+            max_gap_s: 0.5,
+        }
+    }
+}
+
+impl TemporalSettings {
+    /// Every setting in its range; the error is the setting's name and why its value is not.
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        let within = |name: &'static str, v: f32, ok: bool, range: &str| {
+            if v.is_finite() && ok {
+                Ok(())
+            } else {
+                Err((name, format!("{name} = {v}: need a value in {range}")))
+            }
+        };
+        let (c, m, g) = (
+            self.crop_min_cutoff_hz,
+            self.map_min_cutoff_hz,
+            self.max_gap_s,
+        );
+        within(
+            "crop_min_cutoff_hz",
+            c,
+            c > 0.0 && c <= 100.0,
+            "(0, 100] Hz",
+        )?;
+        within("map_min_cutoff_hz", m, m > 0.0 && m <= 100.0, "(0, 100] Hz")?;
+        within("max_gap_s", g, g > 0.0 && g <= 60.0, "(0, 60] s")?;
+        for (name, v) in [("crop_beta", self.crop_beta), ("map_beta", self.map_beta)] {
+            within(name, v, (0.0..=10_000.0).contains(&v), "[0, 10000]")?;
+        }
+        let (lo, hi) = (self.mask_low, self.mask_high);
+        within("mask_low", lo, lo > 0.0 && lo <= 0.5, "(0, 0.5]")?;
+        within("mask_high", hi, (0.5..1.0).contains(&hi), "[0.5, 1)")?;
+        let mm = self.mask_motion;
+        within(
+            "mask_motion",
+            mm,
+            mm > 0.0 && mm <= 1.0,
+            "(0, 1] (of a block's pixels)",
+        )?;
+        let iou = self.same_person_iou;
+        within("same_person_iou", iou, (0.0..=1.0).contains(&iou), "[0, 1]")?;
+        Ok(())
+    }
+}
+
+/// Side of the mask's motion blocks, pixels ([`TemporalSettings::mask_motion`]).
+pub const MOTION_BLOCK: usize = 16;
+
+/// Per [`MOTION_BLOCK`]^2 block of a `size x size` mask (row-major, `ceil(size / B)` a
+/// side): whether more than `fraction` of its pixels, or of a neighbouring block's, changed
+/// side of 0.5 between `last` and `now`. A `last` of another length: everything moves.
+fn moving_blocks(now: &[f32], last: &[f32], size: usize, fraction: f32) -> Vec<bool> {
+    let nb = size.div_ceil(MOTION_BLOCK);
+    if last.len() != now.len() || now.len() < size * size {
+        return vec![true; nb * nb];
+    }
+    let mut flips = vec![0usize; nb * nb];
+    for (p, (a, b)) in now.iter().zip(last).enumerate().take(size * size) {
+        if (*a > 0.5) != (*b > 0.5) {
+            flips[(p / size / MOTION_BLOCK) * nb + (p % size) / MOTION_BLOCK] += 1;
+        }
+    }
+    let limit = fraction * (MOTION_BLOCK * MOTION_BLOCK) as f32;
+    let mut out = vec![false; nb * nb];
+    for by in 0..nb {
+        for bx in 0..nb {
+            let (y0, y1) = (by.saturating_sub(1), (by + 1).min(nb - 1));
+            let (x0, x1) = (bx.saturating_sub(1), (bx + 1).min(nb - 1));
+            out[by * nb + bx] =
+                (y0..=y1).any(|y| (x0..=x1).any(|x| flips[y * nb + x] as f32 > limit));
+        }
+    }
+    out
+}
+
+/// The One Euro weight of a first-order low-pass at `cutoff_hz` over a step of `dt` seconds.
+fn one_euro_alpha(cutoff_hz: f32, dt: f32) -> f32 {
+    let tau = 1.0 / (2.0 * std::f32::consts::PI * cutoff_hz);
+    (1.0 / (1.0 + tau / dt)).clamp(0.0, 1.0)
+}
+
+/// A scalar One Euro filter (derivative cutoff 1 Hz).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct OneEuro {
+    x: f32,
+    dx: f32,
+    primed: bool,
+}
+
+impl OneEuro {
+    /// The filtered value of `x` a step of `dt` seconds after the last one.
+    pub fn filter(&mut self, x: f32, dt: f32, min_cutoff_hz: f32, beta: f32) -> f32 {
+        if !self.primed || !x.is_finite() || !dt.is_finite() || dt <= 0.0 {
+            *self = Self {
+                x,
+                dx: 0.0,
+                primed: x.is_finite(),
+            };
+            return x;
+        }
+        let d = (x - self.x) / dt;
+        self.dx += one_euro_alpha(1.0, dt) * (d - self.dx);
+        let cutoff = min_cutoff_hz + beta * self.dx.abs();
+        self.x += one_euro_alpha(cutoff, dt) * (x - self.x);
+        self.x
+    }
+}
+
+/// A map's layout: `channels` values per pixel of a `size x size` grid over crop NDC
+/// (pixel `i` at `-1 + 2 i / (size - 1)`), interleaved (`[pixel][channel]`, the Fourier
+/// maps) or planar (`[channel][pixel]`, the encoders' features).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MapLayout {
+    pub channels: usize,
+    pub size: usize,
+    pub interleaved: bool,
+}
+
+impl MapLayout {
+    fn at(&self, pixel: usize, channel: usize) -> usize {
+        if self.interleaved {
+            pixel * self.channels + channel
+        } else {
+            channel * self.size * self.size + pixel
+        }
+    }
+    fn len(&self) -> usize {
+        self.channels * self.size * self.size
+    }
+}
+
+struct LastMaps {
+    crop: Crop,
+    shape: (MapLayout, Vec<f32>),
+    color: Option<(MapLayout, Vec<f32>)>,
+}
+
+/// What [`Temporal::steady_input`] did with a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Step {
+    /// The frame continues the last one: filtered.
+    Continued,
+    /// The filter started again on this frame (why).
+    Reset(ResetCause),
+}
+
+/// Why the filter started again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResetCause {
+    First,
+    Gap,
+    PeopleCount,
+    CloseRange,
+    NewPerson,
+    NonFinite,
+}
+
+/// The temporal filter's state for one camera.
+pub struct Temporal {
+    settings: TemporalSettings,
+    crop: [OneEuro; 3],
+    /// Per letterbox pixel: person by the hysteresis rule.
+    on: Vec<bool>,
+    /// The steady mask given out last.
+    out: Vec<f32>,
+    /// The segmenter's mask of the last frame, before steadying.
+    raw: Vec<f32>,
+    last_t: Option<f64>,
+    /// Seconds since the previous frame (0 on a reset).
+    dt: f32,
+    people: usize,
+    close_range: bool,
+    maps: Option<LastMaps>,
+    /// Frames since the last reset.
+    pub continued: u64,
+    pub resets: u64,
+}
+
+impl Temporal {
+    pub fn new(settings: TemporalSettings) -> Self {
+        Self {
+            settings,
+            crop: [OneEuro::default(); 3],
+            on: Vec::new(),
+            out: Vec::new(),
+            raw: Vec::new(),
+            last_t: None,
+            dt: 0.0,
+            people: 0,
+            close_range: false,
+            maps: None,
+            continued: 0,
+            resets: 0,
+        }
+    }
+
+    pub fn settings(&self) -> TemporalSettings {
+        self.settings
+    }
+
+    /// Forget every frame: the next one passes unfiltered.
+    pub fn reset(&mut self) {
+        self.crop = [OneEuro::default(); 3];
+        self.on.clear();
+        self.out.clear();
+        self.raw.clear();
+        self.last_t = None;
+        self.maps = None;
+        self.continued = 0;
+    }
+
+    /// Steady the mask (letterboxed `[S, S]`, in place) and the crop of a frame taken at
+    /// `t_s` seconds showing `people` people; `crop` is the segmenter's (its `cut_by_frame`
+    /// is kept), filtered in time; `None` when no pixel of the steady mask is person (the
+    /// caller reports no person; the state is reset).
+    pub fn steady_input(
+        &mut self,
+        t_s: f64,
+        people: usize,
+        mask: &mut [f32],
+        crop: Crop,
+    ) -> (Option<Crop>, Step) {
+        let size = (mask.len() as f64).sqrt() as usize;
+        let step = self.continuation(t_s, people, mask, crop);
+        if let Step::Reset(_) = step {
+            self.reset();
+            self.resets += 1;
+            self.on = mask.iter().map(|&m| m > 0.5).collect();
+        } else {
+            self.continued += 1;
+            let (lo, hi) = (self.settings.mask_low, self.settings.mask_high);
+            let raw_now = mask.to_vec();
+            let moving = moving_blocks(&raw_now, &self.raw, size, self.settings.mask_motion);
+            let nb = size.div_ceil(MOTION_BLOCK);
+            for (p, ((m, on), out)) in mask.iter_mut().zip(&mut self.on).zip(&self.out).enumerate()
+            {
+                let v = *m;
+                let block = (p / size / MOTION_BLOCK) * nb + (p % size) / MOTION_BLOCK;
+                *on = if moving[block] {
+                    v > 0.5
+                } else {
+                    v > hi || (*on && v >= lo)
+                };
+                if (v > 0.5) != *on {
+                    *m = *out;
+                }
+            }
+            self.raw = raw_now;
+        }
+        if let Step::Reset(_) = step {
+            self.raw.clear();
+            self.raw.extend_from_slice(mask);
+        }
+        self.out.clear();
+        self.out.extend_from_slice(mask);
+        self.last_t = Some(t_s);
+        self.people = people;
+        self.close_range = crop.cut_by_frame;
+        // The crop follows the segmenter's own box (its noise is the One Euro filter's to
+        // take out): a box from the held mask would trail a raised hand's tip and shrink
+        // the whole reconstruction with it.
+        if !mask.iter().take(size * size).any(|&m| m > 0.5) {
+            self.reset();
+            return (None, step);
+        }
+        let raw = crop;
+        let dt = self.dt;
+        let s = &self.settings;
+        let (c, b) = (s.crop_min_cutoff_hz, s.crop_beta);
+        let steady = Crop {
+            tx: self.crop[0].filter(raw.tx, dt, c, b),
+            ty: self.crop[1].filter(raw.ty, dt, c, b),
+            s: self.crop[2].filter(raw.s, dt, c, b),
+            cut_by_frame: crop.cut_by_frame,
+        };
+        (Some(steady), step)
+    }
+
+    /// Whether this frame continues the last one, and the step since it (`self.dt`).
+    fn continuation(&mut self, t_s: f64, people: usize, mask: &[f32], crop: Crop) -> Step {
+        self.dt = 0.0;
+        if mask.iter().any(|m| !m.is_finite()) || !t_s.is_finite() {
+            return Step::Reset(ResetCause::NonFinite);
+        }
+        let Some(last) = self.last_t else {
+            return Step::Reset(ResetCause::First);
+        };
+        if self.on.len() != mask.len() {
+            return Step::Reset(ResetCause::First);
+        }
+        let dt = t_s - last;
+        if !(dt > 0.0 && dt <= self.settings.max_gap_s as f64) {
+            return Step::Reset(ResetCause::Gap);
+        }
+        if people != self.people {
+            return Step::Reset(ResetCause::PeopleCount);
+        }
+        if crop.cut_by_frame != self.close_range {
+            return Step::Reset(ResetCause::CloseRange);
+        }
+        let (mut both, mut either) = (0usize, 0usize);
+        for (&m, &on) in mask.iter().zip(&self.on) {
+            let new = m > 0.5;
+            both += (new && on) as usize;
+            either += (new || on) as usize;
+        }
+        if either == 0 || (both as f32) < self.settings.same_person_iou * either as f32 {
+            return Step::Reset(ResetCause::NewPerson);
+        }
+        self.dt = dt as f32;
+        Step::Continued
+    }
+
+    /// Blend this frame's maps (made through `crop`, the crop [`Self::steady_input`] gave)
+    /// with the last frame's, in place: the shape maps and, when given, the colour features.
+    /// Called once per frame after [`Self::steady_input`]; maps of another layout than the
+    /// last ones (a model switch) start again.
+    pub fn steady_maps(
+        &mut self,
+        crop: Crop,
+        shape: (MapLayout, &mut [f32]),
+        mut color: Option<(MapLayout, &mut [f32])>,
+    ) {
+        let fits = |l: MapLayout, d: &[f32]| l.size >= 2 && l.channels > 0 && d.len() == l.len();
+        let finite = |d: &[f32]| d.iter().all(|v| v.is_finite());
+        let shape_ok = fits(shape.0, shape.1) && finite(shape.1);
+        let color_ok = color.as_ref().is_none_or(|(l, d)| fits(*l, d) && finite(d));
+        let last = self.maps.take();
+        if let (Some(last), true, true, true) = (last, shape_ok, color_ok, self.dt > 0.0) {
+            let same_layout = last.shape.0 == shape.0
+                && match (&last.color, &color) {
+                    (Some((a, _)), Some((b, _))) => a == b,
+                    (None, None) => true,
+                    _ => false,
+                };
+            if same_layout {
+                // The last maps in this frame's crop, once per map: the weights and the
+                // blend read the same resampled values.
+                let (old, valid) = warp(&last.shape, last.crop, crop);
+                let weights = self.blend_weights(&old, &valid, shape.0, shape.1);
+                blend(&old, &valid, shape.0, shape.1, &weights);
+                if let (Some(lc), Some((l, d))) = (&last.color, color.as_mut()) {
+                    let (old, valid) = warp(lc, last.crop, crop);
+                    let w = if l.size == shape.0.size {
+                        weights
+                    } else {
+                        vec![1.0; l.size * l.size]
+                    };
+                    blend(&old, &valid, *l, d, &w);
+                }
+            }
+        }
+        if shape_ok && color_ok {
+            self.maps = Some(LastMaps {
+                crop,
+                shape: (shape.0, shape.1.to_vec()),
+                color: color.map(|(l, d)| (l, d.to_vec())),
+            });
+        }
+    }
+
+    /// Per shape-map pixel, the weight of the new value: the One Euro weight of the pixel's
+    /// relative change per second (1 where the last map has no value).
+    fn blend_weights(&self, old: &[f32], valid: &[bool], l: MapLayout, new: &[f32]) -> Vec<f32> {
+        let scale = new.iter().map(|v| v.abs()).sum::<f32>() / new.len() as f32 + 1e-6;
+        let (dt, s) = (self.dt, &self.settings);
+        let mut w = vec![1.0f32; l.size * l.size];
+        for (p, w) in w.iter_mut().enumerate() {
+            if !valid[p] {
+                continue;
+            }
+            let change = (0..l.channels)
+                .map(|c| (new[l.at(p, c)] - old[l.at(p, c)]).abs())
+                .sum::<f32>()
+                / (l.channels as f32 * scale);
+            let cutoff = s.map_min_cutoff_hz + s.map_beta * change / dt;
+            *w = one_euro_alpha(cutoff, dt);
+        }
+        w
+    }
+}
+
+/// The last map resampled into the pixels of crop `to` (bilinear in the last crop's
+/// pixels, same layout), and per pixel whether it fell inside the last map. The same crop:
+/// the map as it is.
+fn warp(last: &(MapLayout, Vec<f32>), from: Crop, to: Crop) -> (Vec<f32>, Vec<bool>) {
+    let (l, data) = last;
+    let n = l.size * l.size;
+    if (from.s, from.tx, from.ty) == (to.s, to.tx, to.ty) {
+        return (data.clone(), vec![true; n]);
+    }
+    // The taps of every pixel first, then the channels in memory order.
+    let mut taps = vec![([0usize; 4], [0.0f32; 4]); n];
+    let mut valid = vec![false; n];
+    let m = (l.size - 1) as f32;
+    let ndc = |i: usize| -1.0 + 2.0 * i as f32 / m;
+    for (p, (ok, tap)) in valid.iter_mut().zip(&mut taps).enumerate() {
+        let (ux, uy) = (ndc(p % l.size), ndc(p / l.size));
+        // This crop's NDC -> input NDC -> the last crop's NDC -> its pixels.
+        let (x, y) = (to.s * ux + to.tx, to.s * uy + to.ty);
+        let (px, py) = (
+            ((x - from.tx) / from.s + 1.0) * 0.5 * m,
+            ((y - from.ty) / from.s + 1.0) * 0.5 * m,
+        );
+        if !(px >= 0.0 && py >= 0.0 && px <= m && py <= m) {
+            continue;
+        }
+        *ok = true;
+        // Integer taps; the weights are the fractional parts.
+        let (x0, y0) = ((px as usize).min(l.size - 2), (py as usize).min(l.size - 2));
+        let (fx, fy) = (px - x0 as f32, py - y0 as f32);
+        let i = y0 * l.size + x0;
+        *tap = (
+            [i, i + 1, i + l.size, i + l.size + 1],
+            [
+                (1.0 - fx) * (1.0 - fy),
+                fx * (1.0 - fy),
+                (1.0 - fx) * fy,
+                fx * fy,
+            ],
+        );
+    }
+    let mut out = vec![0.0f32; data.len()];
+    let c = l.channels;
+    if l.interleaved {
+        for (p, (idx, w)) in taps.iter().enumerate() {
+            if valid[p] {
+                let o = &mut out[p * c..(p + 1) * c];
+                for (t, wt) in idx.iter().zip(w) {
+                    for (v, d) in o.iter_mut().zip(&data[t * c..(t + 1) * c]) {
+                        *v += wt * d;
+                    }
+                }
+            }
+        }
+    } else {
+        for (o, d) in out.chunks_exact_mut(n).zip(data.chunks_exact(n)) {
+            for (p, (idx, w)) in taps.iter().enumerate() {
+                if valid[p] {
+                    o[p] =
+                        d[idx[0]] * w[0] + d[idx[1]] * w[1] + d[idx[2]] * w[2] + d[idx[3]] * w[3];
+                }
+            }
+        }
+    }
+    (out, valid)
+}
+
+/// `new = old + w (new - old)` per pixel where the last map had a value.
+fn blend(old: &[f32], valid: &[bool], l: MapLayout, new: &mut [f32], weights: &[f32]) {
+    for (p, &w) in weights.iter().enumerate().take(l.size * l.size) {
+        if w >= 1.0 || !valid[p] {
+            continue;
+        }
+        for c in 0..l.channels {
+            let i = l.at(p, c);
+            new[i] = old[i] + w * (new[i] - old[i]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S: usize = 256;
+
+    fn box_mask(x0: usize, x1: usize, y0: usize, y1: usize, v: f32) -> Vec<f32> {
+        let mut m = vec![0.0f32; S * S];
+        for y in y0..y1 {
+            for x in x0..x1 {
+                m[y * S + x] = v;
+            }
+        }
+        m
+    }
+
+    fn crop_of(m: &[f32]) -> Crop {
+        Crop::from_mask(m, S).unwrap()
+    }
+
+    #[test]
+    fn one_euro_holds_still_noise_and_follows_a_ramp() {
+        // f64 reference of a slow filter: still noise of +-0.01 shrinks; a ramp at 1/s is
+        // followed with a lag below 2 frames at 30 fps.
+        let (dt, mut f) = (1.0 / 30.0, OneEuro::default());
+        let mut spread = 0.0f64;
+        for i in 0..300 {
+            let x = if i % 2 == 0 { 0.01 } else { -0.01 };
+            let y = f.filter(x, dt, 1.0, 40.0) as f64;
+            if i > 30 {
+                spread = spread.max(y.abs());
+            }
+        }
+        assert!(spread < 0.004, "still noise 0.01 came through as {spread}");
+        let mut f = OneEuro::default();
+        let mut y = 0.0;
+        for i in 0..60 {
+            y = f.filter(i as f32 * dt, dt, 1.0, 40.0);
+        }
+        let lag = (59.0 * dt - y) / dt;
+        assert!(lag < 2.0, "a ramp lags {lag} frames");
+    }
+
+    #[test]
+    fn flickering_edge_pixels_hold_and_a_real_change_passes() {
+        let mut t = Temporal::new(TemporalSettings::default());
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        for y in 40..220 {
+            m[y * S + 150] = 0.45;
+        }
+        let c = crop_of(&m);
+        t.steady_input(0.0, 1, &mut m, c);
+        // An edge column trembles between 0.45 and 0.55 (inside the band, a small change
+        // each frame): it keeps its first state (off).
+        for k in 1..20 {
+            let mut m = box_mask(100, 150, 40, 220, 0.95);
+            let v = if k % 2 == 0 { 0.45 } else { 0.55 };
+            for y in 40..220 {
+                m[y * S + 150] = v;
+            }
+            let c = crop_of(&m);
+            let (crop, step) = t.steady_input(k as f64 / 30.0, 1, &mut m, c);
+            assert_eq!(step, Step::Continued);
+            assert!(m[100 * S + 150] <= 0.5, "flickering pixel turned on at {k}");
+            assert!(crop.unwrap().s.is_finite());
+        }
+        let mut m = box_mask(100, 160, 40, 220, 0.95);
+        let c = crop_of(&m);
+        t.steady_input(20.0 / 30.0, 1, &mut m, c);
+        assert_eq!(
+            m[100 * S + 155],
+            0.95,
+            "a confident new pixel is taken at once"
+        );
+        // An edge that moves (four columns from 0 to 0.7: inside the band, but a band of
+        // changed pixels, not scattered ones) follows at once too.
+        let mut m = box_mask(100, 160, 40, 220, 0.95);
+        for y in 40..220 {
+            for x in 160..166 {
+                m[y * S + x] = 0.7;
+            }
+        }
+        let c = crop_of(&m);
+        t.steady_input(21.0 / 30.0, 1, &mut m, c);
+        assert_eq!(m[100 * S + 165], 0.7, "a moving edge is not held");
+    }
+
+    #[test]
+    fn another_person_or_a_gap_starts_again() {
+        let mut t = Temporal::new(TemporalSettings::default());
+        let mut a = box_mask(20, 60, 40, 220, 0.9);
+        let ca = crop_of(&a);
+        t.steady_input(0.0, 1, &mut a, ca);
+        let mut a = box_mask(20, 60, 40, 220, 0.9);
+        assert_eq!(t.steady_input(0.033, 1, &mut a, ca).1, Step::Continued);
+        // One leaves and another enters at the other side: never blended.
+        let mut b = box_mask(180, 230, 40, 220, 0.9);
+        let cb = crop_of(&b);
+        let (crop, step) = t.steady_input(0.066, 1, &mut b, cb);
+        assert_eq!(step, Step::Reset(ResetCause::NewPerson));
+        assert_eq!(crop.unwrap(), cb, "the new person's own crop, unfiltered");
+        let mut b = box_mask(180, 230, 40, 220, 0.9);
+        assert_eq!(
+            t.steady_input(2.0, 1, &mut b, cb).1,
+            Step::Reset(ResetCause::Gap)
+        );
+        let mut b = box_mask(180, 230, 40, 220, 0.9);
+        assert_eq!(
+            t.steady_input(2.033, 2, &mut b, cb).1,
+            Step::Reset(ResetCause::PeopleCount)
+        );
+        let mut b = box_mask(180, 230, 40, 220, 0.9);
+        let cut = Crop {
+            cut_by_frame: true,
+            ..cb
+        };
+        assert_eq!(
+            t.steady_input(2.066, 2, &mut b, cut).1,
+            Step::Reset(ResetCause::CloseRange)
+        );
+    }
+
+    #[test]
+    fn maps_average_tremor_and_take_motion_at_once() {
+        let mut t = Temporal::new(TemporalSettings::default());
+        let l = MapLayout {
+            channels: 3,
+            size: 16,
+            interleaved: true,
+        };
+        let base: Vec<f32> = (0..l.len()).map(|i| 0.5 + 0.1 * (i % 7) as f32).collect();
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        let c = crop_of(&m);
+        let crop = t.steady_input(0.0, 1, &mut m, c).0.unwrap();
+        let mut first = base.clone();
+        t.steady_maps(crop, (l, &mut first), None);
+        assert_eq!(first, base, "the first frame passes as it is");
+        let mut worst_tremor = 0.0f32;
+        for k in 1..30 {
+            let mut m = box_mask(100, 150, 40, 220, 0.95);
+            let crop = t.steady_input(k as f64 / 30.0, 1, &mut m, c).0.unwrap();
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let mut maps: Vec<f32> = base.iter().map(|v| v + sign * 0.005).collect();
+            // Pixel 0 moves for real from frame 20 on.
+            if k >= 20 {
+                for ch in 0..3 {
+                    maps[ch] = base[ch] + 1.0;
+                }
+            }
+            t.steady_maps(crop, (l, &mut maps), None);
+            for (p, (a, b)) in maps.iter().zip(&base).enumerate().skip(3) {
+                assert!(a.is_finite(), "pixel {p}");
+                if k > 5 {
+                    worst_tremor = worst_tremor.max((a - b).abs());
+                }
+            }
+            if k == 20 {
+                assert!(
+                    maps[0] > base[0] + 0.85,
+                    "a real change of 1.0 came through as {}",
+                    maps[0] - base[0]
+                );
+            }
+        }
+        assert!(
+            worst_tremor < 0.0025,
+            "a tremor of 0.005 came through as {worst_tremor}"
+        );
+    }
+
+    #[test]
+    fn a_moved_crop_compares_the_same_place() {
+        // The same scene seen through a crop shifted by a quarter of the map: after the
+        // resampling the maps agree, so nothing is taken as motion and the blend keeps them.
+        let mut t = Temporal::new(TemporalSettings::default());
+        let l = MapLayout {
+            channels: 1,
+            size: 33,
+            interleaved: false,
+        };
+        // A field over input NDC: f(x, y) = x + 2y, sampled through a crop.
+        let field = |c: Crop| -> Vec<f32> {
+            (0..l.size * l.size)
+                .map(|p| {
+                    let ndc = |i: usize| -1.0 + 2.0 * i as f32 / (l.size - 1) as f32;
+                    let (ux, uy) = (ndc(p % l.size), ndc(p / l.size));
+                    (c.s * ux + c.tx) + 2.0 * (c.s * uy + c.ty)
+                })
+                .collect()
+        };
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        let c0 = crop_of(&m);
+        let crop0 = t.steady_input(0.0, 1, &mut m, c0).0.unwrap();
+        t.steady_maps(crop0, (l, &mut field(crop0)), None);
+        let mut m = box_mask(104, 154, 40, 220, 0.95);
+        let c1 = crop_of(&m);
+        let crop1 = t.steady_input(1.0 / 30.0, 1, &mut m, c1).0.unwrap();
+        assert!(crop1.tx > crop0.tx, "the crop follows the person");
+        let truth = field(crop1);
+        let mut maps = truth.clone();
+        t.steady_maps(crop1, (l, &mut maps), None);
+        let worst = maps
+            .iter()
+            .zip(&truth)
+            .map(|(a, b)| (*a as f64 - *b as f64).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-4, "resampled maps differ by {worst}");
+    }
+
+    #[test]
+    fn nothing_non_finite_comes_out_and_bad_settings_are_named() {
+        let mut t = Temporal::new(TemporalSettings::default());
+        let l = MapLayout {
+            channels: 2,
+            size: 8,
+            interleaved: true,
+        };
+        for k in 0..12 {
+            let v = match k % 4 {
+                0 => 1.0,
+                1 => 0.0,
+                2 => f32::NAN,
+                _ => 0.5,
+            };
+            let mut m = vec![v; S * S];
+            let raw = Crop {
+                s: 1.0,
+                tx: 0.0,
+                ty: 0.0,
+                cut_by_frame: false,
+            };
+            let (crop, _) = t.steady_input(k as f64 / 30.0, 1, &mut m, raw);
+            if let Some(c) = crop {
+                assert!(c.s.is_finite() && c.tx.is_finite() && c.ty.is_finite());
+                let mut maps = vec![if k % 3 == 0 { f32::INFINITY } else { 1e30 }; l.len()];
+                t.steady_maps(c, (l, &mut maps), None);
+            }
+        }
+        let bad = TemporalSettings {
+            mask_low: 0.7,
+            ..Default::default()
+        };
+        let (key, msg) = bad.check().unwrap_err();
+        assert!(key == "mask_low" && msg.contains("mask_low = 0.7"), "{msg}");
+        let bad = TemporalSettings {
+            map_beta: f32::NAN,
+            ..Default::default()
+        };
+        assert_eq!(bad.check().unwrap_err().0, "map_beta");
+        assert!(TemporalSettings::default().check().is_ok());
+    }
+}

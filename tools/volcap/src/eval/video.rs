@@ -1,0 +1,682 @@
+//! `volcap bench temporal`: the live model path frame by frame on simulated scenes, once per
+//! setting of the temporal filter (`off` is every frame from scratch, as before the filter),
+//! to show what steadiness costs in accuracy and lag.
+//!
+//! Per scene and setting:
+//! - **flicker** (what the display shows: the daemon renders the crop's cube): consecutive
+//!   frames' silhouettes from the front (along depth) and from the side (yaw 90, along x)
+//!   as IoU, mean and worst, and the mean absolute change of the first-hit depth where both
+//!   frames show the person (cm);
+//! - **accuracy** against the simulator's truth of that frame: Chamfer and P2S (cm) against
+//!   the clothed surface, IoU against the oracle in the same crop;
+//! - **jitter** (camera frame, crop undone): the model's frame-to-frame depth change minus
+//!   the oracle's, so that real motion smoothed away is not counted as stability;
+//! - **lag**: the shift (frames) that best lines the filtered silhouettes up with the
+//!   unfiltered run's earlier ones (0 when it follows at once).
+//!
+//! The silhouettes and depths are projections of the localized grid (orthographic, as the
+//! daemon's renderer), so they cost no extra field evaluation.
+
+use super::framing::{OracleInCrop, ToCamera};
+use super::{FrameArg, frame_of, surface_distances};
+use anyhow::{Context, anyhow, bail};
+use clap::Args;
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use volcap_engine::grid::{Grid, GridSpec, is_inside};
+use volcap_engine::localize::{Localizer, Method};
+use volcap_engine::mesh::Mesh;
+use volcap_engine::metrics::iou_bits;
+use volcap_engine::model::temporal::{Temporal, TemporalSettings};
+use volcap_engine::model::{DepthFrame, FrameInfo, ModelView, Models, Precision};
+use volcap_sim::scene::{MotionSpec, Scene};
+use volcap_sim::sim::Simulator;
+
+#[derive(Args, Debug, Clone)]
+pub struct TemporalArgs {
+    /// Scene files (comma-separated). Still people (the flicker cases) and moving ones (the
+    /// accuracy, jitter and lag cases).
+    #[arg(
+        long = "scene",
+        value_delimiter = ',',
+        default_value = "tests/scenes/still-rest-noise.toml,tests/scenes/still-tpose-noise.toml,tests/scenes/still-rest.toml,tests/scenes/front-walk.toml,tests/scenes/turn.toml,tests/scenes/arms-overhead.toml,tests/scenes/fast-motion-blur.toml"
+    )]
+    pub scenes: Vec<PathBuf>,
+    /// Frames per scene (from frame 0, at the scene's frame rate).
+    #[arg(long, default_value_t = 24)]
+    pub frames: u64,
+    /// Frames at the start of each scene left out of the flicker figures (the filter's
+    /// warm-up from the first frame, the same for every setting): a person standing still
+    /// in front of the appliance is still for far longer.
+    #[arg(long, default_value_t = 6)]
+    pub settle: usize,
+    /// Grid resolution (2^L + 1).
+    #[arg(long, default_value_t = 257)]
+    pub res: usize,
+    /// Coarsest localization level of the model's field (the daemon's `render.coarse_level`);
+    /// the truth is localized from level 5 (33^3), finer than any body part is thin.
+    #[arg(long, default_value_t = 4)]
+    pub coarse_level: u32,
+    /// Shape model (NAME or NAME@int8).
+    #[arg(long, default_value = "fourier-small")]
+    pub model: String,
+    /// Filter settings (comma-separated): `off`, `default` (volcapd's defaults), or
+    /// `KEY=VALUE+KEY=VALUE...` over the defaults (keys of `[temporal]`: crop_min_cutoff_hz,
+    /// crop_beta, mask_low, mask_high, mask_motion, map_min_cutoff_hz, map_beta,
+    /// same_person_iou).
+    #[arg(
+        long = "setting",
+        value_delimiter = ',',
+        default_value = "off,default,map_min_cutoff_hz=0.5+crop_min_cutoff_hz=0.5+map_beta=2,map_min_cutoff_hz=3+crop_min_cutoff_hz=3+map_beta=10"
+    )]
+    pub settings: Vec<String>,
+    /// Folder of the ONNX models.
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
+    /// Folder for temporal.md, temporal.json and temporal.png.
+    #[arg(long, default_value = "docs/eval-video")]
+    pub out: PathBuf,
+    /// JSON Lines on stdout (one object per row).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A `--setting` value: its label and the filter (none: off).
+pub fn parse_setting(s: &str) -> anyhow::Result<(String, Option<TemporalSettings>)> {
+    let s = s.trim();
+    match s {
+        "off" => return Ok(("off".into(), None)),
+        "default" => return Ok(("default".into(), Some(TemporalSettings::default()))),
+        _ => {}
+    }
+    let mut t = TemporalSettings::default();
+    for kv in s.split('+') {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--setting {s}: '{kv}' is not KEY=VALUE (or off, default)"))?;
+        let v: f32 = v
+            .trim()
+            .parse()
+            .map_err(|_| anyhow!("--setting {s}: {k} = '{v}' is not a number"))?;
+        let slot = match k.trim() {
+            "crop_min_cutoff_hz" => &mut t.crop_min_cutoff_hz,
+            "crop_beta" => &mut t.crop_beta,
+            "mask_low" => &mut t.mask_low,
+            "mask_high" => &mut t.mask_high,
+            "mask_motion" => &mut t.mask_motion,
+            "map_min_cutoff_hz" => &mut t.map_min_cutoff_hz,
+            "map_beta" => &mut t.map_beta,
+            "same_person_iou" => &mut t.same_person_iou,
+            other => bail!("--setting {s}: unknown key '{other}'"),
+        };
+        *slot = v;
+    }
+    t.check().map_err(|(_, e)| anyhow!("--setting {s}: {e}"))?;
+    Ok((s.to_string(), Some(t)))
+}
+
+/// One scene's frame with its truth.
+struct VFrame {
+    rgb: Vec<u8>,
+    width: usize,
+    height: usize,
+    gt_mesh: Mesh,
+    oracle: volcap_sim::oracle::SceneField,
+    to_cam: ToCamera,
+}
+
+/// Coarsest level of the truth's localization (33^3: 0.06 NDC, thinner than any body part).
+const TRUTH_COARSE_LEVEL: u32 = 5;
+
+/// Side of the camera-frame rasters (input NDC [-1, 1]^2).
+const RASTER: usize = 256;
+
+/// A frame's views: first-hit grid indices in the crop's cube (front: along depth, per
+/// column `j n + i`; side: along x, per `j n + k`; -1 where nothing is hit) and the same
+/// in the camera frame on [`RASTER`]^2 rasters (metres; `None` where nothing is hit).
+struct Views {
+    front: Vec<i32>,
+    side: Vec<i32>,
+    cam_front: Vec<Option<f32>>,
+    cam_side: Vec<Option<f32>>,
+}
+
+/// Metres per input-NDC unit across (x, y) and along depth (after `to_cam`).
+fn metres_per_ndc(fr: &VFrame) -> (f32, f32) {
+    let cam = fr.oracle.camera.projector();
+    let o = cam.ndc_to_world(Vec3::ZERO);
+    (
+        (cam.ndc_to_world(Vec3::X) - o).length(),
+        (cam.ndc_to_world(Vec3::Z) - o).length(),
+    )
+}
+
+fn views(
+    grid: &Grid,
+    spec: GridSpec,
+    crop: volcap_engine::model::preprocess::Crop,
+    fr: &VFrame,
+) -> Views {
+    let n = spec.n();
+    let plane = n * n;
+    let (mut front, mut side) = (vec![-1i32; plane], vec![-1i32; plane]);
+    for k in 0..n {
+        for j in 0..n {
+            let row = &grid.values[j * n + k * plane..j * n + k * plane + n];
+            for (i, &v) in row.iter().enumerate() {
+                if is_inside(v) {
+                    if front[j * n + i] < 0 {
+                        front[j * n + i] = k as i32;
+                    }
+                    if side[j * n + k] < 0 {
+                        side[j * n + k] = i as i32;
+                    }
+                }
+            }
+        }
+    }
+    let (mxy, mz) = metres_per_ndc(fr);
+    let px = |ndc: f32| -> Option<usize> {
+        let p = ((ndc + 1.0) * 0.5 * (RASTER - 1) as f32).round();
+        (p >= 0.0 && p <= (RASTER - 1) as f32).then_some(p as usize)
+    };
+    let mut cam_front = vec![None; RASTER * RASTER];
+    let mut cam_side = vec![None; RASTER * RASTER];
+    let keep = |slot: &mut Option<f32>, d: f32| {
+        if slot.is_none_or(|o| d < o) {
+            *slot = Some(d);
+        }
+    };
+    for j in 0..n {
+        for i in 0..n {
+            let u = Vec3::new(spec.coord(i), spec.coord(j), 0.0);
+            if let Ok(k) = usize::try_from(front[j * n + i]) {
+                let p = fr
+                    .to_cam
+                    .apply(crop.to_input(Vec3::new(u.x, u.y, spec.coord(k))));
+                if let (Some(x), Some(y)) = (px(p.x), px(p.y)) {
+                    keep(&mut cam_front[y * RASTER + x], p.z * mz);
+                }
+            }
+        }
+        for k in 0..n {
+            if let Ok(i) = usize::try_from(side[j * n + k]) {
+                let p = fr.to_cam.apply(crop.to_input(Vec3::new(
+                    spec.coord(i),
+                    spec.coord(j),
+                    spec.coord(k),
+                )));
+                if let (Some(z), Some(y)) = (px(p.z), px(p.y)) {
+                    keep(&mut cam_side[y * RASTER + z], p.x * mxy);
+                }
+            }
+        }
+    }
+    Views {
+        front,
+        side,
+        cam_front,
+        cam_side,
+    }
+}
+
+/// IoU of two hit maps (hit: index >= 0), and the mean |change| of the hit index where both
+/// hit.
+fn compare_hits(a: &[i32], b: &[i32]) -> (f64, f64) {
+    let (mut inter, mut union, mut dsum) = (0usize, 0usize, 0i64);
+    for (&x, &y) in a.iter().zip(b) {
+        inter += (x >= 0 && y >= 0) as usize;
+        union += (x >= 0 || y >= 0) as usize;
+        if x >= 0 && y >= 0 {
+            dsum += (x as i64 - y as i64).abs();
+        }
+    }
+    let iou = if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    };
+    let d = if inter == 0 {
+        0.0
+    } else {
+        dsum as f64 / inter as f64
+    };
+    (iou, d)
+}
+
+/// The same for camera-frame rasters (depth in metres).
+fn compare_raster(a: &[Option<f32>], b: &[Option<f32>]) -> (f64, f64) {
+    let (mut inter, mut union, mut dsum) = (0usize, 0usize, 0f64);
+    for (x, y) in a.iter().zip(b) {
+        union += (x.is_some() || y.is_some()) as usize;
+        if let (Some(x), Some(y)) = (x, y) {
+            inter += 1;
+            dsum += (*x as f64 - *y as f64).abs();
+        }
+    }
+    let iou = if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    };
+    let d = if inter == 0 { 0.0 } else { dsum / inter as f64 };
+    (iou, d)
+}
+
+/// The shift (0..=4 frames) that best lines a run's camera-frame silhouettes (front and
+/// side) up with the reference's earlier ones.
+fn lag_of(per: &[Option<(Views, Views, f32)>], reference: &[Option<&Views>]) -> usize {
+    (0..=4usize)
+        .map(|k| {
+            let mut v = Vec::new();
+            for t in 4..per.len().min(reference.len()) {
+                if let (Some((m, _, _)), Some(o)) = (&per[t], reference[t - k]) {
+                    let (a, _) = compare_raster(&m.cam_front, &o.cam_front);
+                    let (b, _) = compare_raster(&m.cam_side, &o.cam_side);
+                    v.push(0.5 * (a + b));
+                }
+            }
+            (k, mean(&v))
+        })
+        .filter(|(_, v)| v.is_finite())
+        .fold((0usize, f64::MIN), |best, (k, v)| {
+            if v > best.1 + 1e-9 { (k, v) } else { best }
+        })
+        .0
+}
+
+/// One (scene, setting) row.
+#[derive(Debug, Clone, Serialize)]
+pub struct VideoRow {
+    pub scene: String,
+    /// "still" (every subject static) or "moving".
+    pub kind: String,
+    pub setting: String,
+    pub frames: usize,
+    /// Frames without a reconstruction (no person found).
+    pub failed: usize,
+    /// Consecutive-frame silhouette IoU as displayed, front and side: mean and worst.
+    pub front_iou_mean: f64,
+    pub front_iou_min: f64,
+    pub side_iou_mean: f64,
+    pub side_iou_min: f64,
+    /// Mean |change| of the displayed first-hit depth where both frames hit, cm.
+    pub front_depth_change_cm: f64,
+    pub side_depth_change_cm: f64,
+    pub chamfer_cm: f64,
+    pub p2s_cm: f64,
+    pub iou: f64,
+    /// Camera frame: the model's mean |depth change| minus the oracle's, cm (front, side).
+    pub front_jitter_cm: f64,
+    pub side_jitter_cm: f64,
+    /// Frames by which the silhouettes trail the unfiltered run's (best alignment of 0..=4;
+    /// against the truth's when `off` was not measured; 0 for `off` itself).
+    pub lag_frames: usize,
+    /// Filter resets over the run (the first frame is one).
+    pub resets: u64,
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn min(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::NAN, f64::min)
+}
+
+/// Lines of a scene's frames and truth.
+fn render_scene(
+    path: &Path,
+    frames: u64,
+    depth: DepthFrame,
+) -> anyhow::Result<(Vec<VFrame>, f64, bool)> {
+    let scene = Scene::load(path).map_err(|e| anyhow!("{e}"))?;
+    let still = scene
+        .subjects
+        .iter()
+        .all(|s| matches!(s.motion, MotionSpec::Static { .. }));
+    let fps = scene.camera.fps.0 as f64;
+    let z_scale = scene.camera.height_m.0 / volcap_sim::dataset::WHOLE_HEIGHT_M;
+    let assets = Arc::new(volcap_sim::HumanAssets::embedded().map_err(anyhow::Error::msg)?);
+    let mut sim = Simulator::new(scene, assets).with_context(|| path.display().to_string())?;
+    let mut out = Vec::new();
+    for i in 0..frames {
+        let f = sim.render(i)?;
+        let oracle = sim.oracle(volcap_sim::oracle::DEFAULT_VOXEL_M);
+        let dz = match depth {
+            DepthFrame::Camera => 0.0,
+            DepthFrame::Body => volcap_sim::rays::ray_intervals(
+                &oracle.oracle,
+                &f.camera,
+                volcap_sim::rays::DEFAULT_STEP_M,
+            )
+            .mean_depth()
+            .unwrap_or(0.0),
+        };
+        out.push(VFrame {
+            gt_mesh: volcap_sim::dataset::clothed_surface(&sim),
+            oracle,
+            rgb: f.rgb,
+            width: f.width,
+            height: f.height,
+            to_cam: ToCamera { dz, z_scale },
+        });
+    }
+    Ok((out, fps, still))
+}
+
+pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
+    let spec = GridSpec::from_resolution(a.res).with_context(|| format!("--res {}", a.res))?;
+    let coarse = a.coarse_level.min(spec.level());
+    let settings = a
+        .settings
+        .iter()
+        .map(|s| parse_setting(s))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let (name, prec) = match a.model.split_once('@') {
+        Some((n, p)) => (n, Precision::parse(p).map_err(anyhow::Error::msg)?),
+        None => (a.model.as_str(), Precision::F32),
+    };
+    let models = Models::load(&a.models_dir, name, prec)?;
+    let depth = frame_of(FrameArg::Auto, &models, None);
+    let pb = ProgressBar::new((a.scenes.len() * settings.len()) as u64 * a.frames);
+    pb.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    // One localizer per field: a localizer keeps state between runs of the same field.
+    let (mut loc, mut loc_truth) = (Localizer::new(), Localizer::new());
+    let (mut grid, mut truth) = (Grid::new(spec), Grid::new(spec));
+    let mut rows = Vec::new();
+    for path in &a.scenes {
+        let label = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().to_string())
+            .unwrap_or_default();
+        pb.set_message(format!("{label}: rendering"));
+        let (frames, fps, still) = render_scene(path, a.frames, depth)?;
+        let (mxy, mz) = frames.first().map(metres_per_ndc).unwrap_or((1.0, 1.0));
+        // The unfiltered run's views, the reference of the filtered runs' lag.
+        let mut unfiltered: Option<Vec<Option<Views>>> = None;
+        for (setting, ts) in &settings {
+            pb.set_message(format!("{label}: {setting}"));
+            let mut temporal = ts.map(Temporal::new);
+            let mut per: Vec<Option<(Views, Views, f32)>> = Vec::new();
+            let (mut chamfer, mut p2s, mut iou) = (Vec::new(), Vec::new(), Vec::new());
+            for (i, fr) in frames.iter().enumerate() {
+                pb.inc(1);
+                let t = i as f64 / fps;
+                let mut info = FrameInfo::default();
+                let Ok((img, mut mask, crop)) =
+                    models.prepare(&fr.rgb, fr.width, fr.height, &mut info)
+                else {
+                    if let Some(tf) = temporal.as_mut() {
+                        tf.reset();
+                    }
+                    per.push(None);
+                    continue;
+                };
+                let crop = match temporal.as_mut() {
+                    Some(tf) => tf.steady_input(t, info.people, &mut mask, crop).0,
+                    None => Some(crop),
+                };
+                let Some(crop) = crop else {
+                    per.push(None);
+                    continue;
+                };
+                let field = models.encode_steady(
+                    &img,
+                    &mask,
+                    crop,
+                    ModelView::default(),
+                    temporal.as_mut(),
+                )?;
+                loc.run(Method::Hierarchical, &field, spec, coarse, &mut grid)?;
+                let oracle = OracleInCrop {
+                    oracle: &fr.oracle,
+                    crop,
+                    to_cam: fr.to_cam,
+                };
+                loc_truth.run(
+                    Method::Hierarchical,
+                    &oracle,
+                    spec,
+                    TRUTH_COARSE_LEVEL.min(spec.level()),
+                    &mut truth,
+                )?;
+                iou.push(iou_bits(&grid.binarized(), &truth.binarized()));
+                let mesh = volcap_engine::mesh::marching_cubes(&grid);
+                if let Some((c, p)) =
+                    surface_distances(mesh, crop, fr.to_cam, &fr.oracle, &fr.gt_mesh)
+                {
+                    chamfer.push(c);
+                    p2s.push(p);
+                }
+                let v = views(&grid, spec, crop, fr);
+                per.push(Some((v, views(&truth, spec, crop, fr), crop.s)));
+            }
+            // Consecutive pairs of reconstructed frames.
+            let cell = spec.spacing() as f64 * 100.0;
+            let (mut fi, mut si, mut fd, mut sd, mut jf, mut js) =
+                (vec![], vec![], vec![], vec![], vec![], vec![]);
+            for (k, w) in per.windows(2).enumerate() {
+                let (Some((m0, o0, s0)), Some((m1, o1, s1))) = (&w[0], &w[1]) else {
+                    continue;
+                };
+                if k + 1 < a.settle {
+                    continue;
+                }
+                let s = 0.5 * (*s0 + *s1) as f64;
+                let (a, d) = compare_hits(&m0.front, &m1.front);
+                fi.push(a);
+                fd.push(d * cell * s * mz as f64 * frames[0].to_cam.z_scale as f64);
+                let (a, d) = compare_hits(&m0.side, &m1.side);
+                si.push(a);
+                sd.push(d * cell * s * mxy as f64);
+                let (_, dm) = compare_raster(&m0.cam_front, &m1.cam_front);
+                let (_, dorc) = compare_raster(&o0.cam_front, &o1.cam_front);
+                jf.push((dm - dorc) * 100.0);
+                let (_, dm) = compare_raster(&m0.cam_side, &m1.cam_side);
+                let (_, dorc) = compare_raster(&o0.cam_side, &o1.cam_side);
+                js.push((dm - dorc) * 100.0);
+            }
+            // Lag: the shift that best lines this run's camera-frame silhouettes up with
+            // the unfiltered run's earlier ones (the `off` setting of the same frames: no
+            // filter lag by definition), or with the truth's when `off` is not measured.
+            let reference: Vec<Option<&Views>> = match &unfiltered {
+                Some(u) => u.iter().map(|v| v.as_ref()).collect(),
+                None => per.iter().map(|p| p.as_ref().map(|(_, o, _)| o)).collect(),
+            };
+            let lag = if ts.is_none() {
+                0
+            } else {
+                lag_of(&per, &reference)
+            };
+            let row = VideoRow {
+                scene: label.clone(),
+                kind: if still { "still" } else { "moving" }.into(),
+                setting: setting.clone(),
+                frames: per.len(),
+                failed: per.iter().filter(|p| p.is_none()).count(),
+                front_iou_mean: mean(&fi),
+                front_iou_min: min(&fi),
+                side_iou_mean: mean(&si),
+                side_iou_min: min(&si),
+                front_depth_change_cm: mean(&fd),
+                side_depth_change_cm: mean(&sd),
+                chamfer_cm: mean(&chamfer),
+                p2s_cm: mean(&p2s),
+                iou: mean(&iou),
+                front_jitter_cm: mean(&jf),
+                side_jitter_cm: mean(&js),
+                lag_frames: lag,
+                resets: temporal.as_ref().map_or(0, |t| t.resets),
+            };
+            if a.json {
+                println!("{}", serde_json::to_string(&row)?);
+            }
+            rows.push(row);
+            if ts.is_none() {
+                unfiltered = Some(per.into_iter().map(|p| p.map(|(m, _, _)| m)).collect());
+            }
+        }
+    }
+    pb.finish_and_clear();
+    std::fs::create_dir_all(&a.out).with_context(|| a.out.display().to_string())?;
+    let md = report(a, &rows);
+    std::fs::write(a.out.join("temporal.md"), &md)?;
+    std::fs::write(
+        a.out.join("temporal.json"),
+        serde_json::to_string_pretty(&rows)?,
+    )?;
+    plot(&rows, &a.out.join("temporal.png"))?;
+    if !a.json {
+        print!("{md}");
+    }
+    Ok(())
+}
+
+/// One line per setting over all scenes: still scenes' flicker, moving scenes' accuracy,
+/// jitter and lag.
+#[derive(Debug, Clone)]
+struct Summary {
+    setting: String,
+    still_side_iou_mean: f64,
+    still_side_iou_min: f64,
+    moving_chamfer_cm: f64,
+    moving_lag_frames: f64,
+}
+
+fn summarize(rows: &[VideoRow]) -> Vec<Summary> {
+    let mut names: Vec<&str> = Vec::new();
+    for r in rows {
+        if !names.contains(&r.setting.as_str()) {
+            names.push(&r.setting);
+        }
+    }
+    names
+        .into_iter()
+        .map(|s| {
+            let of = |kind: &'static str| {
+                rows.iter()
+                    .filter(move |r| r.setting == s && r.kind == kind)
+            };
+            let f = |v: Vec<f64>| mean(&v);
+            Summary {
+                setting: s.to_string(),
+                still_side_iou_mean: f(of("still").map(|r| r.side_iou_mean).collect()),
+                still_side_iou_min: min(&of("still").map(|r| r.side_iou_min).collect::<Vec<_>>()),
+                moving_chamfer_cm: f(of("moving").map(|r| r.chamfer_cm).collect()),
+                moving_lag_frames: f(of("moving").map(|r| r.lag_frames as f64).collect()),
+            }
+        })
+        .collect()
+}
+
+fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "# A steady render: flicker, accuracy, jitter and lag per temporal setting\n\n\
+         `volcap bench temporal --res {} --coarse-level {} --model {} --frames {} --settle {}` ({} scenes x {} settings). \
+         Flicker is what the display shows (the crop's cube, consecutive frames; flicker and jitter leave out the first {} frames of each scene); accuracy is \
+         against the simulator's truth of each frame; jitter is the model's frame-to-frame depth \
+         change minus the truth's (camera frame); lag is the shift that best lines the \
+         silhouettes up with the unfiltered run's (`off`).\n",
+        a.res,
+        a.coarse_level,
+        a.model,
+        a.frames,
+        a.settle,
+        a.scenes.len(),
+        a.settings.len(),
+        a.settle
+    );
+    let _ = writeln!(md, "## Per setting (means over the scenes of each kind)\n");
+    let _ = writeln!(
+        md,
+        "| setting | still: side IoU mean | still: side IoU worst | moving: Chamfer cm | moving: lag frames |\n|---|---|---|---|---|"
+    );
+    for s in summarize(rows) {
+        let _ = writeln!(
+            md,
+            "| {} | {:.4} | {:.4} | {:.3} | {:.2} |",
+            s.setting,
+            s.still_side_iou_mean,
+            s.still_side_iou_min,
+            s.moving_chamfer_cm,
+            s.moving_lag_frames
+        );
+    }
+    let _ = writeln!(md, "\n## Per scene\n");
+    let _ = writeln!(
+        md,
+        "| scene | kind | setting | front IoU mean / worst | side IoU mean / worst | depth change front / side cm | Chamfer cm | P2S cm | IoU | jitter front / side cm | lag | resets | failed |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    );
+    for r in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.4} / {:.4} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} | {:.3} | {:.4} | {:+.3} / {:+.3} | {} | {} | {} |",
+            r.scene,
+            r.kind,
+            r.setting,
+            r.front_iou_mean,
+            r.front_iou_min,
+            r.side_iou_mean,
+            r.side_iou_min,
+            r.front_depth_change_cm,
+            r.side_depth_change_cm,
+            r.chamfer_cm,
+            r.p2s_cm,
+            r.iou,
+            r.front_jitter_cm,
+            r.side_jitter_cm,
+            r.lag_frames,
+            r.resets,
+            r.failed
+        );
+    }
+    md
+}
+
+fn plot(rows: &[VideoRow], path: &Path) -> anyhow::Result<()> {
+    let pts: Vec<Summary> = summarize(rows)
+        .into_iter()
+        .filter(|s| s.still_side_iou_mean.is_finite() && s.moving_chamfer_cm.is_finite())
+        .collect();
+    let xmin = pts
+        .iter()
+        .map(|s| s.still_side_iou_min)
+        .fold(1.0, f64::min)
+        .min(0.9);
+    let ymax = pts.iter().map(|s| s.moving_chamfer_cm).fold(0.1, f64::max) * 1.25;
+    let points: Vec<crate::plot::Labelled> = pts
+        .iter()
+        .map(|s| crate::plot::Labelled {
+            label: format!("{} (lag {:.1} frames)", s.setting, s.moving_lag_frames),
+            x: s.still_side_iou_mean,
+            y: s.moving_chamfer_cm,
+            x_bar: Some(s.still_side_iou_min),
+        })
+        .collect();
+    crate::plot::scatter(
+        path,
+        &crate::plot::Axes {
+            caption: "Steadiness vs accuracy per temporal setting (volcap bench temporal)",
+            x_desc: "still person: consecutive side-view silhouette IoU (mean; bar to worst)",
+            y_desc: "moving: Chamfer cm (lower is better)",
+            x: xmin..1.0,
+            y: 0.0..ymax,
+            size: (820, 500),
+        },
+        &points,
+    )
+}
