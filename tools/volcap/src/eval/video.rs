@@ -47,7 +47,7 @@ pub struct TemporalArgs {
     )]
     pub scenes: Vec<PathBuf>,
     /// Frames per scene (from frame 0, at the scene's frame rate).
-    #[arg(long, default_value_t = 24)]
+    #[arg(long, default_value_t = 30)]
     pub frames: u64,
     /// Frames at the start of each scene left out of the flicker figures (the filter's
     /// warm-up from the first frame, the same for every setting): a person standing still
@@ -71,7 +71,7 @@ pub struct TemporalArgs {
     #[arg(
         long = "setting",
         value_delimiter = ',',
-        default_value = "off,default,map_min_cutoff_hz=0.5+crop_min_cutoff_hz=0.5+map_beta=2,map_min_cutoff_hz=3+crop_min_cutoff_hz=3+map_beta=10"
+        default_value = "off,default,map_min_cutoff_hz=1+crop_min_cutoff_hz=1+map_beta=5,mask_low=0.5+mask_high=0.5"
     )]
     pub settings: Vec<String>,
     /// Folder of the ONNX models.
