@@ -197,13 +197,6 @@ pub struct MapLayout {
 }
 
 impl MapLayout {
-    fn at(&self, pixel: usize, channel: usize) -> usize {
-        if self.interleaved {
-            pixel * self.channels + channel
-        } else {
-            channel * self.size * self.size + pixel
-        }
-    }
     fn len(&self) -> usize {
         self.channels * self.size * self.size
     }
@@ -421,10 +414,16 @@ impl Temporal {
                 blend(&old, &valid, shape.0, shape.1, &weights);
                 if let (Some(lc), Some((l, d))) = (&last.color, color.as_mut()) {
                     let (old, valid) = warp(lc, last.crop, crop);
+                    // The shape map's weights at the colour map's pixels (nearest: both
+                    // grids span the crop's NDC corner to corner).
                     let w = if l.size == shape.0.size {
                         weights
                     } else {
-                        vec![1.0; l.size * l.size]
+                        let (a, b) = (shape.0.size - 1, l.size - 1);
+                        let near = |i: usize| (i * a + b / 2) / b;
+                        (0..l.size * l.size)
+                            .map(|p| weights[near(p / l.size) * shape.0.size + near(p % l.size)])
+                            .collect()
                     };
                     blend(&old, &valid, *l, d, &w);
                 }
@@ -444,17 +443,31 @@ impl Temporal {
     fn blend_weights(&self, old: &[f32], valid: &[bool], l: MapLayout, new: &[f32]) -> Vec<f32> {
         let scale = new.iter().map(|v| v.abs()).sum::<f32>() / new.len() as f32 + 1e-6;
         let (dt, s) = (self.dt, &self.settings);
-        let mut w = vec![1.0f32; l.size * l.size];
-        for (p, w) in w.iter_mut().enumerate() {
-            if !valid[p] {
-                continue;
+        let n = l.size * l.size;
+        // Sum of |new - old| per pixel, in the layout's memory order.
+        let mut change = vec![0.0f32; n];
+        if l.interleaved {
+            for (p, ch) in change.iter_mut().enumerate() {
+                let r = p * l.channels..(p + 1) * l.channels;
+                *ch = new[r.clone()]
+                    .iter()
+                    .zip(&old[r])
+                    .map(|(a, b)| (a - b).abs())
+                    .sum();
             }
-            let change = (0..l.channels)
-                .map(|c| (new[l.at(p, c)] - old[l.at(p, c)]).abs())
-                .sum::<f32>()
-                / (l.channels as f32 * scale);
-            let cutoff = s.map_min_cutoff_hz + s.map_beta * change / dt;
-            *w = one_euro_alpha(cutoff, dt);
+        } else {
+            for (np, op) in new.chunks_exact(n).zip(old.chunks_exact(n)) {
+                for ((ch, a), b) in change.iter_mut().zip(np).zip(op) {
+                    *ch += (a - b).abs();
+                }
+            }
+        }
+        let norm = 1.0 / (l.channels as f32 * scale * dt);
+        let mut w = vec![1.0f32; n];
+        for ((w, ch), ok) in w.iter_mut().zip(&change).zip(valid) {
+            if *ok {
+                *w = one_euro_alpha(s.map_min_cutoff_hz + s.map_beta * ch * norm, dt);
+            }
         }
         w
     }
@@ -466,7 +479,12 @@ impl Temporal {
 fn warp(last: &(MapLayout, Vec<f32>), from: Crop, to: Crop) -> (Vec<f32>, Vec<bool>) {
     let (l, data) = last;
     let n = l.size * l.size;
-    if (from.s, from.tx, from.ty) == (to.s, to.tx, to.ty) {
+    // A crop that moved less than a hundredth of a map pixel anywhere (a still person's
+    // filtered box): the map as it is.
+    let px = 0.5 * (l.size - 1) as f32;
+    let moved = ((to.tx - from.tx).abs() + (to.ty - from.ty).abs()) / from.s
+        + 2.0 * (to.s / from.s - 1.0).abs();
+    if moved * px < 0.01 {
         return (data.clone(), vec![true; n]);
     }
     // The taps of every pixel first, then the channels in memory order.
@@ -528,13 +546,24 @@ fn warp(last: &(MapLayout, Vec<f32>), from: Crop, to: Crop) -> (Vec<f32>, Vec<bo
 
 /// `new = old + w (new - old)` per pixel where the last map had a value.
 fn blend(old: &[f32], valid: &[bool], l: MapLayout, new: &mut [f32], weights: &[f32]) {
-    for (p, &w) in weights.iter().enumerate().take(l.size * l.size) {
-        if w >= 1.0 || !valid[p] {
-            continue;
+    let n = l.size * l.size;
+    let mix = |v: &mut f32, o: f32, w: f32| *v = o + w * (*v - o);
+    if l.interleaved {
+        for (p, (&w, &ok)) in weights.iter().zip(valid).enumerate().take(n) {
+            if ok && w < 1.0 {
+                let r = p * l.channels..(p + 1) * l.channels;
+                for (v, o) in new[r.clone()].iter_mut().zip(&old[r]) {
+                    mix(v, *o, w);
+                }
+            }
         }
-        for c in 0..l.channels {
-            let i = l.at(p, c);
-            new[i] = old[i] + w * (new[i] - old[i]);
+    } else {
+        for (np, op) in new.chunks_exact_mut(n).zip(old.chunks_exact(n)) {
+            for (((v, o), &w), &ok) in np.iter_mut().zip(op).zip(weights).zip(valid) {
+                if ok && w < 1.0 {
+                    mix(v, *o, w);
+                }
+            }
         }
     }
 }
@@ -789,5 +818,46 @@ mod tests {
         };
         assert_eq!(bad.check().unwrap_err().0, "map_beta");
         assert!(TemporalSettings::default().check().is_ok());
+    }
+
+    #[test]
+    fn colour_features_of_another_size_are_steadied_too() {
+        // The Fourier maps are 128 px, the colour features 64: the colour takes the shape
+        // map's weights at its own pixels.
+        let mut t = Temporal::new(TemporalSettings::default());
+        let (sl, cl) = (
+            MapLayout {
+                channels: 3,
+                size: 16,
+                interleaved: true,
+            },
+            MapLayout {
+                channels: 2,
+                size: 8,
+                interleaved: false,
+            },
+        );
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        let c = crop_of(&m);
+        let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+        for k in 0..90 {
+            let mut m2 = m.clone();
+            let crop = t.steady_input(k as f64 / 30.0, 1, &mut m2, c).0.unwrap();
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            let mut shape = vec![0.5f32; sl.len()];
+            let mut color: Vec<f32> = vec![0.4 + sign * 0.01; cl.len()];
+            t.steady_maps(crop, (sl, &mut shape), Some((cl, &mut color)));
+            // Past the filter's time constant (~0.5 s): only the tremor's residue is left.
+            if k >= 60 {
+                lo = color.iter().copied().fold(lo, f32::min);
+                hi = color.iter().copied().fold(hi, f32::max);
+            }
+        }
+        m.clear();
+        let worst = hi - lo;
+        assert!(
+            worst < 0.004,
+            "a colour tremor of 0.02 (peak to peak) came through as {worst}"
+        );
     }
 }
