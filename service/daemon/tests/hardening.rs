@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 mod common;
 use common::{
     alive, connect_from, launch, launch_publishing, proc_status, request, root, serial, signal,
-    sim_config, state, tmp, wait_for,
+    sim_config, state, tmp, trickling, wait_for,
 };
 
 /// #4: SIGHUP killed the daemon (exit 129, nothing logged, no restart); SIGUSR1 too.
@@ -137,13 +137,7 @@ fn one_address_cannot_take_every_connection() {
     );
     let (p, addr) = launch_publishing(&cfg, 0);
     // 100 connections from 127.0.0.2 trickling a request head (one byte, then nothing).
-    let hog: Vec<TcpStream> = (0..100)
-        .filter_map(|_| {
-            let mut s = connect_from(&addr, "127.0.0.2", None).ok()?;
-            s.write_all(b"G").ok()?;
-            Some(s)
-        })
-        .collect();
+    let hog = trickling(&addr, "127.0.0.2", 100);
     for s in &hog {
         s.set_nonblocking(true).unwrap();
     }

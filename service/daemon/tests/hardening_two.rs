@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 mod common;
 use common::{
     alive, connect_from, launch, launch_publishing, proc_status, request, serial, signal,
-    sim_config, state, tmp, wait_for,
+    sim_config, state, tmp, trickling, wait_for,
 };
 
 /// `volcapd` threads whose name is `name` (`/proc/PID/task/*/comm`).
@@ -458,14 +458,7 @@ fn a_reserve_for_this_machine_and_one_guess_budget() {
     let (p, addr) = launch_publishing(&cfg, 0);
     // 10 LAN hosts (127.0.0.2..=11 stand in) x 8 trickling connections = the 80 of the cap.
     let hog: Vec<TcpStream> = (2..12)
-        .flat_map(|h| {
-            let addr = &addr;
-            (0..8).filter_map(move |_| {
-                let mut s = connect_from(addr, &format!("127.0.0.{h}"), None).ok()?;
-                s.write_all(b"G").ok()?;
-                Some(s)
-            })
-        })
+        .flat_map(|h| trickling(&addr, &format!("127.0.0.{h}"), 8))
         .collect();
     assert_eq!(hog.len(), 80);
     // Another LAN host finds the server full (once the server has taken in the hogs).

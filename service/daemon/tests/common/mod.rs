@@ -240,3 +240,15 @@ pub fn launch_publishing(config: &Path, frames: u64) -> (Proc, String) {
     });
     (p, addr)
 }
+
+/// `n` connections from `from` to `addr`, each having sent one byte of a request head and
+/// nothing more (a trickling client); those the server refused are left out.
+pub fn trickling(addr: &str, from: &str, n: usize) -> Vec<TcpStream> {
+    (0..n)
+        .filter_map(|_| {
+            let mut s = connect_from(addr, from, None).ok()?;
+            s.write_all(b"G").ok()?;
+            Some(s)
+        })
+        .collect()
+}
