@@ -1,0 +1,69 @@
+//! `[temporal]`: the model mode's temporal filter settings.
+
+use serde::Deserialize;
+
+/// `[temporal]`: the model mode's temporal filter (`volcap_engine::model::temporal`): the
+/// mask, crop and maps held steady while the person is still, let go when they move. On by
+/// default; every key defaults to the engine's `TemporalSettings::default()`, chosen from
+/// `volcap bench temporal` (docs/eval-video).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TemporalConfig {
+    #[serde(default = "d_true")]
+    pub enabled: bool,
+    pub crop_min_cutoff_hz: Option<f32>,
+    pub crop_beta: Option<f32>,
+    pub mask_low: Option<f32>,
+    pub mask_high: Option<f32>,
+    pub mask_motion: Option<f32>,
+    pub map_min_cutoff_hz: Option<f32>,
+    pub map_beta: Option<f32>,
+    pub same_person_iou: Option<f32>,
+    pub max_gap_s: Option<f32>,
+}
+
+fn d_true() -> bool {
+    true
+}
+
+impl Default for TemporalConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            crop_min_cutoff_hz: None,
+            crop_beta: None,
+            mask_low: None,
+            mask_high: None,
+            mask_motion: None,
+            map_min_cutoff_hz: None,
+            map_beta: None,
+            same_person_iou: None,
+            max_gap_s: None,
+        }
+    }
+}
+
+impl TemporalConfig {
+    /// The filter's settings (`None` when `enabled = false`): the engine's defaults with the
+    /// keys given here.
+    pub fn settings(&self) -> Option<volcap_engine::model::temporal::TemporalSettings> {
+        self.enabled.then(|| self.values())
+    }
+
+    /// The settings whether enabled or not (checked either way: a bad value is never
+    /// silently kept for later).
+    pub fn values(&self) -> volcap_engine::model::temporal::TemporalSettings {
+        let d = volcap_engine::model::temporal::TemporalSettings::default();
+        volcap_engine::model::temporal::TemporalSettings {
+            crop_min_cutoff_hz: self.crop_min_cutoff_hz.unwrap_or(d.crop_min_cutoff_hz),
+            crop_beta: self.crop_beta.unwrap_or(d.crop_beta),
+            mask_low: self.mask_low.unwrap_or(d.mask_low),
+            mask_high: self.mask_high.unwrap_or(d.mask_high),
+            mask_motion: self.mask_motion.unwrap_or(d.mask_motion),
+            map_min_cutoff_hz: self.map_min_cutoff_hz.unwrap_or(d.map_min_cutoff_hz),
+            map_beta: self.map_beta.unwrap_or(d.map_beta),
+            same_person_iou: self.same_person_iou.unwrap_or(d.same_person_iou),
+            max_gap_s: self.max_gap_s.unwrap_or(d.max_gap_s),
+        }
+    }
+}

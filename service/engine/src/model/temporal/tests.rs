@@ -1,0 +1,290 @@
+use super::*;
+
+const S: usize = 256;
+
+fn box_mask(x0: usize, x1: usize, y0: usize, y1: usize, v: f32) -> Vec<f32> {
+    let mut m = vec![0.0f32; S * S];
+    for y in y0..y1 {
+        for x in x0..x1 {
+            m[y * S + x] = v;
+        }
+    }
+    m
+}
+
+fn crop_of(m: &[f32]) -> Crop {
+    Crop::from_mask(m, S).unwrap()
+}
+
+#[test]
+fn one_euro_holds_still_noise_and_follows_a_ramp() {
+    // f64 reference of a slow filter: still noise of +-0.01 shrinks; a ramp at 1/s is
+    // followed with a lag below 2 frames at 30 fps.
+    let (dt, mut f) = (1.0 / 30.0, OneEuro::default());
+    let mut spread = 0.0f64;
+    for i in 0..300 {
+        let x = if i % 2 == 0 { 0.01 } else { -0.01 };
+        let y = f.filter(x, dt, 1.0, 40.0) as f64;
+        if i > 30 {
+            spread = spread.max(y.abs());
+        }
+    }
+    assert!(spread < 0.004, "still noise 0.01 came through as {spread}");
+    let mut f = OneEuro::default();
+    let mut y = 0.0;
+    for i in 0..60 {
+        y = f.filter(i as f32 * dt, dt, 1.0, 40.0);
+    }
+    let lag = (59.0 * dt - y) / dt;
+    assert!(lag < 2.0, "a ramp lags {lag} frames");
+}
+
+#[test]
+fn flickering_edge_pixels_hold_and_a_real_change_passes() {
+    let mut t = Temporal::new(TemporalSettings::default());
+    let mut m = box_mask(100, 150, 40, 220, 0.95);
+    for y in 40..220 {
+        m[y * S + 150] = 0.45;
+    }
+    let c = crop_of(&m);
+    t.steady_input(0.0, 1, &mut m, c);
+    // An edge column trembles between 0.45 and 0.55 (inside the band, a small change
+    // each frame): it keeps its first state (off).
+    for k in 1..20 {
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        let v = if k % 2 == 0 { 0.45 } else { 0.55 };
+        for y in 40..220 {
+            m[y * S + 150] = v;
+        }
+        let c = crop_of(&m);
+        let (crop, step) = t.steady_input(k as f64 / 30.0, 1, &mut m, c);
+        assert_eq!(step, Step::Continued);
+        assert!(m[100 * S + 150] <= 0.5, "flickering pixel turned on at {k}");
+        assert!(crop.unwrap().s.is_finite());
+    }
+    let mut m = box_mask(100, 160, 40, 220, 0.95);
+    let c = crop_of(&m);
+    t.steady_input(20.0 / 30.0, 1, &mut m, c);
+    assert_eq!(
+        m[100 * S + 155],
+        0.95,
+        "a confident new pixel is taken at once"
+    );
+    // An edge that moves (four columns from 0 to 0.7: inside the band, but a band of
+    // changed pixels, not scattered ones) follows at once too.
+    let mut m = box_mask(100, 160, 40, 220, 0.95);
+    for y in 40..220 {
+        for x in 160..166 {
+            m[y * S + x] = 0.7;
+        }
+    }
+    let c = crop_of(&m);
+    t.steady_input(21.0 / 30.0, 1, &mut m, c);
+    assert_eq!(m[100 * S + 165], 0.7, "a moving edge is not held");
+}
+
+#[test]
+fn another_person_or_a_gap_starts_again() {
+    let mut t = Temporal::new(TemporalSettings::default());
+    let mut a = box_mask(20, 60, 40, 220, 0.9);
+    let ca = crop_of(&a);
+    t.steady_input(0.0, 1, &mut a, ca);
+    let mut a = box_mask(20, 60, 40, 220, 0.9);
+    assert_eq!(t.steady_input(0.033, 1, &mut a, ca).1, Step::Continued);
+    // One leaves and another enters at the other side: never blended.
+    let mut b = box_mask(180, 230, 40, 220, 0.9);
+    let cb = crop_of(&b);
+    let (crop, step) = t.steady_input(0.066, 1, &mut b, cb);
+    assert_eq!(step, Step::Reset(ResetCause::NewPerson));
+    assert_eq!(crop.unwrap(), cb, "the new person's own crop, unfiltered");
+    let mut b = box_mask(180, 230, 40, 220, 0.9);
+    assert_eq!(
+        t.steady_input(2.0, 1, &mut b, cb).1,
+        Step::Reset(ResetCause::Gap)
+    );
+    let mut b = box_mask(180, 230, 40, 220, 0.9);
+    assert_eq!(
+        t.steady_input(2.033, 2, &mut b, cb).1,
+        Step::Reset(ResetCause::PeopleCount)
+    );
+    let mut b = box_mask(180, 230, 40, 220, 0.9);
+    let cut = Crop {
+        cut_by_frame: true,
+        ..cb
+    };
+    assert_eq!(
+        t.steady_input(2.066, 2, &mut b, cut).1,
+        Step::Reset(ResetCause::CloseRange)
+    );
+}
+
+#[test]
+fn maps_average_tremor_and_take_motion_at_once() {
+    let mut t = Temporal::new(TemporalSettings::default());
+    let l = MapLayout {
+        channels: 3,
+        size: 16,
+        interleaved: true,
+    };
+    let base: Vec<f32> = (0..l.len()).map(|i| 0.5 + 0.1 * (i % 7) as f32).collect();
+    let mut m = box_mask(100, 150, 40, 220, 0.95);
+    let c = crop_of(&m);
+    let crop = t.steady_input(0.0, 1, &mut m, c).0.unwrap();
+    let mut first = base.clone();
+    t.steady_maps(crop, (l, &mut first), None);
+    assert_eq!(first, base, "the first frame passes as it is");
+    let mut worst_tremor = 0.0f32;
+    for k in 1..30 {
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        let crop = t.steady_input(k as f64 / 30.0, 1, &mut m, c).0.unwrap();
+        let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+        let mut maps: Vec<f32> = base.iter().map(|v| v + sign * 0.005).collect();
+        // Pixel 0 moves for real from frame 20 on.
+        if k >= 20 {
+            for ch in 0..3 {
+                maps[ch] = base[ch] + 1.0;
+            }
+        }
+        t.steady_maps(crop, (l, &mut maps), None);
+        for (p, (a, b)) in maps.iter().zip(&base).enumerate().skip(3) {
+            assert!(a.is_finite(), "pixel {p}");
+            if k > 5 {
+                worst_tremor = worst_tremor.max((a - b).abs());
+            }
+        }
+        if k == 20 {
+            assert!(
+                maps[0] > base[0] + 0.85,
+                "a real change of 1.0 came through as {}",
+                maps[0] - base[0]
+            );
+        }
+    }
+    assert!(
+        worst_tremor < 0.0025,
+        "a tremor of 0.005 came through as {worst_tremor}"
+    );
+}
+
+#[test]
+fn a_moved_crop_compares_the_same_place() {
+    // The same scene seen through a crop shifted by a quarter of the map: after the
+    // resampling the maps agree, so nothing is taken as motion and the blend keeps them.
+    let mut t = Temporal::new(TemporalSettings::default());
+    let l = MapLayout {
+        channels: 1,
+        size: 33,
+        interleaved: false,
+    };
+    // A field over input NDC: f(x, y) = x + 2y, sampled through a crop.
+    let field = |c: Crop| -> Vec<f32> {
+        (0..l.size * l.size)
+            .map(|p| {
+                let ndc = |i: usize| -1.0 + 2.0 * i as f32 / (l.size - 1) as f32;
+                let (ux, uy) = (ndc(p % l.size), ndc(p / l.size));
+                (c.s * ux + c.tx) + 2.0 * (c.s * uy + c.ty)
+            })
+            .collect()
+    };
+    let mut m = box_mask(100, 150, 40, 220, 0.95);
+    let c0 = crop_of(&m);
+    let crop0 = t.steady_input(0.0, 1, &mut m, c0).0.unwrap();
+    t.steady_maps(crop0, (l, &mut field(crop0)), None);
+    let mut m = box_mask(104, 154, 40, 220, 0.95);
+    let c1 = crop_of(&m);
+    let crop1 = t.steady_input(1.0 / 30.0, 1, &mut m, c1).0.unwrap();
+    assert!(crop1.tx > crop0.tx, "the crop follows the person");
+    let truth = field(crop1);
+    let mut maps = truth.clone();
+    t.steady_maps(crop1, (l, &mut maps), None);
+    let worst = maps
+        .iter()
+        .zip(&truth)
+        .map(|(a, b)| (*a as f64 - *b as f64).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-4, "resampled maps differ by {worst}");
+}
+
+#[test]
+fn nothing_non_finite_comes_out_and_bad_settings_are_named() {
+    let mut t = Temporal::new(TemporalSettings::default());
+    let l = MapLayout {
+        channels: 2,
+        size: 8,
+        interleaved: true,
+    };
+    for k in 0..12 {
+        let v = match k % 4 {
+            0 => 1.0,
+            1 => 0.0,
+            2 => f32::NAN,
+            _ => 0.5,
+        };
+        let mut m = vec![v; S * S];
+        let raw = Crop {
+            s: 1.0,
+            tx: 0.0,
+            ty: 0.0,
+            cut_by_frame: false,
+        };
+        let (crop, _) = t.steady_input(k as f64 / 30.0, 1, &mut m, raw);
+        if let Some(c) = crop {
+            assert!(c.s.is_finite() && c.tx.is_finite() && c.ty.is_finite());
+            let mut maps = vec![if k % 3 == 0 { f32::INFINITY } else { 1e30 }; l.len()];
+            t.steady_maps(c, (l, &mut maps), None);
+        }
+    }
+    let bad = TemporalSettings {
+        mask_low: 0.7,
+        ..Default::default()
+    };
+    let (key, msg) = bad.check().unwrap_err();
+    assert!(key == "mask_low" && msg.contains("mask_low = 0.7"), "{msg}");
+    let bad = TemporalSettings {
+        map_beta: f32::NAN,
+        ..Default::default()
+    };
+    assert_eq!(bad.check().unwrap_err().0, "map_beta");
+    assert!(TemporalSettings::default().check().is_ok());
+}
+
+#[test]
+fn colour_features_of_another_size_are_steadied_too() {
+    // The Fourier maps are 128 px, the colour features 64: the colour takes the shape
+    // map's weights at its own pixels.
+    let mut t = Temporal::new(TemporalSettings::default());
+    let (sl, cl) = (
+        MapLayout {
+            channels: 3,
+            size: 16,
+            interleaved: true,
+        },
+        MapLayout {
+            channels: 2,
+            size: 8,
+            interleaved: false,
+        },
+    );
+    let mut m = box_mask(100, 150, 40, 220, 0.95);
+    let c = crop_of(&m);
+    let (mut lo, mut hi) = (f32::MAX, f32::MIN);
+    for k in 0..90 {
+        let mut m2 = m.clone();
+        let crop = t.steady_input(k as f64 / 30.0, 1, &mut m2, c).0.unwrap();
+        let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+        let mut shape = vec![0.5f32; sl.len()];
+        let mut color: Vec<f32> = vec![0.4 + sign * 0.01; cl.len()];
+        t.steady_maps(crop, (sl, &mut shape), Some((cl, &mut color)));
+        // Past the filter's time constant (~0.5 s): only the tremor's residue is left.
+        if k >= 60 {
+            lo = color.iter().copied().fold(lo, f32::min);
+            hi = color.iter().copied().fold(hi, f32::max);
+        }
+    }
+    m.clear();
+    let worst = hi - lo;
+    assert!(
+        worst < 0.004,
+        "a colour tremor of 0.02 (peak to peak) came through as {worst}"
+    );
+}
