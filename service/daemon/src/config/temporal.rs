@@ -16,8 +16,10 @@ pub struct TemporalConfig {
     pub mask_low: Option<f32>,
     pub mask_high: Option<f32>,
     pub mask_motion: Option<f32>,
+    pub mask_hold_frames: Option<u32>,
     pub map_min_cutoff_hz: Option<f32>,
     pub map_beta: Option<f32>,
+    pub map_change_cutoff_hz: Option<f32>,
     pub same_person_iou: Option<f32>,
     pub max_gap_s: Option<f32>,
 }
@@ -35,8 +37,10 @@ impl Default for TemporalConfig {
             mask_low: None,
             mask_high: None,
             mask_motion: None,
+            mask_hold_frames: None,
             map_min_cutoff_hz: None,
             map_beta: None,
+            map_change_cutoff_hz: None,
             same_person_iou: None,
             max_gap_s: None,
         }
@@ -60,8 +64,10 @@ impl TemporalConfig {
             mask_low: self.mask_low.unwrap_or(d.mask_low),
             mask_high: self.mask_high.unwrap_or(d.mask_high),
             mask_motion: self.mask_motion.unwrap_or(d.mask_motion),
+            mask_hold_frames: self.mask_hold_frames.unwrap_or(d.mask_hold_frames),
             map_min_cutoff_hz: self.map_min_cutoff_hz.unwrap_or(d.map_min_cutoff_hz),
             map_beta: self.map_beta.unwrap_or(d.map_beta),
+            map_change_cutoff_hz: self.map_change_cutoff_hz.unwrap_or(d.map_change_cutoff_hz),
             same_person_iou: self.same_person_iou.unwrap_or(d.same_person_iou),
             max_gap_s: self.max_gap_s.unwrap_or(d.max_gap_s),
         }

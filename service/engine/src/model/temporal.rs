@@ -13,7 +13,9 @@
 //!    side of 0.5, the pixel keeps the value it had. Where the person moves (a
 //!    [`MOTION_BLOCK`]^2 block, or one beside it, with more than `mask_motion` of its pixels
 //!    changed side since the last frame: sensor noise flips scattered pixels along the
-//!    outline, a raised arm a band of them) the mask follows the segmenter at once.
+//!    outline, a raised arm a band of them) the mask follows the segmenter at once. A
+//!    pixel the segmenter keeps on the other side for `mask_hold_frames` frames in a row is
+//!    followed too: tremor flips back and forth, a slow real change stays.
 //! 2. **Crop** (same call): the segmenter's crop box goes through a One Euro filter (Casiez
 //!    et al., CHI 2012) on its centre and scale: a low cutoff while the box is still, opened
 //!    by its speed, so a walking person is followed without lag. (A box from the held mask
@@ -21,9 +23,11 @@
 //! 3. **Maps** ([`Temporal::steady_maps`]): the shape maps (Fourier coefficients or MLP
 //!    features) and the colour features are blended with the last frame's, per map pixel,
 //!    after undoing the crop change (the last maps are resampled into this frame's crop).
-//!    Each pixel's blend weight is a One Euro weight from its own change: a pixel whose maps
-//!    moved (a raised arm) takes the new value at once, a pixel that only trembles is
-//!    averaged over frames.
+//!    Each pixel's blend weight is a One Euro weight from its own rate of change, each
+//!    value's rate low-passed (`map_change_cutoff_hz`) as in the One Euro filter's
+//!    derivative: a pixel whose maps move (a raised arm) keeps the sign of its change and
+//!    opens the filter within a frame or two; a pixel that only trembles changes sign from
+//!    frame to frame, its rate averages out and it is averaged over frames.
 //!
 //! The state resets on a new person (the steady and the new mask overlap less than
 //! `same_person_iou`), a change in the people count, a close-range model switch, a gap in
@@ -49,11 +53,19 @@ pub struct TemporalSettings {
     /// edge. Sensor noise flips scattered pixels along the outline; a raised arm flips a
     /// band of them.
     pub mask_motion: f32,
+    /// Inside the band, a pixel whose segmenter value has stayed on the other side of 0.5
+    /// for this many frames in a row follows it: tremor flips a pixel back and forth, a
+    /// slow real change (an arm near the top of its swing) keeps it on one side.
+    pub mask_hold_frames: u32,
     /// The maps' cutoff when still, Hz.
     pub map_min_cutoff_hz: f32,
     /// How a map pixel's cutoff opens with its change: Hz per unit of relative change per
     /// second (the change over the maps' mean magnitude).
     pub map_beta: f32,
+    /// The cutoff of each map value's measured rate of change, Hz: tremor changes sign
+    /// from frame to frame and averages out of the rate below this cutoff, so it does not
+    /// open the filter; a real change keeps its sign and opens it within a frame or two.
+    pub map_change_cutoff_hz: f32,
     /// Below this IoU between the steady mask and the new one, the frame shows another
     /// person (or the same one after a jump): the filter starts again.
     pub same_person_iou: f32,
@@ -62,9 +74,11 @@ pub struct TemporalSettings {
 }
 
 /// Chosen with `volcap bench temporal` (docs/eval-video/temporal.md): low cutoffs while
-/// still (0.3 Hz), opened fully by real motion (a map pixel that changes by its own size in
-/// a frame passes at ~0.9 at once); the mask held where fewer than 8 % of a block's pixels
-/// change side.
+/// still (0.3 Hz); a map pixel's rate of change averaged below 0.7 Hz, so sensor noise
+/// (which changes sign each frame) leaves the filter closed while a real change (a pixel
+/// changing by its own size) passes at ~0.6 on its first frame and ~0.9 by its third; the
+/// mask held where fewer than 8 % of a block's pixels change side, and for at most two
+/// frames where they keep to their new side.
 impl Default for TemporalSettings {
     fn default() -> Self {
         Self {
@@ -73,8 +87,10 @@ impl Default for TemporalSettings {
             mask_low: 0.2,
             mask_high: 0.8,
             mask_motion: 0.08,
+            mask_hold_frames: 2,
             map_min_cutoff_hz: 0.3,
             map_beta: 1.0,
+            map_change_cutoff_hz: 0.7,
             same_person_iou: 0.5,
             max_gap_s: 0.5,
         }
@@ -103,6 +119,13 @@ impl TemporalSettings {
             "(0, 100] Hz",
         )?;
         within("map_min_cutoff_hz", m, m > 0.0 && m <= 100.0, "(0, 100] Hz")?;
+        let mc = self.map_change_cutoff_hz;
+        within(
+            "map_change_cutoff_hz",
+            mc,
+            mc > 0.0 && mc <= 100.0,
+            "(0, 100] Hz",
+        )?;
         within("max_gap_s", g, g > 0.0 && g <= 60.0, "(0, 60] s")?;
         for (name, v) in [("crop_beta", self.crop_beta), ("map_beta", self.map_beta)] {
             within(name, v, (0.0..=10_000.0).contains(&v), "[0, 10000]")?;
@@ -117,6 +140,13 @@ impl TemporalSettings {
             mm > 0.0 && mm <= 1.0,
             "(0, 1] (of a block's pixels)",
         )?;
+        let hold = self.mask_hold_frames;
+        if !(1..=255).contains(&hold) {
+            return Err((
+                "mask_hold_frames",
+                format!("mask_hold_frames = {hold}: need a whole number of frames in [1, 255]"),
+            ));
+        }
         let iou = self.same_person_iou;
         within("same_person_iou", iou, (0.0..=1.0).contains(&iou), "[0, 1]")?;
         Ok(())
@@ -165,6 +195,8 @@ pub struct OneEuro {
     x: f32,
     dx: f32,
     primed: bool,
+    /// The weight the last step gave the new value (1 on a restart).
+    alpha: f32,
 }
 
 impl OneEuro {
@@ -175,14 +207,21 @@ impl OneEuro {
                 x,
                 dx: 0.0,
                 primed: x.is_finite(),
+                alpha: 1.0,
             };
             return x;
         }
         let d = (x - self.x) / dt;
         self.dx += one_euro_alpha(1.0, dt) * (d - self.dx);
         let cutoff = min_cutoff_hz + beta * self.dx.abs();
-        self.x += one_euro_alpha(cutoff, dt) * (x - self.x);
+        self.alpha = one_euro_alpha(cutoff, dt);
+        self.x += self.alpha * (x - self.x);
         self.x
+    }
+
+    /// The weight the last step gave the new value: near 0 while still, 1 when moving fast.
+    pub fn alpha(&self) -> f32 {
+        self.alpha
     }
 }
 
@@ -205,6 +244,8 @@ impl MapLayout {
 struct LastMaps {
     crop: Crop,
     shape: (MapLayout, Vec<f32>),
+    /// Per shape-map value: its filtered rate of change (per second).
+    rate: Vec<f32>,
     color: Option<(MapLayout, Vec<f32>)>,
 }
 
@@ -234,6 +275,9 @@ pub struct Temporal {
     crop: [OneEuro; 3],
     /// Per letterbox pixel: person by the hysteresis rule.
     on: Vec<bool>,
+    /// Per letterbox pixel: frames in a row the segmenter put it on the other side of 0.5
+    /// than `on` (saturating).
+    against: Vec<u8>,
     /// The steady mask given out last.
     out: Vec<f32>,
     /// The segmenter's mask of the last frame, before steadying.
@@ -255,6 +299,7 @@ impl Temporal {
             settings,
             crop: [OneEuro::default(); 3],
             on: Vec::new(),
+            against: Vec::new(),
             out: Vec::new(),
             raw: Vec::new(),
             last_t: None,
@@ -275,6 +320,7 @@ impl Temporal {
     pub fn reset(&mut self) {
         self.crop = [OneEuro::default(); 3];
         self.on.clear();
+        self.against.clear();
         self.out.clear();
         self.raw.clear();
         self.last_t = None;
@@ -299,22 +345,28 @@ impl Temporal {
             self.reset();
             self.resets += 1;
             self.on = mask.iter().map(|&m| m > 0.5).collect();
+            self.against = vec![0; mask.len()];
         } else {
             self.continued += 1;
             let (lo, hi) = (self.settings.mask_low, self.settings.mask_high);
             let raw_now = mask.to_vec();
             let moving = moving_blocks(&raw_now, &self.raw, size, self.settings.mask_motion);
             let nb = size.div_ceil(MOTION_BLOCK);
-            for (p, ((m, on), out)) in mask.iter_mut().zip(&mut self.on).zip(&self.out).enumerate()
-            {
+            let hold = self.settings.mask_hold_frames.min(255) as u8;
+            let pixels = mask.iter_mut().zip(&mut self.on).zip(&mut self.against);
+            for (p, (((m, on), against), out)) in pixels.zip(&self.out).enumerate() {
                 let v = *m;
+                let raw_on = v > 0.5;
+                if raw_on == *on {
+                    *against = 0;
+                    continue;
+                }
+                *against = against.saturating_add(1);
                 let block = (p / size / MOTION_BLOCK) * nb + (p % size) / MOTION_BLOCK;
-                *on = if moving[block] {
-                    v > 0.5
+                if moving[block] || v > hi || v < lo || *against >= hold {
+                    *on = raw_on;
+                    *against = 0;
                 } else {
-                    v > hi || (*on && v >= lo)
-                };
-                if (v > 0.5) != *on {
                     *m = *out;
                 }
             }
@@ -395,25 +447,41 @@ impl Temporal {
         mut color: Option<(MapLayout, &mut [f32])>,
     ) {
         let fits = |l: MapLayout, d: &[f32]| l.size >= 2 && l.channels > 0 && d.len() == l.len();
-        let finite = |d: &[f32]| d.iter().all(|v| v.is_finite());
+        // Branch-free within a chunk (vectorizes): every value finite.
+        let finite = |d: &[f32]| {
+            d.chunks(64)
+                .all(|c| c.iter().fold(true, |ok, v| ok & v.is_finite()))
+        };
         let shape_ok = fits(shape.0, shape.1) && finite(shape.1);
         let color_ok = color.as_ref().is_none_or(|(l, d)| fits(*l, d) && finite(d));
-        let last = self.maps.take();
-        if let (Some(last), true, true, true) = (last, shape_ok, color_ok, self.dt > 0.0) {
-            let same_layout = last.shape.0 == shape.0
-                && match (&last.color, &color) {
+        if !(shape_ok && color_ok) {
+            self.maps = None;
+            return;
+        }
+        let same_layout = |last: &LastMaps, color: &Option<(MapLayout, &mut [f32])>| {
+            last.shape.0 == shape.0
+                && match (&last.color, color) {
                     (Some((a, _)), Some((b, _))) => a == b,
                     (None, None) => true,
                     _ => false,
+                }
+        };
+        match self.maps.take() {
+            Some(mut last) if self.dt > 0.0 && same_layout(&last, &color) => {
+                // The last maps in this frame's crop (as they are when the crop did not
+                // move), once per map: the weights and the blend read the same values.
+                let taps = Taps::between(shape.0.size, last.crop, crop);
+                let (old, valid) = resampled(taps.as_ref(), shape.0, &last.shape.1);
+                let mut rate = match &taps {
+                    None => std::mem::take(&mut last.rate),
+                    Some(t) => t.apply(shape.0, &last.rate),
                 };
-            if same_layout {
-                // The last maps in this frame's crop, once per map: the weights and the
-                // blend read the same resampled values.
-                let (old, valid) = warp(&last.shape, last.crop, crop);
-                let weights = self.blend_weights(&old, &valid, shape.0, shape.1);
-                blend(&old, &valid, shape.0, shape.1, &weights);
-                if let (Some(lc), Some((l, d))) = (&last.color, color.as_mut()) {
-                    let (old, valid) = warp(lc, last.crop, crop);
+                let weights = self.blend_weights(&old, valid, shape.0, shape.1, &mut rate);
+                last.rate = rate;
+                blend(&old, valid, shape.0, shape.1, &weights);
+                drop(old);
+                if let (Some((_, lc)), Some((l, d))) = (&mut last.color, color.as_mut()) {
+                    let l = *l;
                     // The shape map's weights at the colour map's pixels (nearest: both
                     // grids span the crop's NDC corner to corner).
                     let w = if l.size == shape.0.size {
@@ -425,142 +493,221 @@ impl Temporal {
                             .map(|p| weights[near(p / l.size) * shape.0.size + near(p % l.size)])
                             .collect()
                     };
-                    blend(&old, &valid, *l, d, &w);
+                    let taps = if l.size == shape.0.size {
+                        taps
+                    } else {
+                        Taps::between(l.size, last.crop, crop)
+                    };
+                    let (old, valid) = resampled(taps.as_ref(), l, lc);
+                    blend(&old, valid, l, d, &w);
+                    drop(old);
+                    lc.copy_from_slice(d);
                 }
+                // This frame's maps are the next one's last (in the same buffers).
+                last.shape.1.copy_from_slice(shape.1);
+                last.crop = crop;
+                self.maps = Some(last);
             }
-        }
-        if shape_ok && color_ok {
-            self.maps = Some(LastMaps {
-                crop,
-                shape: (shape.0, shape.1.to_vec()),
-                color: color.map(|(l, d)| (l, d.to_vec())),
-            });
+            _ => {
+                self.maps = Some(LastMaps {
+                    crop,
+                    shape: (shape.0, shape.1.to_vec()),
+                    rate: vec![0.0; shape.1.len()],
+                    color: color.map(|(l, d)| (l, d.to_vec())),
+                });
+            }
         }
     }
 
-    /// Per shape-map pixel, the weight of the new value: the One Euro weight of the pixel's
-    /// relative change per second (1 where the last map has no value).
-    fn blend_weights(&self, old: &[f32], valid: &[bool], l: MapLayout, new: &[f32]) -> Vec<f32> {
-        let scale = new.iter().map(|v| v.abs()).sum::<f32>() / new.len() as f32 + 1e-6;
+    /// Per shape-map pixel, the weight of the new value: the crop filter's own weight (a
+    /// person moving as a whole, whose box moves fast, is followed everywhere at once) or,
+    /// where larger, the One Euro weight of the pixel's rate of change (the sum over its channels of each value's filtered rate, `rate`,
+    /// updated here, over the maps' mean magnitude); 1 where the last map has no value.
+    fn blend_weights(
+        &self,
+        old: &[f32],
+        valid: Option<&[bool]>,
+        l: MapLayout,
+        new: &[f32],
+        rate: &mut [f32],
+    ) -> Vec<f32> {
         let (dt, s) = (self.dt, &self.settings);
         let n = l.size * l.size;
-        // Sum of |new - old| per pixel, in the layout's memory order.
-        let mut change = vec![0.0f32; n];
+        let a = one_euro_alpha(s.map_change_cutoff_hz, dt);
+        let inv_dt = 1.0 / dt;
+        // Per pixel the sum of |rate|, and the sum of |new|, in the layout's memory order
+        // (sums kept in registers per pixel or per plane: a running sum in memory would
+        // chain every value's add through a store).
+        let mut speed = vec![0.0f32; n];
+        let mut magnitude = 0.0f32;
         if l.interleaved {
-            for (p, ch) in change.iter_mut().enumerate() {
-                let r = p * l.channels..(p + 1) * l.channels;
-                *ch = new[r.clone()]
-                    .iter()
-                    .zip(&old[r])
-                    .map(|(a, b)| (a - b).abs())
-                    .sum();
+            let c = l.channels;
+            for (((sp, np), op), rp) in speed
+                .iter_mut()
+                .zip(new.chunks_exact(c))
+                .zip(old.chunks_exact(c))
+                .zip(rate.chunks_exact_mut(c))
+            {
+                let (mut acc, mut mag) = (0.0f32, 0.0f32);
+                for ((v, o), r) in np.iter().zip(op).zip(rp) {
+                    *r += a * ((v - o) * inv_dt - *r);
+                    acc += r.abs();
+                    mag += v.abs();
+                }
+                *sp = acc;
+                magnitude += mag;
             }
         } else {
-            for (np, op) in new.chunks_exact(n).zip(old.chunks_exact(n)) {
-                for ((ch, a), b) in change.iter_mut().zip(np).zip(op) {
-                    *ch += (a - b).abs();
+            for ((np, op), rp) in new
+                .chunks_exact(n)
+                .zip(old.chunks_exact(n))
+                .zip(rate.chunks_exact_mut(n))
+            {
+                for (((sp, v), o), r) in speed.iter_mut().zip(np).zip(op).zip(rp) {
+                    *r += a * ((v - o) * inv_dt - *r);
+                    *sp += r.abs();
                 }
+                magnitude += np.iter().map(|v| v.abs()).sum::<f32>();
             }
         }
-        let norm = 1.0 / (l.channels as f32 * scale * dt);
-        let mut w = vec![1.0f32; n];
-        for ((w, ch), ok) in w.iter_mut().zip(&change).zip(valid) {
-            if *ok {
-                *w = one_euro_alpha(s.map_min_cutoff_hz + s.map_beta * ch * norm, dt);
+        let scale = magnitude / new.len() as f32 + 1e-6;
+        let norm = 1.0 / (l.channels as f32 * scale);
+        let floor = self.crop.iter().map(OneEuro::alpha).fold(0.0f32, f32::max);
+        let mut w: Vec<f32> = speed
+            .iter()
+            .map(|sp| one_euro_alpha(s.map_min_cutoff_hz + s.map_beta * sp * norm, dt).max(floor))
+            .collect();
+        if let Some(valid) = valid {
+            for (w, ok) in w.iter_mut().zip(valid) {
+                if !*ok {
+                    *w = 1.0;
+                }
             }
         }
         w
     }
 }
 
-/// The last map resampled into the pixels of crop `to` (bilinear in the last crop's
-/// pixels, same layout), and per pixel whether it fell inside the last map. The same crop:
-/// the map as it is.
-fn warp(last: &(MapLayout, Vec<f32>), from: Crop, to: Crop) -> (Vec<f32>, Vec<bool>) {
-    let (l, data) = last;
-    let n = l.size * l.size;
-    // A crop that moved less than a hundredth of a map pixel anywhere (a still person's
-    // filtered box): the map as it is.
-    let px = 0.5 * (l.size - 1) as f32;
-    let moved = ((to.tx - from.tx).abs() + (to.ty - from.ty).abs()) / from.s
-        + 2.0 * (to.s / from.s - 1.0).abs();
-    if moved * px < 0.01 {
-        return (data.clone(), vec![true; n]);
-    }
-    // The taps of every pixel first, then the channels in memory order.
-    let mut taps = vec![([0usize; 4], [0.0f32; 4]); n];
-    let mut valid = vec![false; n];
-    let m = (l.size - 1) as f32;
-    let ndc = |i: usize| -1.0 + 2.0 * i as f32 / m;
-    for (p, (ok, tap)) in valid.iter_mut().zip(&mut taps).enumerate() {
-        let (ux, uy) = (ndc(p % l.size), ndc(p / l.size));
-        // This crop's NDC -> input NDC -> the last crop's NDC -> its pixels.
-        let (x, y) = (to.s * ux + to.tx, to.s * uy + to.ty);
-        let (px, py) = (
-            ((x - from.tx) / from.s + 1.0) * 0.5 * m,
-            ((y - from.ty) / from.s + 1.0) * 0.5 * m,
-        );
-        if !(px >= 0.0 && py >= 0.0 && px <= m && py <= m) {
-            continue;
+/// A resampling of a `size x size` map from one crop's pixels into another's: bilinear
+/// taps per pixel, and whether the pixel fell inside the old map.
+struct Taps {
+    taps: Vec<([usize; 4], [f32; 4])>,
+    valid: Vec<bool>,
+}
+
+impl Taps {
+    /// The taps that bring a map made through `from` into the pixels of `to`; `None` when
+    /// the crop moved less than a hundredth of a map pixel anywhere (a still person's
+    /// filtered box): the map as it is.
+    fn between(size: usize, from: Crop, to: Crop) -> Option<Self> {
+        let px = 0.5 * (size - 1) as f32;
+        let moved = ((to.tx - from.tx).abs() + (to.ty - from.ty).abs()) / from.s
+            + 2.0 * (to.s / from.s - 1.0).abs();
+        if moved * px < 0.01 {
+            return None;
         }
-        *ok = true;
-        // Integer taps; the weights are the fractional parts.
-        let (x0, y0) = ((px as usize).min(l.size - 2), (py as usize).min(l.size - 2));
-        let (fx, fy) = (px - x0 as f32, py - y0 as f32);
-        let i = y0 * l.size + x0;
-        *tap = (
-            [i, i + 1, i + l.size, i + l.size + 1],
-            [
-                (1.0 - fx) * (1.0 - fy),
-                fx * (1.0 - fy),
-                (1.0 - fx) * fy,
-                fx * fy,
-            ],
-        );
+        let n = size * size;
+        let mut taps = vec![([0usize; 4], [0.0f32; 4]); n];
+        let mut valid = vec![false; n];
+        let m = (size - 1) as f32;
+        let ndc = |i: usize| -1.0 + 2.0 * i as f32 / m;
+        for (p, (ok, tap)) in valid.iter_mut().zip(&mut taps).enumerate() {
+            let (ux, uy) = (ndc(p % size), ndc(p / size));
+            // This crop's NDC -> input NDC -> the last crop's NDC -> its pixels.
+            let (x, y) = (to.s * ux + to.tx, to.s * uy + to.ty);
+            let (px, py) = (
+                ((x - from.tx) / from.s + 1.0) * 0.5 * m,
+                ((y - from.ty) / from.s + 1.0) * 0.5 * m,
+            );
+            if !(px >= 0.0 && py >= 0.0 && px <= m && py <= m) {
+                continue;
+            }
+            *ok = true;
+            // Integer taps; the weights are the fractional parts.
+            let (x0, y0) = ((px as usize).min(size - 2), (py as usize).min(size - 2));
+            let (fx, fy) = (px - x0 as f32, py - y0 as f32);
+            let i = y0 * size + x0;
+            *tap = (
+                [i, i + 1, i + size, i + size + 1],
+                [
+                    (1.0 - fx) * (1.0 - fy),
+                    fx * (1.0 - fy),
+                    (1.0 - fx) * fy,
+                    fx * fy,
+                ],
+            );
+        }
+        Some(Self { taps, valid })
     }
-    let mut out = vec![0.0f32; data.len()];
-    let c = l.channels;
-    if l.interleaved {
-        for (p, (idx, w)) in taps.iter().enumerate() {
-            if valid[p] {
-                let o = &mut out[p * c..(p + 1) * c];
-                for (t, wt) in idx.iter().zip(w) {
-                    for (v, d) in o.iter_mut().zip(&data[t * c..(t + 1) * c]) {
-                        *v += wt * d;
+
+    /// `data` (layout `l`, made through the old crop) in the new crop's pixels; 0 where
+    /// the pixel fell outside the old map.
+    fn apply(&self, l: MapLayout, data: &[f32]) -> Vec<f32> {
+        let n = l.size * l.size;
+        let mut out = vec![0.0f32; data.len()];
+        let c = l.channels;
+        if l.interleaved {
+            for (p, (idx, w)) in self.taps.iter().enumerate() {
+                if self.valid[p] {
+                    let o = &mut out[p * c..(p + 1) * c];
+                    for (t, wt) in idx.iter().zip(w) {
+                        for (v, d) in o.iter_mut().zip(&data[t * c..(t + 1) * c]) {
+                            *v += wt * d;
+                        }
+                    }
+                }
+            }
+        } else {
+            for (o, d) in out.chunks_exact_mut(n).zip(data.chunks_exact(n)) {
+                for (p, (idx, w)) in self.taps.iter().enumerate() {
+                    if self.valid[p] {
+                        o[p] = d[idx[0]] * w[0]
+                            + d[idx[1]] * w[1]
+                            + d[idx[2]] * w[2]
+                            + d[idx[3]] * w[3];
                     }
                 }
             }
         }
-    } else {
-        for (o, d) in out.chunks_exact_mut(n).zip(data.chunks_exact(n)) {
-            for (p, (idx, w)) in taps.iter().enumerate() {
-                if valid[p] {
-                    o[p] =
-                        d[idx[0]] * w[0] + d[idx[1]] * w[1] + d[idx[2]] * w[2] + d[idx[3]] * w[3];
-                }
-            }
-        }
+        out
     }
-    (out, valid)
+}
+
+/// The last map in this frame's pixels (borrowed when the crop did not move) and which
+/// pixels have a value (`None`: all).
+fn resampled<'a>(
+    taps: Option<&'a Taps>,
+    l: MapLayout,
+    last: &'a [f32],
+) -> (std::borrow::Cow<'a, [f32]>, Option<&'a [bool]>) {
+    match taps {
+        None => (std::borrow::Cow::Borrowed(last), None),
+        Some(t) => (std::borrow::Cow::Owned(t.apply(l, last)), Some(&t.valid)),
+    }
 }
 
 /// `new = old + w (new - old)` per pixel where the last map had a value.
-fn blend(old: &[f32], valid: &[bool], l: MapLayout, new: &mut [f32], weights: &[f32]) {
+fn blend(old: &[f32], valid: Option<&[bool]>, l: MapLayout, new: &mut [f32], weights: &[f32]) {
     let n = l.size * l.size;
+    let ok = |p: usize| valid.is_none_or(|v| v[p]);
     let mix = |v: &mut f32, o: f32, w: f32| *v = o + w * (*v - o);
     if l.interleaved {
-        for (p, (&w, &ok)) in weights.iter().zip(valid).enumerate().take(n) {
-            if ok && w < 1.0 {
-                let r = p * l.channels..(p + 1) * l.channels;
-                for (v, o) in new[r.clone()].iter_mut().zip(&old[r]) {
+        for (p, ((np, op), &w)) in new
+            .chunks_exact_mut(l.channels)
+            .zip(old.chunks_exact(l.channels))
+            .zip(weights)
+            .enumerate()
+        {
+            if w < 1.0 && ok(p) {
+                for (v, o) in np.iter_mut().zip(op) {
                     mix(v, *o, w);
                 }
             }
         }
     } else {
         for (np, op) in new.chunks_exact_mut(n).zip(old.chunks_exact(n)) {
-            for (((v, o), &w), &ok) in np.iter_mut().zip(op).zip(weights).zip(valid) {
-                if ok && w < 1.0 {
+            for (p, ((v, o), &w)) in np.iter_mut().zip(op).zip(weights).enumerate() {
+                if w < 1.0 && ok(p) {
                     mix(v, *o, w);
                 }
             }

@@ -68,12 +68,13 @@ pub struct TemporalArgs {
     pub model: String,
     /// Filter settings (comma-separated): `off`, `default` (volcapd's defaults), or
     /// `KEY=VALUE+KEY=VALUE...` over the defaults (keys of `[temporal]`: crop_min_cutoff_hz,
-    /// crop_beta, mask_low, mask_high, mask_motion, map_min_cutoff_hz, map_beta,
+    /// crop_beta, mask_low, mask_high, mask_motion, mask_hold_frames, map_min_cutoff_hz, map_beta,
+    /// map_change_cutoff_hz,
     /// same_person_iou).
     #[arg(
         long = "setting",
         value_delimiter = ',',
-        default_value = "off,default,map_min_cutoff_hz=1+crop_min_cutoff_hz=1+map_beta=5,mask_low=0.5+mask_high=0.5"
+        default_value = "off,default,map_change_cutoff_hz=1.5,mask_low=0.5+mask_high=0.5"
     )]
     pub settings: Vec<String>,
     /// Folder of the ONNX models.
@@ -107,6 +108,13 @@ pub fn parse_setting(s: &str) -> anyhow::Result<(String, Option<TemporalSettings
             .trim()
             .parse()
             .map_err(|_| anyhow!("--setting {s}: {k} = '{v}' is not a number"))?;
+        if k.trim() == "mask_hold_frames" {
+            if v.fract() != 0.0 || !(0.0..=255.0).contains(&v) {
+                bail!("--setting {s}: mask_hold_frames = {v} is not a whole number of frames");
+            }
+            t.mask_hold_frames = v as u32;
+            continue;
+        }
         let slot = match k.trim() {
             "crop_min_cutoff_hz" => &mut t.crop_min_cutoff_hz,
             "crop_beta" => &mut t.crop_beta,
@@ -115,6 +123,7 @@ pub fn parse_setting(s: &str) -> anyhow::Result<(String, Option<TemporalSettings
             "mask_motion" => &mut t.mask_motion,
             "map_min_cutoff_hz" => &mut t.map_min_cutoff_hz,
             "map_beta" => &mut t.map_beta,
+            "map_change_cutoff_hz" => &mut t.map_change_cutoff_hz,
             "same_person_iou" => &mut t.same_person_iou,
             other => bail!("--setting {s}: unknown key '{other}'"),
         };
