@@ -45,6 +45,16 @@ install -d -m 0755 "$share/board-config" "$share/scenes" "$share/models"
 install -m 0644 board-config/*.toml "$share/board-config/"
 install -m 0644 tests/scenes/*.toml "$share/scenes/"
 if compgen -G "models/*" >/dev/null; then cp -r models/. "$share/models/"; fi
+# ONNX Runtime's library for `compute.runtime` (tools/onnxruntime.sh fetches the pinned
+# wheel's; without it the daemon runs its networks on tract).
+[ -f target/onnxruntime/libonnxruntime.so ] || tools/onnxruntime.sh --optional
+if [ -f target/onnxruntime/libonnxruntime.so ]; then
+  ort="$root/usr/lib/volcap/onnxruntime"
+  install -d -m 0755 "$ort"
+  cp -P target/onnxruntime/libonnxruntime.so* "$ort/"
+  install -m 0644 target/onnxruntime/LICENSE target/onnxruntime/ThirdPartyNotices.txt \
+    target/onnxruntime/SOURCE "$ort/"
+fi
 install -D -m 0644 README.md "$root/usr/share/doc/volcap/README.md"
 
 # The board config, with its relative paths pointed at the installed copies.

@@ -1,8 +1,12 @@
 //! The daemon's configuration (one TOML per board under `board-config/`). Unknown keys and
 //! bad values are errors naming the file, line and key.
 
+mod compute;
 mod live;
 mod temporal;
+pub use compute::{
+    ComputeBackend, ComputeConfig, DEFAULT_SEGMENT_THREAD_UP_TO, RuntimeSetting, THREADS,
+};
 pub use live::{Live, LiveError};
 pub use temporal::TemporalConfig;
 
@@ -346,59 +350,6 @@ impl Default for ModelConfig {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum ComputeBackend {
-    /// Native threads on the CPU (the engine's localization and renderer, tract).
-    #[default]
-    Cpu,
-}
-
-/// The compute section.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ComputeConfig {
-    #[serde(default)]
-    pub backend: ComputeBackend,
-    /// Threads that evaluate the field for the render stage (each batch of points split
-    /// across them; the image does not change) and that the field stage's networks spread
-    /// their matrix products over (tract's pool), [`THREADS`]. The other pipeline stages
-    /// have one thread each. More than 1 pays only where a stage leaves a core idle
-    /// (`volcap bench pipeline` measures it).
-    #[serde(default = "d_threads")]
-    pub threads: usize,
-    /// Model mode: the largest render resolution at which the segmentation runs on a thread
-    /// of its own (a third compute stage: more frames per second where the render stage
-    /// leaves a core idle, one stage more of latency); 0 = never. Default 129
-    /// ([`DEFAULT_SEGMENT_THREAD_UP_TO`]; `volcap bench pipeline --segment-thread-up-to`).
-    #[serde(default = "d_segment_thread_up_to")]
-    pub segment_thread_up_to: usize,
-}
-
-/// Default of `compute.segment_thread_up_to`: measured on 2 cores, the split takes 129^3 from
-/// about 15 to 17-19 fps (latency p50 about 90 -> 150 ms) and would take 257^3 from 14 to 12
-/// fps (three compute threads for two cores), so it stops at 129.
-pub const DEFAULT_SEGMENT_THREAD_UP_TO: usize = 129;
-
-fn d_segment_thread_up_to() -> usize {
-    DEFAULT_SEGMENT_THREAD_UP_TO
-}
-
-impl Default for ComputeConfig {
-    fn default() -> Self {
-        Self {
-            backend: ComputeBackend::default(),
-            threads: d_threads(),
-            segment_thread_up_to: d_segment_thread_up_to(),
-        }
-    }
-}
-
-fn d_threads() -> usize {
-    1
-}
-/// Accepted range of `compute.threads`.
-pub const THREADS: std::ops::RangeInclusive<usize> = 1..=64;
 /// `model.close_range_frames`: up to ten seconds at 30 fps.
 pub const CLOSE_RANGE_FRAMES: std::ops::RangeInclusive<u32> = 1..=300;
 

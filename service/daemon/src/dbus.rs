@@ -241,8 +241,9 @@ impl Capture1 {
         self.ctl.snapshot().backend
     }
 
-    /// What produces the field: `reconstruction: NAME (PRECISION)` (the trained networks), or
-    /// `oracle` / `camera` (labelled debugging modes, not reconstructions).
+    /// What produces the field: `reconstruction: NAME (PRECISION, RUNTIME)` (the trained
+    /// networks and what runs them), or `oracle` / `camera` (labelled debugging modes, not
+    /// reconstructions).
     #[zbus(property)]
     fn model(&self) -> String {
         self.ctl.snapshot().model

@@ -370,6 +370,10 @@ fn state_json(app: &App, details: bool) -> serde_json::Value {
             n => n.into(),
         },
         "field": sh.field_label,
+        "runtime": (!sh.runtime.is_empty()).then(|| serde_json::json!({
+            "name": sh.runtime,
+            "note": sh.runtime_note,
+        })),
         "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
         "temporal": sh.temporal.then(|| serde_json::json!({
             "resets": sh.temporal_resets.load(Ordering::Relaxed),

@@ -70,18 +70,40 @@ fn main() -> ExitCode {
         };
     }
     let mode = cfg.field().name();
+    // Model mode: the networks' runtime (label) and why `auto` fell back to tract.
+    let mut runtime: Option<(String, Option<String>)> = None;
     let models = if cfg.field() == config::FieldMode::Model {
         let dir = cfg.resolve(&cfg.model.dir);
         let prec = match cfg.model.precision {
             config::Precision::F32 => volcap_engine::model::Precision::F32,
             config::Precision::Int8 => volcap_engine::model::Precision::Int8,
         };
-        let loaded = volcap_engine::model::Models::load(&dir, &cfg.model.name, prec).and_then(
-            |m| match &cfg.model.close_range {
-                Some(close) => m.with_close_range(&dir, close),
-                None => Ok(m),
-            },
-        );
+        let lib = cfg.compute.onnxruntime_lib.as_ref().map(|p| cfg.resolve(p));
+        let opened =
+            match volcap_engine::model::Runtime::open(cfg.compute.runtime.choice(), lib.as_deref())
+            {
+                Ok(o) => o,
+                Err(e) => {
+                    eprintln!("volcapd: compute.runtime in {}: {e}", cli.config.display());
+                    return ExitCode::from(EXIT_CONFIG);
+                }
+            };
+        if let Some(why) = &opened.fallback {
+            tracing::warn!(%why, "compute.runtime = auto: the networks run on tract");
+            if prec == volcap_engine::model::Precision::Int8 {
+                tracing::warn!(
+                    "model.precision = int8 on tract runs slower than f32 (docs/bench/nets.md): \
+                     install ONNX Runtime (tools/onnxruntime.sh) or set precision = \"f32\""
+                );
+            }
+        }
+        runtime = Some((opened.runtime.label(), opened.fallback.clone()));
+        let loaded =
+            volcap_engine::model::Models::load_on(&dir, &cfg.model.name, prec, &opened.runtime)
+                .and_then(|m| match &cfg.model.close_range {
+                    Some(close) => m.with_close_range(&dir, close),
+                    None => Ok(m),
+                });
         match loaded {
             Ok(m) => Some(Arc::new(m)),
             Err(e) => {
@@ -94,11 +116,15 @@ fn main() -> ExitCode {
     };
     let summary = |source: &str| {
         format!(
-            "{}: ok ({}; camera {source}, mode {mode}, model {} {:?}, bus {:?})",
+            "{}: ok ({}; camera {source}, mode {mode}, model {} {:?}{}, bus {:?})",
             cli.config.display(),
             cfg.description,
             cfg.model.name,
             cfg.model.precision,
+            runtime
+                .as_ref()
+                .map(|(l, _)| format!(" on {l}"))
+                .unwrap_or_default(),
             cfg.dbus.bus,
         )
     };
@@ -130,7 +156,11 @@ fn main() -> ExitCode {
     }
     tracing::info!(config = %cli.config.display(), board = %cfg.description, "starting");
     let (tx, _rx) = tokio::sync::watch::channel(None);
-    let shared = Arc::new(pipeline::Shared::new(&cfg, source.clone(), tx));
+    let mut shared = pipeline::Shared::new(&cfg, source.clone(), tx);
+    if let Some((label, fallback)) = runtime {
+        shared.set_runtime(label, fallback);
+    }
+    let shared = Arc::new(shared);
     let app = Arc::new(http::App::new(
         shared.clone(),
         cfg.http.client_limit,

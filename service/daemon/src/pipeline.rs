@@ -113,9 +113,13 @@ pub struct Shared {
     pub started: Instant,
     pub published: tokio::sync::watch::Sender<Option<Arc<Published>>>,
     pub mode: &'static str,
-    /// What produces the field, as D-Bus `Model` says it: `reconstruction: NAME (PRECISION)`
-    /// in model mode, `oracle` / `camera` for the labelled debugging modes.
+    /// What produces the field, as D-Bus `Model` says it: `reconstruction: NAME (PRECISION,
+    /// RUNTIME)` in model mode, `oracle` / `camera` for the labelled debugging modes.
     pub field_label: String,
+    /// Model mode: what runs the networks ("tract", "onnxruntime 1.32.0"; empty in the
+    /// other modes) and, when `compute.runtime = "auto"` fell back to tract, why.
+    pub runtime: String,
+    pub runtime_note: Option<String>,
     /// The latest rendered frame's field (oracle or model mode), for meshes on request.
     pub latest_field: Mutex<Option<Arc<dyn MeshField>>>,
     /// A new camera for the capture thread to switch to (config reload).
@@ -184,6 +188,8 @@ impl Shared {
                 ),
                 other => other.name().to_string(),
             },
+            runtime: String::new(),
+            runtime_note: None,
             latest_field: Mutex::new(None),
             camera_swap: Mutex::new(None),
             beats: Default::default(),
@@ -193,6 +199,18 @@ impl Shared {
             evaluations: AtomicU64::new(0),
             temporal: cfg.field() == FieldMode::Model && cfg.temporal.enabled,
             temporal_resets: AtomicU64::new(0),
+        }
+    }
+
+    /// Model mode: the runtime the networks were loaded on (its label joins the field's:
+    /// `reconstruction: NAME (PRECISION, RUNTIME)`) and why `auto` fell back to tract.
+    pub fn set_runtime(&mut self, label: String, fallback: Option<String>) {
+        if self.mode == "model" {
+            if let Some(open) = self.field_label.rfind(')') {
+                self.field_label.insert_str(open, &format!(", {label}"));
+            }
+            self.runtime = label;
+            self.runtime_note = fallback;
         }
     }
 

@@ -619,6 +619,17 @@ fn install_script_stages_a_complete_service() {
     ] {
         assert!(stage.join(f).is_file(), "{f} not installed");
     }
+    // ONNX Runtime's library goes with the service where tools/onnxruntime.sh fetched it
+    // (CI does), with its licence and where it came from.
+    if root()
+        .join("target/onnxruntime/libonnxruntime.so")
+        .is_file()
+    {
+        for f in ["libonnxruntime.so", "LICENSE", "SOURCE"] {
+            let p = stage.join("usr/lib/volcap/onnxruntime").join(f);
+            assert!(p.is_file(), "{} not installed", p.display());
+        }
+    }
     use std::os::unix::fs::PermissionsExt;
     let mode = std::fs::metadata(stage.join("usr/bin/volcapd"))
         .unwrap()

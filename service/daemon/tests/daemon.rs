@@ -558,6 +558,40 @@ fn model_mode_renders_network_output() {
         err.contains("[model]") && err.contains("seg.onnx") && err.contains("not found"),
         "{err}"
     );
+    // The networks' runtime: ONNX Runtime asked for by name with a library that is not
+    // there is a start-up error naming the key and the file; tract always starts and says
+    // so; `auto` starts on one or the other and names it.
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
+    for (runtime, ok, says) in [
+        (
+            "runtime = \"onnxruntime\"\nonnxruntime_lib = \"/nowhere/libonnxruntime.so\"",
+            false,
+            "compute.runtime",
+        ),
+        ("runtime = \"tract\"", true, "F32 on tract"),
+        ("runtime = \"auto\"", true, "F32 on "),
+    ] {
+        std::fs::write(
+            dir.join("rt.toml"),
+            format!(
+                "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\n[model]\ndir = \"{}\"\n[compute]\n{runtime}\n",
+                scene.display(),
+                models.display()
+            ),
+        )
+        .unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_volcapd"))
+            .args(["--check-config", "--config"])
+            .arg(dir.join("rt.toml"))
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(if ok { &out.stdout } else { &out.stderr }).to_string();
+        assert_eq!(out.status.success(), ok, "{runtime}: {text}");
+        assert!(text.contains(says), "{runtime}: {text}");
+        if !ok {
+            assert!(text.contains("/nowhere/libonnxruntime.so"), "{text}");
+        }
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -1,112 +1,28 @@
 //! The committed networks through the engine: golden vectors from PyTorch, load-time checks,
 //! int8 against f32, and hard frames that must stay finite.
 
+mod common;
+
+use common::{Golden, golden_input, models_dir, models_of, points, runtimes, shape_models};
 use glam::Vec3;
-use safetensors::SafeTensors;
 use std::path::{Path, PathBuf};
 use volcap_engine::grid::{Grid, GridSpec};
 use volcap_engine::localize::{Localizer, Method};
-use volcap_engine::model::preprocess::{Crop, INPUT_SIZE, encoder_input, letterbox};
+use volcap_engine::model::preprocess::{INPUT_SIZE, letterbox};
 use volcap_engine::model::{
     FEATURE_SIZE, FourierNet, FrameError, ModelError, ModelView, Models, Precision, ShapeNets,
 };
 use volcap_engine::render::{RenderOptions, Renderer};
 
-fn models_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models")
-}
-
-/// Shape models listed in models/models.json.
-/// Shape models of `models.json` of one family ("mlp" when the card names none).
-fn models_of(family: &str) -> Vec<String> {
-    let text =
-        std::fs::read_to_string(models_dir().join("models.json")).expect("models/models.json");
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let mut names: Vec<String> = v
-        .as_object()
-        .unwrap()
-        .iter()
-        .filter(|(_, c)| c["family"].as_str().unwrap_or("mlp") == family)
-        .filter_map(|(k, _)| k.strip_prefix("shape-").map(str::to_string))
-        .collect();
-    names.sort();
-    names
-}
-
-fn shape_models() -> Vec<String> {
-    let names = models_of("mlp");
-    assert!(
-        names.contains(&"compact".to_string()),
-        "the compact default is committed"
-    );
-    names
-}
-
-struct Golden {
-    bytes: Vec<u8>,
-}
-
-impl Golden {
-    fn load(name: &str) -> Self {
-        let p = models_dir()
-            .join("golden")
-            .join(format!("{name}.safetensors"));
-        Golden {
-            bytes: std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
-        }
-    }
-    fn f32(&self, key: &str) -> Vec<f32> {
-        let st = SafeTensors::deserialize(&self.bytes).unwrap();
-        let t = st.tensor(key).unwrap();
-        t.data()
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-            .collect()
-    }
-    fn i32(&self, key: &str) -> Vec<i32> {
-        let st = SafeTensors::deserialize(&self.bytes).unwrap();
-        let t = st.tensor(key).unwrap();
-        t.data()
-            .chunks_exact(4)
-            .map(|b| i32::from_le_bytes(b.try_into().unwrap()))
-            .collect()
-    }
-    fn u8(&self, key: &str) -> Vec<u8> {
-        let st = SafeTensors::deserialize(&self.bytes).unwrap();
-        st.tensor(key).unwrap().data().to_vec()
-    }
-}
-
-/// The encoder input and crop of the golden image, through the engine's preprocessing.
-fn golden_input(g: &Golden) -> (Vec<f32>, Crop) {
-    let s = INPUT_SIZE;
-    let img = letterbox(&g.u8("image_u8"), s, s);
-    let mask: Vec<f32> = g.u8("mask_u8").iter().map(|&m| m as f32 / 255.0).collect();
-    let crop = Crop::from_mask(&mask, s).expect("golden image has a person");
-    let want = g.f32("crop");
-    assert!(
-        (crop.s - want[0]).abs() < 1e-5
-            && (crop.tx - want[1]).abs() < 1e-5
-            && (crop.ty - want[2]).abs() < 1e-5,
-        "crop rule differs from training: engine {crop:?}, PyTorch {want:?}"
-    );
-    let rgb_c = crop.apply(&img, 3, s);
-    let mask_c = crop.apply(&mask, 1, s);
-    (encoder_input(&rgb_c, &mask_c, s), crop)
-}
-
-fn points(g: &Golden) -> Vec<Vec3> {
-    g.f32("points")
-        .chunks_exact(3)
-        .map(|p| Vec3::new(p[0], p[1], p[2]))
-        .collect()
-}
-
 #[test]
 fn shape_models_match_pytorch_golden_vectors() {
-    for name in shape_models() {
+    for (rt, name) in runtimes()
+        .into_iter()
+        .flat_map(|rt| shape_models().into_iter().map(move |n| (rt.clone(), n)))
+    {
         let g = Golden::load(&format!("shape-{name}"));
-        let nets = ShapeNets::load(&models_dir(), &name, Precision::F32).unwrap();
+        let nets = ShapeNets::load_on(&models_dir(), &name, Precision::F32, &rt).unwrap();
+        let name = format!("{name} on {}", rt.label());
         let (x, _) = golden_input(&g);
         let feat = nets.features(&x).unwrap();
         assert_eq!(feat.len(), nets.channels * FEATURE_SIZE * FEATURE_SIZE);
@@ -154,9 +70,12 @@ fn assert_golden_occupancy(name: &str, g: &Golden, occ: &[f32]) {
 #[test]
 fn fourier_models_match_pytorch_golden_vectors() {
     let names = models_of("fourier");
-    for name in &names {
+    for (rt, name) in runtimes()
+        .into_iter()
+        .flat_map(|rt| names.iter().map(move |n| (rt.clone(), n)))
+    {
         let g = Golden::load(&format!("shape-{name}"));
-        let net = FourierNet::load(&models_dir(), name, Precision::F32).unwrap();
+        let net = FourierNet::load_on(&models_dir(), name, Precision::F32, &rt).unwrap();
         // The depth frame the file declares is the one its run trained in (runs before the
         // `--depth-frame` option: camera).
         let text = std::fs::read_to_string(models_dir().join("models.json")).unwrap();
@@ -181,6 +100,7 @@ fn fourier_models_match_pytorch_golden_vectors() {
                 worst = worst.max((px[ch] - want[k * c + ch]).abs());
             }
         }
+        let name = format!("{name} on {}", rt.label());
         assert!(
             worst < 2e-3,
             "{name}: coefficients differ from PyTorch by {worst}"
@@ -188,7 +108,7 @@ fn fourier_models_match_pytorch_golden_vectors() {
         let pts = points(&g);
         let mut occ = vec![0.0; pts.len()];
         maps.occupancy(&pts, &mut occ, &mut Vec::new());
-        assert_golden_occupancy(name, &g, &occ);
+        assert_golden_occupancy(&name, &g, &occ);
     }
 }
 
@@ -473,7 +393,14 @@ fn adversarial_points_are_finite_or_refused() {
 
 #[test]
 fn segmentation_and_colour_match_pytorch_golden_vectors() {
-    let models = full();
+    for rt in runtimes() {
+        let models = Models::load_on(&models_dir(), "compact", Precision::F32, &rt)
+            .expect("committed models load");
+        seg_and_colour_golden(&models, &rt.label());
+    }
+}
+
+fn seg_and_colour_golden(models: &Models, on: &str) {
     let s = INPUT_SIZE;
     let g = Golden::load("seg");
     let prob = models.segment(&letterbox(&g.u8("image_u8"), s, s)).unwrap();
@@ -484,8 +411,11 @@ fn segmentation_and_colour_match_pytorch_golden_vectors() {
         .zip(&want)
         .map(|((&y, &x), w)| (prob[y as usize * s + x as usize] - w).abs())
         .fold(0.0f32, f32::max);
-    println!("seg: golden mask max |engine - PyTorch| = {worst:.2e}");
-    assert!(worst < 2e-3, "segmentation differs from PyTorch by {worst}");
+    println!("seg on {on}: golden mask max |engine - PyTorch| = {worst:.2e}");
+    assert!(
+        worst < 2e-3,
+        "segmentation on {on} differs from PyTorch by {worst}"
+    );
     let g = Golden::load("color");
     let (x, _) = golden_input(&g);
     let c = models.color.channels;
@@ -505,10 +435,10 @@ fn segmentation_and_colour_match_pytorch_golden_vectors() {
             })
         })
         .fold(0.0f32, f32::max);
-    println!("colour: golden features max |engine - PyTorch| = {worst:.2e}");
+    println!("colour on {on}: golden features max |engine - PyTorch| = {worst:.2e}");
     assert!(
         worst < 2e-3,
-        "colour features differ from PyTorch by {worst}"
+        "colour features on {on} differ from PyTorch by {worst}"
     );
 }
 

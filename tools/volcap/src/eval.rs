@@ -36,6 +36,10 @@ use turntable::turntable;
 
 #[derive(Args, Debug, Clone)]
 pub struct EvalArgs {
+    /// What runs the networks: tract, onnxruntime or auto (the daemon's `compute.runtime`;
+    /// accuracy is the same on both, tests/runtimes.rs; the ms columns are the runtime's).
+    #[arg(long, default_value = "tract")]
+    pub runtime: String,
     /// Human assets: a MakeHuman folder or a pack file (default: the embedded pack), so other
     /// asset folders can be evaluated.
     #[arg(long)]
@@ -492,6 +496,11 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    let choice = volcap_engine::model::RuntimeChoice::parse(&a.runtime)
+        .map_err(|e| anyhow!("--runtime: {e}"))?;
+    let runtime = volcap_engine::model::Runtime::open(choice, None)
+        .map_err(|e| anyhow!("--runtime {}: {e}", a.runtime))?
+        .runtime;
     let mut images = Vec::new();
     let mut summary = Vec::new();
     let (mut loc, mut grid, mut truth) = (Localizer::new(), Grid::new(spec), Grid::new(spec));
@@ -501,10 +510,11 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     {
         let truth_k = truth_order(name);
         // Ground-truth fields still segment (for the mask IoU column) with the default models.
-        let mut models = Models::load(
+        let mut models = Models::load_on(
             &a.models_dir,
             if truth_k.is_some() { "compact" } else { name },
             *prec,
+            &runtime,
         )?;
         let level = match (&mut models.shape, level) {
             (ShapeModel::Fourier(f), Some(l)) if truth_k.is_none() => {

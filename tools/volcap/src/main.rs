@@ -4,6 +4,7 @@ mod bench;
 mod ctl;
 mod eval;
 mod mlp_bench;
+mod nets_bench;
 mod pipeline_bench;
 mod plot;
 mod reconstruct;
@@ -53,6 +54,9 @@ enum BenchCmd {
     /// model x coarse level x threads: fps, latency, ms per stage, evaluations, speed-up over
     /// one thread. Writes a table and a plot.
     Pipeline(PipelineArgs),
+    /// Each network on its own (segmentation, shape and colour encoders): ms per run, and
+    /// with --profile where tract spends them, per op kind and node. Writes docs/bench/nets.md.
+    Nets(nets_bench::NetsArgs),
     /// The point MLP's throughput (fused and on tract) against the machine's SGEMM peak.
     Mlp(MlpArgs),
     /// The live model path frame by frame on simulated scenes per temporal-filter setting:
@@ -107,6 +111,10 @@ pub struct PipelineArgs {
     /// is on).
     #[arg(long, value_delimiter = ',', default_value = "true")]
     pub temporal: Vec<bool>,
+    /// Runtimes of the networks (`compute.runtime`, comma-separated): tract, onnxruntime,
+    /// auto (ONNX Runtime when its library is found, else tract).
+    #[arg(long = "runtime", value_delimiter = ',', default_value = "auto")]
+    pub runtimes: Vec<String>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,
@@ -196,6 +204,7 @@ fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Localize(a)) => bench::localize(&a),
         Cmd::Bench(BenchCmd::Pipeline(a)) => pipeline_bench::run(&a),
         Cmd::Bench(BenchCmd::Mlp(a)) => mlp_bench::run(&a),
+        Cmd::Bench(BenchCmd::Nets(a)) => nets_bench::run(&a),
         Cmd::Bench(BenchCmd::Temporal(a)) => eval::video::run(&a),
         Cmd::Eval(a) => eval::eval(&a),
         Cmd::Reconstruct(a) => reconstruct::reconstruct(&a),

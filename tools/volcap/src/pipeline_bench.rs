@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
-use volcap_engine::model::{Models, Precision};
+use volcap_engine::model::{Models, Precision, Runtime, RuntimeChoice};
 use volcapd::capture::Camera;
 use volcapd::capture::replay::{ReplayCamera, Still};
 use volcapd::config::Config;
@@ -27,6 +27,8 @@ use volcapd::pipeline::{self, PipelineState, Shared, stage};
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
     pub model: String,
+    /// What ran the networks ("tract", "onnxruntime 1.32.0").
+    pub runtime: String,
     pub resolution: usize,
     pub coarse_level: u32,
     pub threads: usize,
@@ -90,13 +92,14 @@ fn frames(scene: &Path, n: usize) -> anyhow::Result<Vec<Still>> {
 /// display size, temporal filter on.
 type Setup = (String, Precision, usize, u32, usize, usize, usize, bool);
 
-fn config(scene: &Path, models_dir: &Path, setup: &Setup) -> anyhow::Result<Config> {
+fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyhow::Result<Config> {
     let (name, prec, res, coarse, threads, split, display, temporal) = setup;
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
-         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\n[dbus]\nbus = \"none\"\n\
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\n\
+         [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
         match prec {
             Precision::F32 => "f32",
@@ -119,6 +122,7 @@ fn measure(
     let shared = Arc::new(Shared::new(cfg, "replay".into(), tx));
     let factory: volcapd::capture::CameraFactory =
         Box::new(move || Ok(Box::new(ReplayCamera::new(stills, fps)) as Box<dyn Camera>));
+    let runtime = models.runtime.label();
     let threads = pipeline::start(cfg, factory, shared.clone(), Some(models));
     std::thread::sleep(Duration::from_secs_f64(warmup));
     let t0 = Instant::now();
@@ -147,6 +151,7 @@ fn measure(
                 volcapd::config::Precision::F32 => "",
                 volcapd::config::Precision::Int8 => "@int8",
             },
+        runtime,
         resolution: cfg.render.resolution.0,
         coarse_level: cfg.render.coarse_level,
         threads: cfg.compute.threads,
@@ -187,6 +192,15 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         .models_dir
         .canonicalize()
         .with_context(|| format!("--models-dir {}", a.models_dir.display()))?;
+    let mut runtimes = Vec::new();
+    for r in &a.runtimes {
+        let choice = RuntimeChoice::parse(r.trim()).map_err(|e| anyhow!("--runtime: {e}"))?;
+        let opened = Runtime::open(choice, None).map_err(|e| anyhow!("--runtime {r}: {e}"))?;
+        if let Some(why) = &opened.fallback {
+            eprintln!("--runtime {r}: on tract ({why})");
+        }
+        runtimes.push((choice, opened.runtime));
+    }
     let mut configs = Vec::new();
     for m in &a.models {
         let (name, prec) = model_spec(m)?;
@@ -204,32 +218,48 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             }
         }
     }
-    // Every configuration is checked before anything runs.
-    let cfgs: Vec<Config> = configs
-        .iter()
-        .map(|s| config(&scene, &models_dir, s))
-        .collect::<anyhow::Result<_>>()?;
+    // Every configuration (per runtime) is checked before anything runs.
+    let mut runs: Vec<(Config, &Setup, usize)> = Vec::new();
+    for (ri, (choice, _)) in runtimes.iter().enumerate() {
+        for s in &configs {
+            runs.push((config(&scene, &models_dir, s, choice.as_str())?, s, ri));
+        }
+    }
     // Every model is loaded before anything runs (a bad name fails at once).
-    let mut loaded: Vec<((String, Precision), Arc<Models>)> = Vec::new();
-    for (name, prec, ..) in &configs {
-        if !loaded.iter().any(|(k, _)| k.0 == *name && k.1 == *prec) {
-            let m = Models::load(&models_dir, name, *prec)
-                .map_err(|e| anyhow!("model {name} in {}: {e}", models_dir.display()))?;
-            loaded.push(((name.clone(), *prec), Arc::new(m)));
+    let mut loaded: Vec<((String, Precision, usize), Arc<Models>)> = Vec::new();
+    for (_, (name, prec, ..), ri) in &runs {
+        if !loaded
+            .iter()
+            .any(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri)
+        {
+            let rt = &runtimes[*ri].1;
+            let m = Models::load_on(&models_dir, name, *prec, rt).map_err(|e| {
+                anyhow!(
+                    "model {name} in {} on {}: {e}",
+                    models_dir.display(),
+                    rt.label()
+                )
+            })?;
+            loaded.push(((name.clone(), *prec, *ri), Arc::new(m)));
         }
     }
     let stills = Arc::new(frames(&scene, a.frames)?);
-    let pb = ProgressBar::new(cfgs.len() as u64).with_style(
+    let pb = ProgressBar::new(runs.len() as u64).with_style(
         ProgressStyle::with_template("pipeline {bar:30} {pos}/{len} {msg} (eta {eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let mut rows = Vec::new();
-    for (cfg, (name, prec, ..)) in cfgs.iter().zip(&configs) {
+    for (cfg, (name, prec, ..), ri) in &runs {
         pb.set_message(format!(
-            "{name} {} x{}",
-            cfg.render.resolution.0, cfg.compute.threads
+            "{name} {} x{} {}",
+            cfg.render.resolution.0,
+            cfg.compute.threads,
+            runtimes[*ri].1.name()
         ));
-        let Some((_, models)) = loaded.iter().find(|(k, _)| k.0 == *name && k.1 == *prec) else {
+        let Some((_, models)) = loaded
+            .iter()
+            .find(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri)
+        else {
             bail!("model {name} was not loaded");
         };
         rows.push(measure(
@@ -243,34 +273,25 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         pb.inc(1);
     }
     pb.finish_and_clear();
-    let base: Vec<(String, usize, u32, usize, usize, bool, f64)> = rows
+    // The one-thread row of the same configuration (all but the threads), same run.
+    let base: Vec<Row> = rows
         .iter()
         .filter(|r| r.threads == 1 && r.error.is_none())
-        .map(|r| {
-            let k = (r.model.clone(), r.resolution, r.coarse_level);
-            (
-                k.0,
-                k.1,
-                k.2,
-                r.segment_thread_up_to,
-                r.display_size,
-                r.temporal,
-                r.fps,
-            )
-        })
+        .cloned()
         .collect();
     for r in &mut rows {
         r.speedup_vs_1_thread = base
             .iter()
             .find(|b| {
-                b.0 == r.model
-                    && b.1 == r.resolution
-                    && b.2 == r.coarse_level
-                    && b.3 == r.segment_thread_up_to
-                    && b.4 == r.display_size
-                    && b.5 == r.temporal
+                b.model == r.model
+                    && b.runtime == r.runtime
+                    && b.resolution == r.resolution
+                    && b.coarse_level == r.coarse_level
+                    && b.segment_thread_up_to == r.segment_thread_up_to
+                    && b.display_size == r.display_size
+                    && b.temporal == r.temporal
             })
-            .map(|b| r.fps / b.6.max(1e-9));
+            .map(|b| r.fps / b.fps.max(1e-9));
     }
     if a.json {
         let mut out = std::io::stdout().lock();
@@ -318,14 +339,15 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
 
 fn table(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| model | res | display px | coarse | threads | segment thread | temporal | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| model | runtime | res | display px | coarse | threads | segment thread | temporal | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
+            r.runtime,
             r.resolution,
             if r.display_size == 0 {
                 r.resolution
@@ -370,7 +392,7 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
     let (left, right) = root.split_horizontally(550);
     let key = |r: &Row| {
         (
-            r.model.clone(),
+            format!("{} {}", r.model, r.runtime),
             r.coarse_level,
             r.threads,
             r.segment_thread_up_to,

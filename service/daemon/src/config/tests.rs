@@ -138,6 +138,37 @@ fn errors_name_file_line_and_key() {
 
 /// `[temporal]`: on by default with the engine's defaults; a key out of its range names
 /// the key, its line and value, on or off; `enabled = false` turns the filter off.
+/// `compute.runtime`: auto by default; tract / onnxruntime by name; anything else names the
+/// key and the value's line.
+#[test]
+fn compute_runtime_defaults_and_bad_values() {
+    use super::RuntimeSetting;
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    let c = Config::parse(base, Path::new("b.toml")).unwrap();
+    assert_eq!(c.compute.runtime, RuntimeSetting::Auto);
+    for (v, want) in [
+        ("tract", RuntimeSetting::Tract),
+        ("onnxruntime", RuntimeSetting::Onnxruntime),
+        ("auto", RuntimeSetting::Auto),
+    ] {
+        let c = Config::parse(
+            &format!("{base}[compute]\nruntime = \"{v}\"\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.compute.runtime, want);
+    }
+    let e = Config::parse(
+        &format!("{base}[compute]\nruntime = \"gpu\"\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("runtime") && e.contains("gpu") && e.contains("line 5"),
+        "{e}"
+    );
+}
+
 #[test]
 fn temporal_section_defaults_bounds_and_off() {
     let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
@@ -158,6 +189,8 @@ fn temporal_section_defaults_bounds_and_off() {
         ("crop_min_cutoff_hz = 0", "temporal.crop_min_cutoff_hz"),
         ("map_beta = -1", "temporal.map_beta"),
         ("max_gap_s = nan", "temporal.max_gap_s"),
+        ("mask_hold_frames = 0", "temporal.mask_hold_frames"),
+        ("map_change_cutoff_hz = 0", "temporal.map_change_cutoff_hz"),
     ] {
         let e = Config::parse(&format!("{base}[temporal]\n{extra}\n"), Path::new("b.toml"))
             .unwrap_err();

@@ -227,6 +227,16 @@ impl FourierNet {
     }
 
     pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        Self::load_on(dir, name, precision, &super::Runtime::Tract)
+    }
+
+    /// [`FourierNet::load`] on `rt`.
+    pub fn load_on(
+        dir: &Path,
+        name: &str,
+        precision: Precision,
+        rt: &super::Runtime,
+    ) -> Result<Self, ModelError> {
         let path = Self::path(dir, name, precision);
         let meta = meta_of(&path);
         let k = meta_usize(&path, &meta, "fourier_k")?;
@@ -266,7 +276,7 @@ impl FourierNet {
                     found: format!("{v:?}"),
                 })?,
         };
-        let net = Net::load(
+        let net = Net::load_on(
             &path,
             "shape-fourier",
             &[InputSpec {
@@ -274,6 +284,7 @@ impl FourierNet {
                 shape: &IMG,
             }],
             &[Some(1), Some(2 * k + 1), Some(size), Some(size)],
+            rt,
         )?;
         Ok(Self {
             net,

@@ -16,8 +16,10 @@
 mod field;
 pub mod fourier;
 mod net;
-pub use net::{InputSpec, Net};
+pub mod runtime;
+pub use net::{InputSpec, Net, NodeTime};
 pub(crate) use net::{meta_of, meta_usize};
+pub use runtime::{Runtime, RuntimeChoice};
 pub mod mlp;
 mod threads;
 pub use threads::with_threads;
@@ -127,13 +129,15 @@ pub struct Models {
     /// frames whose person the frame's lower edge cuts ([`preprocess::cut_by_frame`]); none:
     /// `shape` for every frame.
     pub close_range: Option<(String, ShapeModel)>,
+    /// The runtime every network runs on.
+    pub runtime: Runtime,
 }
 
 pub(crate) const IMG: [Option<usize>; 4] = [Some(1), Some(4), Some(INPUT_SIZE), Some(INPUT_SIZE)];
 
-fn encoder(path: &Path, kind: &str) -> Result<(Net, usize), ModelError> {
+fn encoder(path: &Path, kind: &str, rt: &Runtime) -> Result<(Net, usize), ModelError> {
     let channels = meta_usize(path, &meta_of(path), "feature_channels")?;
-    let net = Net::load(
+    let net = Net::load_on(
         path,
         kind,
         &[InputSpec {
@@ -146,16 +150,27 @@ fn encoder(path: &Path, kind: &str) -> Result<(Net, usize), ModelError> {
             Some(FEATURE_SIZE),
             Some(FEATURE_SIZE),
         ],
+        rt,
     )?;
     Ok((net, channels))
 }
 
 impl ShapeNets {
     pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        Self::load_on(dir, name, precision, &Runtime::Tract)
+    }
+
+    pub fn load_on(
+        dir: &Path,
+        name: &str,
+        precision: Precision,
+        rt: &Runtime,
+    ) -> Result<Self, ModelError> {
         let sfx = precision.suffix();
         let (encoder, channels) = encoder(
             &dir.join(format!("shape-{name}.encoder{sfx}.onnx")),
             "shape-encoder",
+            rt,
         )?;
         let mpath = dir.join(format!("shape-{name}.mlp{sfx}.onnx"));
         let meta = meta_of(&mpath);
@@ -172,7 +187,7 @@ impl ShapeNets {
             }
             _ => ZEncoding::SoftZ,
         };
-        let mlp = Net::load(
+        let mlp = Net::load_on(
             &mpath,
             "shape-mlp",
             &[
@@ -186,6 +201,7 @@ impl ShapeNets {
                 },
             ],
             &[None, Some(1)],
+            rt,
         )?;
         let fused = if precision == Precision::F32 {
             mlp::FusedCbnMlp::from_onnx(&mpath).filter(|f| {
@@ -274,12 +290,24 @@ pub enum ShapeModel {
 impl ShapeModel {
     /// `shape-NAME.fourier.onnx` if it exists, else `shape-NAME.encoder.onnx` + `.mlp.onnx`.
     pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        Self::load_on(dir, name, precision, &Runtime::Tract)
+    }
+
+    /// [`ShapeModel::load`] on `rt`.
+    pub fn load_on(
+        dir: &Path,
+        name: &str,
+        precision: Precision,
+        rt: &Runtime,
+    ) -> Result<Self, ModelError> {
         if FourierNet::path(dir, name, precision).is_file() {
-            Ok(Self::Fourier(Arc::new(FourierNet::load(
-                dir, name, precision,
+            Ok(Self::Fourier(Arc::new(FourierNet::load_on(
+                dir, name, precision, rt,
             )?)))
         } else {
-            Ok(Self::Mlp(Arc::new(ShapeNets::load(dir, name, precision)?)))
+            Ok(Self::Mlp(Arc::new(ShapeNets::load_on(
+                dir, name, precision, rt,
+            )?)))
         }
     }
 
@@ -296,8 +324,13 @@ impl ColorNets {
     /// Colour stays f32 at every precision setting: it runs only on the visible surface
     /// points, off the shape path's cost.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let (encoder, channels) = encoder(&dir.join("color.encoder.onnx"), "color-encoder")?;
-        let mlp = Net::load(
+        Self::load_on(dir, &Runtime::Tract)
+    }
+
+    /// [`ColorNets::load`] on `rt`.
+    pub fn load_on(dir: &Path, rt: &Runtime) -> Result<Self, ModelError> {
+        let (encoder, channels) = encoder(&dir.join("color.encoder.onnx"), "color-encoder", rt)?;
+        let mlp = Net::load_on(
             &dir.join("color.mlp.onnx"),
             "color-mlp",
             &[
@@ -315,6 +348,7 @@ impl ColorNets {
                 },
             ],
             &[None, Some(3)],
+            rt,
         )?;
         Ok(ColorNets {
             encoder,
@@ -372,11 +406,22 @@ impl Default for ModelView {
 pub const NDC_HALF_EXTENT_M: Vec3 = Vec3::new(1.15, 1.15, 1.5);
 
 impl Models {
-    /// Load `seg.onnx`, `shape-NAME.*` and `color.*` (the shape files at `precision`) from `dir`.
+    /// Load `seg.onnx`, `shape-NAME.*` and `color.*` (the shape files at `precision`) from
+    /// `dir`, on tract.
     pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
+        Self::load_on(dir, name, precision, &Runtime::Tract)
+    }
+
+    /// [`Models::load`] with every network on `rt`.
+    pub fn load_on(
+        dir: &Path,
+        name: &str,
+        precision: Precision,
+        rt: &Runtime,
+    ) -> Result<Self, ModelError> {
         // The segmentation is f32 at every precision: its int8 form lost accuracy on real
         // photos and was slower (models/seg.md).
-        let seg = Net::load(
+        let seg = Net::load_on(
             &dir.join("seg.onnx"),
             "seg",
             &[InputSpec {
@@ -384,14 +429,16 @@ impl Models {
                 shape: &[Some(1), Some(3), Some(INPUT_SIZE), Some(INPUT_SIZE)],
             }],
             &[Some(1), Some(1), Some(INPUT_SIZE), Some(INPUT_SIZE)],
+            rt,
         )?;
         Ok(Models {
             seg,
-            shape: ShapeModel::load(dir, name, precision)?,
-            color: Arc::new(ColorNets::load(dir)?),
+            shape: ShapeModel::load_on(dir, name, precision, rt)?,
+            color: Arc::new(ColorNets::load_on(dir, rt)?),
             name: name.into(),
             precision,
             close_range: None,
+            runtime: rt.clone(),
         })
     }
 
@@ -400,7 +447,8 @@ impl Models {
     /// says so). It must be of the same family as the main shape model's colour and crop
     /// contract, which every committed shape model shares.
     pub fn with_close_range(mut self, dir: &Path, name: &str) -> Result<Self, ModelError> {
-        self.close_range = Some((name.into(), ShapeModel::load(dir, name, self.precision)?));
+        let shape = ShapeModel::load_on(dir, name, self.precision, &self.runtime)?;
+        self.close_range = Some((name.into(), shape));
         Ok(self)
     }
 

@@ -1,7 +1,9 @@
-//! One ONNX network run by tract, checked at load (kind, inputs, output shape) with errors
-//! that name the file and what differs; the `volcap.*` metadata readers.
+//! One ONNX network, checked at load (kind, inputs, output shape: with tract, whichever
+//! runtime then runs it) with errors that name the file and what differs, and run by tract
+//! or ONNX Runtime ([`super::runtime`]); the `volcap.*` metadata readers.
 
 use super::ModelError;
+use super::runtime::Runtime;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -9,10 +11,17 @@ use tract_onnx::prelude::*;
 
 type Plan = Arc<TypedRunnableModel>;
 
+/// What runs a network.
+enum Backend {
+    Tract(Plan),
+    #[cfg(feature = "onnxruntime")]
+    Ort(super::runtime::ort_backend::OrtNet),
+}
+
 /// One ONNX network, shape-checked at load.
 pub struct Net {
     path: PathBuf,
-    plan: Plan,
+    backend: Backend,
     meta: HashMap<String, String>,
 }
 
@@ -23,13 +32,24 @@ pub struct InputSpec<'a> {
 }
 
 impl Net {
-    /// Load `path`, check `volcap.kind == kind`, the inputs (names, shapes; `None` is the
-    /// dynamic batch dimension) and the output's shape.
+    /// Load `path` on tract ([`Net::load_on`]).
     pub fn load(
         path: &Path,
         kind: &str,
         inputs: &[InputSpec],
         output: &[Option<usize>],
+    ) -> Result<Net, ModelError> {
+        Self::load_on(path, kind, inputs, output, &Runtime::Tract)
+    }
+
+    /// Load `path` to run on `runtime`, check `volcap.kind == kind`, the inputs (names,
+    /// shapes; `None` is the dynamic batch dimension) and the output's shape.
+    pub fn load_on(
+        path: &Path,
+        kind: &str,
+        inputs: &[InputSpec],
+        output: &[Option<usize>],
+        runtime: &Runtime,
     ) -> Result<Net, ModelError> {
         let p = path.display().to_string();
         let file = |msg: String| ModelError::File {
@@ -144,13 +164,21 @@ impl Net {
                 format!("{shape:?}"),
             ));
         }
-        let plan = typed
-            .into_optimized()
-            .and_then(|m| m.into_runnable())
-            .map_err(|e| file(format!("cannot optimize: {e:#}")))?;
+        let backend = match runtime {
+            Runtime::Tract => Backend::Tract(
+                typed
+                    .into_optimized()
+                    .and_then(|m| m.into_runnable())
+                    .map_err(|e| file(format!("cannot optimize: {e:#}")))?,
+            ),
+            #[cfg(feature = "onnxruntime")]
+            Runtime::OnnxRuntime(rt) => {
+                Backend::Ort(super::runtime::ort_backend::OrtNet::load(rt, path).map_err(file)?)
+            }
+        };
         let net = Net {
             path: path.to_path_buf(),
-            plan,
+            backend,
             meta,
         };
         net.probe(inputs)?;
@@ -195,22 +223,107 @@ impl Net {
         &self.path
     }
 
-    /// Run on f32 inputs (shape, data); the first output as a flat vector.
-    pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, ModelError> {
-        let err = |msg: String| ModelError::Run {
+    /// A failed run of this network: the file and why.
+    fn run_error(&self, msg: String) -> ModelError {
+        ModelError::Run {
             path: self.path.display().to_string(),
             msg,
+        }
+    }
+
+    /// The runtime that runs it: "tract" or "onnxruntime".
+    pub fn runtime(&self) -> &'static str {
+        match self.backend {
+            Backend::Tract(_) => "tract",
+            #[cfg(feature = "onnxruntime")]
+            Backend::Ort(_) => "onnxruntime",
+        }
+    }
+
+    /// Run on f32 inputs (shape, data); the first output as a flat vector.
+    pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, ModelError> {
+        let err = |msg: String| self.run_error(msg);
+        let plan = match &self.backend {
+            Backend::Tract(plan) => plan,
+            #[cfg(feature = "onnxruntime")]
+            Backend::Ort(net) => return net.run(inputs).map_err(err),
         };
         let mut tv: TVec<TValue> = tvec![];
         for (shape, data) in inputs {
             let t = Tensor::from_shape(shape, data).map_err(|e| err(e.to_string()))?;
             tv.push(t.into_tvalue());
         }
-        let out = self.plan.run(tv).map_err(|e| err(format!("{e:#}")))?;
+        let out = plan.run(tv).map_err(|e| err(format!("{e:#}")))?;
         let v = out[0]
             .to_plain_array_view::<f32>()
             .map_err(|e| err(e.to_string()))?;
         Ok(v.iter().copied().collect())
+    }
+}
+
+/// One node of a network's optimized tract plan, timed ([`Net::profile`]).
+#[derive(Debug, Clone)]
+pub struct NodeTime {
+    pub name: String,
+    /// The op's kind (tract's name for it: `Conv`, `EinSum`, `OptMatMul`, ...).
+    pub op: String,
+    /// Median over the runs, milliseconds.
+    pub ms: f64,
+}
+
+impl Net {
+    /// Run `runs` times (after one untimed run) timing every node of tract's optimized plan:
+    /// per node the median milliseconds, in plan order (tract only).
+    pub fn profile(
+        &self,
+        inputs: &[(&[usize], &[f32])],
+        runs: usize,
+    ) -> Result<Vec<NodeTime>, ModelError> {
+        let err = |msg: String| self.run_error(msg);
+        let plan = match &self.backend {
+            Backend::Tract(plan) => plan,
+            #[cfg(feature = "onnxruntime")]
+            Backend::Ort(_) => return Err(err("per-node times are tract's only".into())),
+        };
+        let model = plan.model();
+        let mut times: Vec<Vec<f64>> = vec![Vec::new(); model.nodes().len()];
+        let mut state = tract_onnx::tract_core::plan::SimpleState::new(plan)
+            .map_err(|e| err(format!("{e:#}")))?;
+        for run in 0..=runs.max(1) {
+            let mut tv: TVec<TValue> = tvec![];
+            for (shape, data) in inputs {
+                let t = Tensor::from_shape(shape, data).map_err(|e| err(e.to_string()))?;
+                tv.push(t.into_tvalue());
+            }
+            state
+                .run_plan_with_eval(tv, |ctx, st, node, input| {
+                    let t = std::time::Instant::now();
+                    let out = tract_onnx::tract_core::plan::eval(ctx, st, node, input);
+                    if run > 0 {
+                        times[node.id].push(t.elapsed().as_secs_f64() * 1e3);
+                    }
+                    out
+                })
+                .map_err(|e| err(format!("{e:#}")))?;
+        }
+        Ok(model
+            .eval_order()
+            .map_err(|e| err(format!("{e:#}")))?
+            .into_iter()
+            .filter_map(|id| {
+                let node = model.node(id);
+                let mut t = std::mem::take(&mut times[id]);
+                if t.is_empty() {
+                    return None;
+                }
+                t.sort_by(f64::total_cmp);
+                Some(NodeTime {
+                    name: node.name.clone(),
+                    op: node.op.name().to_string(),
+                    ms: t[t.len() / 2],
+                })
+            })
+            .collect())
     }
 }
 

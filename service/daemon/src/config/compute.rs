@@ -1,0 +1,91 @@
+//! `[compute]`: where and how the pipeline computes (threads, the networks' runtime).
+
+use serde::Deserialize;
+use std::path::PathBuf;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ComputeBackend {
+    /// Native threads on the CPU (the engine's localization and renderer, tract).
+    #[default]
+    Cpu,
+}
+
+/// The compute section.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ComputeConfig {
+    #[serde(default)]
+    pub backend: ComputeBackend,
+    /// Threads that evaluate the field for the render stage (each batch of points split
+    /// across them; the image does not change) and that the field stage's networks spread
+    /// their matrix products over (tract's pool), [`THREADS`]. The other pipeline stages
+    /// have one thread each. More than 1 pays only where a stage leaves a core idle
+    /// (`volcap bench pipeline` measures it).
+    #[serde(default = "d_threads")]
+    pub threads: usize,
+    /// Model mode: the largest render resolution at which the segmentation runs on a thread
+    /// of its own (a third compute stage: more frames per second where the render stage
+    /// leaves a core idle, one stage more of latency); 0 = never. Default 129
+    /// ([`DEFAULT_SEGMENT_THREAD_UP_TO`]; `volcap bench pipeline --segment-thread-up-to`).
+    #[serde(default = "d_segment_thread_up_to")]
+    pub segment_thread_up_to: usize,
+    /// What runs the networks (model mode): `tract` (built in), `onnxruntime` (its shared
+    /// library, `tools/onnxruntime.sh`; a config error when it cannot be loaded) or `auto`
+    /// (ONNX Runtime when its library is found and loads, else tract, logged and shown in
+    /// `/state` and D-Bus). Default `auto`.
+    #[serde(default)]
+    pub runtime: RuntimeSetting,
+    /// ONNX Runtime's library (`libonnxruntime.so`); default: searched in
+    /// `$VOLCAP_ONNXRUNTIME`, `/usr/lib/volcap/onnxruntime/`, `target/onnxruntime/`.
+    #[serde(default)]
+    pub onnxruntime_lib: Option<PathBuf>,
+}
+
+/// `compute.runtime`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum RuntimeSetting {
+    Tract,
+    Onnxruntime,
+    #[default]
+    Auto,
+}
+
+impl RuntimeSetting {
+    pub fn choice(self) -> volcap_engine::model::RuntimeChoice {
+        use volcap_engine::model::RuntimeChoice;
+        match self {
+            Self::Tract => RuntimeChoice::Tract,
+            Self::Onnxruntime => RuntimeChoice::OnnxRuntime,
+            Self::Auto => RuntimeChoice::Auto,
+        }
+    }
+}
+
+/// Default of `compute.segment_thread_up_to`: measured on 2 cores, the split takes 129^3 from
+/// about 15 to 17-19 fps (latency p50 about 90 -> 150 ms) and would take 257^3 from 14 to 12
+/// fps (three compute threads for two cores), so it stops at 129.
+pub const DEFAULT_SEGMENT_THREAD_UP_TO: usize = 129;
+
+fn d_segment_thread_up_to() -> usize {
+    DEFAULT_SEGMENT_THREAD_UP_TO
+}
+
+impl Default for ComputeConfig {
+    fn default() -> Self {
+        Self {
+            backend: ComputeBackend::default(),
+            threads: d_threads(),
+            segment_thread_up_to: d_segment_thread_up_to(),
+            runtime: RuntimeSetting::default(),
+            onnxruntime_lib: None,
+        }
+    }
+}
+
+fn d_threads() -> usize {
+    1
+}
+/// Accepted range of `compute.threads`.
+pub const THREADS: std::ops::RangeInclusive<usize> = 1..=64;

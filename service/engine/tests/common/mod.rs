@@ -1,0 +1,113 @@
+//! Shared by the engine's model tests: the committed models, PyTorch's golden vectors, and
+//! the runtimes to run them on.
+#![allow(dead_code)]
+
+use glam::Vec3;
+use safetensors::SafeTensors;
+use std::path::{Path, PathBuf};
+use volcap_engine::model::preprocess::{Crop, INPUT_SIZE, encoder_input, letterbox};
+use volcap_engine::model::{Runtime, RuntimeChoice};
+
+pub fn models_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models")
+}
+
+/// Shape models of `models.json` of one family ("mlp" when the card names none).
+pub fn models_of(family: &str) -> Vec<String> {
+    let text =
+        std::fs::read_to_string(models_dir().join("models.json")).expect("models/models.json");
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let mut names: Vec<String> = v
+        .as_object()
+        .unwrap()
+        .iter()
+        .filter(|(_, c)| c["family"].as_str().unwrap_or("mlp") == family)
+        .filter_map(|(k, _)| k.strip_prefix("shape-").map(str::to_string))
+        .collect();
+    names.sort();
+    names
+}
+
+pub fn shape_models() -> Vec<String> {
+    let names = models_of("mlp");
+    assert!(
+        names.contains(&"compact".to_string()),
+        "the compact default is committed"
+    );
+    names
+}
+
+pub struct Golden {
+    bytes: Vec<u8>,
+}
+
+impl Golden {
+    pub fn load(name: &str) -> Self {
+        let p = models_dir()
+            .join("golden")
+            .join(format!("{name}.safetensors"));
+        Golden {
+            bytes: std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+        }
+    }
+    pub fn f32(&self, key: &str) -> Vec<f32> {
+        let st = SafeTensors::deserialize(&self.bytes).unwrap();
+        let t = st.tensor(key).unwrap();
+        t.data()
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect()
+    }
+    pub fn i32(&self, key: &str) -> Vec<i32> {
+        let st = SafeTensors::deserialize(&self.bytes).unwrap();
+        let t = st.tensor(key).unwrap();
+        t.data()
+            .chunks_exact(4)
+            .map(|b| i32::from_le_bytes(b.try_into().unwrap()))
+            .collect()
+    }
+    pub fn u8(&self, key: &str) -> Vec<u8> {
+        let st = SafeTensors::deserialize(&self.bytes).unwrap();
+        st.tensor(key).unwrap().data().to_vec()
+    }
+}
+
+/// The encoder input and crop of the golden image, through the engine's preprocessing.
+pub fn golden_input(g: &Golden) -> (Vec<f32>, Crop) {
+    let s = INPUT_SIZE;
+    let img = letterbox(&g.u8("image_u8"), s, s);
+    let mask: Vec<f32> = g.u8("mask_u8").iter().map(|&m| m as f32 / 255.0).collect();
+    let crop = Crop::from_mask(&mask, s).expect("golden image has a person");
+    let want = g.f32("crop");
+    assert!(
+        (crop.s - want[0]).abs() < 1e-5
+            && (crop.tx - want[1]).abs() < 1e-5
+            && (crop.ty - want[2]).abs() < 1e-5,
+        "crop rule differs from training: engine {crop:?}, PyTorch {want:?}"
+    );
+    let rgb_c = crop.apply(&img, 3, s);
+    let mask_c = crop.apply(&mask, 1, s);
+    (encoder_input(&rgb_c, &mask_c, s), crop)
+}
+
+pub fn points(g: &Golden) -> Vec<Vec3> {
+    g.f32("points")
+        .chunks_exact(3)
+        .map(|p| Vec3::new(p[0], p[1], p[2]))
+        .collect()
+}
+
+/// The runtimes to test on: tract, and ONNX Runtime where its library is installed
+/// (`tools/onnxruntime.sh`). Under CI its absence is a failure (CI tests both runtimes);
+/// elsewhere the test says that it ran on tract alone.
+pub fn runtimes() -> Vec<Runtime> {
+    let mut out = vec![Runtime::Tract];
+    match Runtime::open(RuntimeChoice::OnnxRuntime, None) {
+        Ok(o) => out.push(o.runtime),
+        Err(e) if std::env::var_os("CI").is_some() => {
+            panic!("CI runs the networks on both runtimes, but ONNX Runtime is missing: {e}")
+        }
+        Err(e) => println!("on tract alone: {e}"),
+    }
+    out
+}

@@ -1,0 +1,255 @@
+//! `volcap bench nets`: each network of the pipeline on its own, one thread, the same input
+//! every run: median milliseconds per network and model, and with `--profile` where tract
+//! spends them (per op kind and the slowest nodes of its optimized plan).
+
+use anyhow::{Context, anyhow};
+use clap::Args;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::time::Instant;
+use volcap_engine::model::{
+    Models, Precision, Runtime, RuntimeChoice, ShapeModel, preprocess::INPUT_SIZE,
+};
+use volcap_engine::model::{Net, NodeTime};
+
+#[derive(Args, Debug, Clone)]
+pub struct NetsArgs {
+    /// Shape models (NAME or NAME@int8, comma-separated).
+    #[arg(long = "model", value_delimiter = ',', default_value = "fourier-small")]
+    pub models: Vec<String>,
+    /// Runtimes (comma-separated): tract, onnxruntime (its library as the daemon finds it:
+    /// $VOLCAP_ONNXRUNTIME, /usr/lib/volcap/onnxruntime/, target/onnxruntime/).
+    #[arg(
+        long = "runtime",
+        value_delimiter = ',',
+        default_value = "tract,onnxruntime"
+    )]
+    pub runtimes: Vec<String>,
+    /// Timed runs per network (median reported).
+    #[arg(long, default_value_t = 20)]
+    pub runs: usize,
+    /// Also time every node of tract's optimized plan: totals per op kind and the
+    /// slowest nodes.
+    #[arg(long)]
+    pub profile: bool,
+    /// Slowest nodes listed per network with --profile.
+    #[arg(long, default_value_t = 12)]
+    pub top: usize,
+    /// Folder of the ONNX models.
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
+    /// Folder for nets.md (default docs/bench).
+    #[arg(long, default_value = "docs/bench")]
+    pub out: PathBuf,
+}
+
+/// Median milliseconds of `runs` calls (after one untimed call).
+fn timed(runs: usize, mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
+    f()?;
+    let mut t = Vec::with_capacity(runs.max(1));
+    for _ in 0..runs.max(1) {
+        let s = Instant::now();
+        f()?;
+        t.push(s.elapsed().as_secs_f64() * 1e3);
+    }
+    t.sort_by(f64::total_cmp);
+    Ok(t[t.len() / 2])
+}
+
+/// A deterministic input in [-1, 1] of `len` values (a network's time does not depend on
+/// its values, but a constant could take shortcuts).
+fn input(len: usize) -> Vec<f32> {
+    (0..len)
+        .map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0)
+        .collect()
+}
+
+pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
+    let s = INPUT_SIZE;
+    let rgb = input(3 * s * s);
+    let x = input(4 * s * s);
+    // First, on a quiet process (after tract's runs its pool's threads share the cores).
+    let filter = temporal_cost(a.runs)?;
+    let mut runtimes = Vec::new();
+    for r in &a.runtimes {
+        let choice = RuntimeChoice::parse(r.trim()).map_err(|e| anyhow!("--runtime: {e}"))?;
+        let opened = Runtime::open(choice, None).map_err(|e| anyhow!("--runtime {r}: {e}"))?;
+        runtimes.push(opened.runtime);
+    }
+    // (network, file) -> ms per runtime, in first-seen order.
+    let mut rows: Vec<(String, String, Vec<Option<f64>>)> = Vec::new();
+    let mut profile = String::new();
+    for (ri, rt) in runtimes.iter().enumerate() {
+        for m in &a.models {
+            let (name, prec) = match m.split_once('@') {
+                Some((n, p)) => (n, Precision::parse(p).map_err(anyhow::Error::msg)?),
+                None => (m.as_str(), Precision::F32),
+            };
+            let models = Models::load_on(&a.models_dir, name, prec, rt).map_err(|e| {
+                anyhow!(
+                    "model {m} in {} on {}: {e}",
+                    a.models_dir.display(),
+                    rt.label()
+                )
+            })?;
+            let shape: &Net = match &models.shape {
+                ShapeModel::Fourier(f) => &f.net,
+                ShapeModel::Mlp(n) => &n.encoder,
+            };
+            let nets: [(&str, &Net, &[f32], [usize; 4]); 3] = [
+                ("segmentation", &models.seg, &rgb, [1, 3, s, s]),
+                ("shape encoder", shape, &x, [1, 4, s, s]),
+                ("colour encoder", &models.color.encoder, &x, [1, 4, s, s]),
+            ];
+            for (what, net, data, dims) in nets {
+                let file = net
+                    .path()
+                    .file_name()
+                    .map(|f| f.to_string_lossy().to_string())
+                    .unwrap_or_default();
+                let row = match rows.iter().position(|r| r.1 == file) {
+                    Some(i) => i,
+                    None => {
+                        rows.push((what.to_string(), file.clone(), vec![None; runtimes.len()]));
+                        rows.len() - 1
+                    }
+                };
+                if rows[row].2[ri].is_some() {
+                    continue;
+                }
+                let args = [(&dims[..], data)];
+                let ms = timed(a.runs, || {
+                    net.run(&args).map(|_| ()).map_err(anyhow::Error::msg)
+                })
+                .with_context(|| format!("{file} on {}", rt.label()))?;
+                rows[row].2[ri] = Some(ms);
+                if a.profile && matches!(rt, Runtime::Tract) {
+                    let nodes = net.profile(&args, a.runs).map_err(anyhow::Error::msg)?;
+                    profile.push_str(&profile_md(&file, &nodes, a.top));
+                }
+            }
+        }
+    }
+    let labels: Vec<String> = runtimes.iter().map(|r| r.label()).collect();
+    let mut table = format!(
+        "| network | file | {} |\n|---|---|{}\n",
+        labels
+            .iter()
+            .map(|l| format!("{l} ms"))
+            .collect::<Vec<_>>()
+            .join(" | "),
+        "---|".repeat(labels.len())
+    );
+    for (what, file, ms) in &rows {
+        let cells: Vec<String> = ms
+            .iter()
+            .map(|m| m.map_or("-".into(), |m| format!("{m:.2}")))
+            .collect();
+        let _ = writeln!(table, "| {what} | {file} | {} |", cells.join(" | "));
+    }
+    let mut md = format!(
+        "# The networks one by one\n\n`volcap bench nets --model {} --runtime {}{}` (median of {} \
+         runs, one thread each).\n\n{table}",
+        a.models.join(","),
+        a.runtimes.join(","),
+        if a.profile { " --profile" } else { "" },
+        a.runs
+    );
+    md.push_str(&filter);
+    if a.profile {
+        md.push_str("\n## Where tract spends the time (optimized plan, per node)\n");
+        md.push_str(&profile);
+    }
+    std::fs::create_dir_all(&a.out).with_context(|| a.out.display().to_string())?;
+    let path = a.out.join("nets.md");
+    std::fs::write(&path, &md).with_context(|| path.display().to_string())?;
+    print!("{md}");
+    Ok(())
+}
+
+/// The `[temporal]` filter's own cost per frame on fourier-small's maps (128^2 x 31
+/// coefficients, interleaved) and the colour features (64^2 x 32, planar): the person still
+/// (the crop does not move: the last maps are read in place) and walking (the crop moves
+/// every frame: the last maps are resampled into the new crop first).
+fn temporal_cost(runs: usize) -> anyhow::Result<String> {
+    use volcap_engine::model::preprocess::Crop;
+    use volcap_engine::model::temporal::{MapLayout, Temporal, TemporalSettings};
+    let shape = MapLayout {
+        channels: 31,
+        size: 128,
+        interleaved: true,
+    };
+    let color = MapLayout {
+        channels: 32,
+        size: 64,
+        interleaved: false,
+    };
+    let s = INPUT_SIZE;
+    let mut out = String::from("\n| temporal filter, per frame | ms |\n|---|---|\n");
+    for (what, step) in [
+        ("person still (crop in place)", 0.0f32),
+        ("person walking (crop moves)", 0.01),
+    ] {
+        let mut t = Temporal::new(TemporalSettings::default());
+        let mut times = Vec::new();
+        let base_s = input(shape.channels * shape.size * shape.size);
+        let base_c = input(color.channels * color.size * color.size);
+        for k in 0..=runs.max(1) + 1 {
+            let mut mask = vec![0.0f32; s * s];
+            for y in 40..220 {
+                for x in 100..150 {
+                    mask[y * s + x] = 0.95;
+                }
+            }
+            let crop = Crop::from_mask(&mask, s).ok_or_else(|| anyhow!("no crop"))?;
+            let crop = Crop {
+                tx: crop.tx + step * k as f32,
+                ..crop
+            };
+            let mut sm = base_s.clone();
+            let mut cm = base_c.clone();
+            let v = 0.01 * (k % 2) as f32;
+            sm.iter_mut().chain(cm.iter_mut()).for_each(|x| *x += v);
+            let start = Instant::now();
+            let (Some(c), _) = t.steady_input(k as f64 / 30.0, 1, &mut mask, crop) else {
+                anyhow::bail!("the filter lost the person");
+            };
+            t.steady_maps(c, (shape, &mut sm), Some((color, &mut cm)));
+            let total = start.elapsed();
+            if k > 1 {
+                times.push(total.as_secs_f64() * 1e3);
+            }
+        }
+        times.sort_by(f64::total_cmp);
+        let _ = writeln!(out, "| {what} | {:.2} |", times[times.len() / 2]);
+    }
+    Ok(out)
+}
+
+/// Per op kind the total and share, then the slowest nodes.
+fn profile_md(file: &str, nodes: &[NodeTime], top: usize) -> String {
+    let total: f64 = nodes.iter().map(|n| n.ms).sum();
+    let mut kinds: BTreeMap<&str, (f64, usize)> = BTreeMap::new();
+    for n in nodes {
+        let e = kinds.entry(n.op.as_str()).or_default();
+        e.0 += n.ms;
+        e.1 += 1;
+    }
+    let mut kinds: Vec<_> = kinds.into_iter().collect();
+    kinds.sort_by(|a, b| b.1.0.total_cmp(&a.1.0));
+    let mut s = format!(
+        "\n### {file}: {total:.2} ms over {} nodes\n\n| op | nodes | ms | share |\n|---|---|---|---|\n",
+        nodes.len()
+    );
+    for (op, (ms, n)) in &kinds {
+        let _ = writeln!(s, "| {op} | {n} | {ms:.2} | {:.0} % |", 100.0 * ms / total);
+    }
+    let mut slow: Vec<&NodeTime> = nodes.iter().collect();
+    slow.sort_by(|a, b| b.ms.total_cmp(&a.ms));
+    s.push_str("\n| slowest nodes | op | ms |\n|---|---|---|\n");
+    for n in slow.into_iter().take(top) {
+        let _ = writeln!(s, "| {} | {} | {:.3} |", n.name, n.op, n.ms);
+    }
+    s
+}
