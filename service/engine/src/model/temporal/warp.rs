@@ -1,0 +1,137 @@
+//! The temporal filter's maps between frames: the last frame's maps resampled into this
+//! frame's crop (bilinear taps, computed once per crop change and map size) and the blend.
+
+use super::{Crop, MapLayout};
+
+/// A resampling of a `size x size` map from one crop's pixels into another's: bilinear
+/// taps per pixel, and whether the pixel fell inside the old map.
+pub(super) struct Taps {
+    taps: Vec<([usize; 4], [f32; 4])>,
+    pub(super) valid: Vec<bool>,
+}
+
+impl Taps {
+    /// The taps that bring a map made through `from` into the pixels of `to`; `None` when
+    /// the crop moved less than a hundredth of a map pixel anywhere (a still person's
+    /// filtered box): the map as it is.
+    pub(super) fn between(size: usize, from: Crop, to: Crop) -> Option<Self> {
+        let px = 0.5 * (size - 1) as f32;
+        let moved = ((to.tx - from.tx).abs() + (to.ty - from.ty).abs()) / from.s
+            + 2.0 * (to.s / from.s - 1.0).abs();
+        if moved * px < 0.01 {
+            return None;
+        }
+        let n = size * size;
+        let mut taps = vec![([0usize; 4], [0.0f32; 4]); n];
+        let mut valid = vec![false; n];
+        let m = (size - 1) as f32;
+        let ndc = |i: usize| -1.0 + 2.0 * i as f32 / m;
+        for (p, (ok, tap)) in valid.iter_mut().zip(&mut taps).enumerate() {
+            let (ux, uy) = (ndc(p % size), ndc(p / size));
+            // This crop's NDC -> input NDC -> the last crop's NDC -> its pixels.
+            let (x, y) = (to.s * ux + to.tx, to.s * uy + to.ty);
+            let (px, py) = (
+                ((x - from.tx) / from.s + 1.0) * 0.5 * m,
+                ((y - from.ty) / from.s + 1.0) * 0.5 * m,
+            );
+            if !(px >= 0.0 && py >= 0.0 && px <= m && py <= m) {
+                continue;
+            }
+            *ok = true;
+            // Integer taps; the weights are the fractional parts.
+            let (x0, y0) = ((px as usize).min(size - 2), (py as usize).min(size - 2));
+            let (fx, fy) = (px - x0 as f32, py - y0 as f32);
+            let i = y0 * size + x0;
+            *tap = (
+                [i, i + 1, i + size, i + size + 1],
+                [
+                    (1.0 - fx) * (1.0 - fy),
+                    fx * (1.0 - fy),
+                    (1.0 - fx) * fy,
+                    fx * fy,
+                ],
+            );
+        }
+        Some(Self { taps, valid })
+    }
+
+    /// `data` (layout `l`, made through the old crop) in the new crop's pixels; 0 where
+    /// the pixel fell outside the old map.
+    pub(super) fn apply(&self, l: MapLayout, data: &[f32]) -> Vec<f32> {
+        let n = l.size * l.size;
+        let mut out = vec![0.0f32; data.len()];
+        let c = l.channels;
+        if l.interleaved {
+            for (p, (idx, w)) in self.taps.iter().enumerate() {
+                if self.valid[p] {
+                    let o = &mut out[p * c..(p + 1) * c];
+                    for (t, wt) in idx.iter().zip(w) {
+                        for (v, d) in o.iter_mut().zip(&data[t * c..(t + 1) * c]) {
+                            *v += wt * d;
+                        }
+                    }
+                }
+            }
+        } else {
+            for (o, d) in out.chunks_exact_mut(n).zip(data.chunks_exact(n)) {
+                for (p, (idx, w)) in self.taps.iter().enumerate() {
+                    if self.valid[p] {
+                        o[p] = d[idx[0]] * w[0]
+                            + d[idx[1]] * w[1]
+                            + d[idx[2]] * w[2]
+                            + d[idx[3]] * w[3];
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The last map in this frame's pixels (borrowed when the crop did not move) and which
+/// pixels have a value (`None`: all).
+pub(super) fn resampled<'a>(
+    taps: Option<&'a Taps>,
+    l: MapLayout,
+    last: &'a [f32],
+) -> (std::borrow::Cow<'a, [f32]>, Option<&'a [bool]>) {
+    match taps {
+        None => (std::borrow::Cow::Borrowed(last), None),
+        Some(t) => (std::borrow::Cow::Owned(t.apply(l, last)), Some(&t.valid)),
+    }
+}
+
+/// `new = old + w (new - old)` per pixel where the last map had a value.
+pub(super) fn blend(
+    old: &[f32],
+    valid: Option<&[bool]>,
+    l: MapLayout,
+    new: &mut [f32],
+    weights: &[f32],
+) {
+    let n = l.size * l.size;
+    let ok = |p: usize| valid.is_none_or(|v| v[p]);
+    let mix = |v: &mut f32, o: f32, w: f32| *v = o + w * (*v - o);
+    if l.interleaved {
+        for (p, ((np, op), &w)) in new
+            .chunks_exact_mut(l.channels)
+            .zip(old.chunks_exact(l.channels))
+            .zip(weights)
+            .enumerate()
+        {
+            if w < 1.0 && ok(p) {
+                for (v, o) in np.iter_mut().zip(op) {
+                    mix(v, *o, w);
+                }
+            }
+        }
+    } else {
+        for (np, op) in new.chunks_exact_mut(n).zip(old.chunks_exact(n)) {
+            for (p, ((v, o), &w)) in np.iter_mut().zip(op).zip(weights).enumerate() {
+                if w < 1.0 && ok(p) {
+                    mix(v, *o, w);
+                }
+            }
+        }
+    }
+}
