@@ -4,9 +4,7 @@
 mod compute;
 mod live;
 mod temporal;
-pub use compute::{
-    ComputeBackend, ComputeConfig, DEFAULT_SEGMENT_THREAD_UP_TO, RuntimeSetting, THREADS,
-};
+pub use compute::{ComputeBackend, ComputeConfig, DEFAULT_SEGMENT_THREAD_UP_TO, THREADS};
 pub use live::{Live, LiveError};
 pub use temporal::TemporalConfig;
 

@@ -79,15 +79,14 @@ fn main() -> ExitCode {
             config::Precision::Int8 => volcap_engine::model::Precision::Int8,
         };
         let lib = cfg.compute.onnxruntime_lib.as_ref().map(|p| cfg.resolve(p));
-        let opened =
-            match volcap_engine::model::Runtime::open(cfg.compute.runtime.choice(), lib.as_deref())
-            {
-                Ok(o) => o,
-                Err(e) => {
-                    eprintln!("volcapd: compute.runtime in {}: {e}", cli.config.display());
-                    return ExitCode::from(EXIT_CONFIG);
-                }
-            };
+        let opened = match volcap_engine::model::Runtime::open(cfg.compute.runtime, lib.as_deref())
+        {
+            Ok(o) => o,
+            Err(e) => {
+                eprintln!("volcapd: compute.runtime in {}: {e}", cli.config.display());
+                return ExitCode::from(EXIT_CONFIG);
+            }
+        };
         if let Some(why) = &opened.fallback {
             tracing::warn!(%why, "compute.runtime = auto: the networks run on tract");
             if prec == volcap_engine::model::Precision::Int8 {

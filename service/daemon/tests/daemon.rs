@@ -7,7 +7,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{have, request, root, serial, start, state, wait_for};
+use common::{check_config, have, request, root, serial, start, state, wait_for};
 
 /// The sim board in its debugging mode (the oracle at 129^3): the endpoint tests check the
 /// server, not the networks, and run at the oracle's cheaper rate.
@@ -498,103 +498,6 @@ fn two_people_is_a_reported_state_not_a_garbled_render() {
 
 /// The product path: the sim camera through the trained networks (segmentation, shape,
 /// colour), localized and rendered by the engine, published like any frame.
-#[test]
-fn model_mode_renders_network_output() {
-    let _serial = serial();
-    let dir = std::env::temp_dir().join(format!("volcapd-model-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let scene = root().join("tests/scenes/front-walk.toml");
-    std::fs::write(
-        dir.join("b.toml"),
-        format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\ndisplay_size = 0\n[model]\ndir = \"{}\"\n",
-            scene.display(),
-            root().join("models").display()
-        ),
-    )
-    .unwrap();
-    let d = start(&dir.join("b.toml"));
-    let s = wait_for(&d.addr, "model frames", Duration::from_secs(60), |s| {
-        s["frames_published"].as_u64() > Some(1)
-    });
-    assert_eq!(s["mode"], "model", "{s}");
-    // The segmentation's count of people in the walking scene: exactly one.
-    assert_eq!(s["people"], 1, "{s}");
-    // No close-range model configured: nothing to report.
-    assert!(s["close_range"].is_null(), "{s}");
-    assert!(
-        s["mode_note"]
-            .as_str()
-            .unwrap()
-            .contains("trained networks")
-    );
-    let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
-    assert_eq!(st, 200);
-    let png = image::load_from_memory(&png).unwrap().to_rgba8();
-    assert_eq!(png.width(), 65);
-    let opaque = png.pixels().filter(|p| p[3] == 255).count();
-    assert!(
-        opaque > 50,
-        "the reconstructed person covers {opaque} pixels"
-    );
-    assert!(opaque < 65 * 65, "not everything is inside");
-    // A missing model folder is a clear start-up error naming the file.
-    std::fs::write(
-        dir.join("bad.toml"),
-        format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\n[model]\ndir = \"nowhere\"\n",
-            scene.display()
-        ),
-    )
-    .unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_volcapd"))
-        .args(["--check-config", "--config"])
-        .arg(dir.join("bad.toml"))
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("[model]") && err.contains("seg.onnx") && err.contains("not found"),
-        "{err}"
-    );
-    // The networks' runtime: ONNX Runtime asked for by name with a library that is not
-    // there is a start-up error naming the key and the file; tract always starts and says
-    // so; `auto` starts on one or the other and names it.
-    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models");
-    for (runtime, ok, says) in [
-        (
-            "runtime = \"onnxruntime\"\nonnxruntime_lib = \"/nowhere/libonnxruntime.so\"",
-            false,
-            "compute.runtime",
-        ),
-        ("runtime = \"tract\"", true, "F32 on tract"),
-        ("runtime = \"auto\"", true, "F32 on "),
-    ] {
-        std::fs::write(
-            dir.join("rt.toml"),
-            format!(
-                "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\n[model]\ndir = \"{}\"\n[compute]\n{runtime}\n",
-                scene.display(),
-                models.display()
-            ),
-        )
-        .unwrap();
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_volcapd"))
-            .args(["--check-config", "--config"])
-            .arg(dir.join("rt.toml"))
-            .output()
-            .unwrap();
-        let text = String::from_utf8_lossy(if ok { &out.stdout } else { &out.stderr }).to_string();
-        assert_eq!(out.status.success(), ok, "{runtime}: {text}");
-        assert!(text.contains(says), "{runtime}: {text}");
-        if !ok {
-            assert!(text.contains("/nowhere/libonnxruntime.so"), "{text}");
-        }
-    }
-    std::fs::remove_dir_all(&dir).ok();
-}
-
 fn test_jpeg(w: u32, h: u32, shade: u8) -> Vec<u8> {
     let img = image::RgbImage::from_fn(w, h, |x, _| image::Rgb([shade, (x * 4) as u8, 60]));
     let mut out = Vec::new();
@@ -661,23 +564,6 @@ fn file_backend_counts_and_skips_bad_frames() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// `volcapd --check-config --config PATH`: the exit code and stderr.
-fn check_config(path: &std::path::Path) -> (Option<i32>, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
-        .args(["--check-config", "--config"])
-        .arg(path)
-        .output()
-        .unwrap();
-    (
-        o.status.code(),
-        format!(
-            "{}{}",
-            String::from_utf8_lossy(&o.stderr),
-            String::from_utf8_lossy(&o.stdout)
-        ),
-    )
-}
-
 /// Bad camera keys are configuration errors (exit 2) that say what to do; a backend this
 /// build lacks is checked whole and named in a note (issue #37, item 2).
 #[test]
@@ -708,58 +594,5 @@ fn camera_config_errors_are_clear() {
     if !cfg!(feature = "v4l2") {
         assert!(e.contains("note:") && e.contains("--features v4l2"), "{e}");
     }
-    std::fs::remove_dir_all(&dir).ok();
-}
-
-/// A person cut by the frame's lower edge (tests/scenes/cut-by-edge.toml: an upper body)
-/// is encoded by the close-range model once `close_range_frames` frames in a row were cut;
-/// `/state` says which model encodes.
-#[test]
-fn close_range_model_takes_over_when_the_frame_cuts_the_person() {
-    let _serial = serial();
-    let dir = std::env::temp_dir().join(format!("volcapd-close-live-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::write(
-        dir.join("b.toml"),
-        format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 33\n[model]\ndir = \"{}\"\nclose_range = \"fourier-small-upper\"\nclose_range_frames = 2\n",
-            root().join("tests/scenes/cut-by-edge.toml").display(),
-            root().join("models").display()
-        ),
-    )
-    .unwrap();
-    let d = start(&dir.join("b.toml"));
-    let s = wait_for(&d.addr, "close-range model", Duration::from_secs(60), |s| {
-        s["close_range"] == true
-    });
-    assert_eq!(s["mode"], "model", "{s}");
-    drop(d);
-    std::fs::remove_dir_all(&dir).ok();
-}
-
-/// `[model] close_range`: a committed model loads with the main one at `--check-config`; a
-/// missing one is a configuration error naming its file.
-#[test]
-fn close_range_model_is_checked_at_start() {
-    let _serial = serial();
-    let dir = std::env::temp_dir().join(format!("volcapd-close-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let run = |close: &str| {
-        let text = format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\n[model]\ndir = \"{}\"\nclose_range = \"{close}\"\n",
-            root().join("tests/scenes/front-walk.toml").display(),
-            root().join("models").display()
-        );
-        std::fs::write(dir.join("c.toml"), text).unwrap();
-        check_config(&dir.join("c.toml"))
-    };
-    let (code, e) = run("fourier-small-upper");
-    assert_eq!(code, Some(0), "{e}");
-    let (code, e) = run("no-such-model");
-    assert_eq!(code, Some(2), "{e}");
-    assert!(
-        e.contains("shape-no-such-model") && e.contains("c.toml"),
-        "{e}"
-    );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -10,7 +10,7 @@ use std::time::Instant;
 use volcap_engine::model::{Precision, ShapeNets};
 
 /// Median seconds of `runs` calls of `f` (after one untimed call).
-fn timed(runs: usize, mut f: impl FnMut()) -> f64 {
+pub(crate) fn timed(runs: usize, mut f: impl FnMut()) -> f64 {
     f();
     let mut t: Vec<f64> = (0..runs.max(1))
         .map(|_| {

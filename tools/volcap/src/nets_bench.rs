@@ -44,19 +44,6 @@ pub struct NetsArgs {
     pub out: PathBuf,
 }
 
-/// Median milliseconds of `runs` calls (after one untimed call).
-fn timed(runs: usize, mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
-    f()?;
-    let mut t = Vec::with_capacity(runs.max(1));
-    for _ in 0..runs.max(1) {
-        let s = Instant::now();
-        f()?;
-        t.push(s.elapsed().as_secs_f64() * 1e3);
-    }
-    t.sort_by(f64::total_cmp);
-    Ok(t[t.len() / 2])
-}
-
 /// A deterministic input in [-1, 1] of `len` values (a network's time does not depend on
 /// its values, but a constant could take shortcuts).
 fn input(len: usize) -> Vec<f32> {
@@ -119,10 +106,13 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
                     continue;
                 }
                 let args = [(&dims[..], data)];
-                let ms = timed(a.runs, || {
-                    net.run(&args).map(|_| ()).map_err(anyhow::Error::msg)
-                })
-                .with_context(|| format!("{file} on {}", rt.label()))?;
+                // One checked run, then the timed ones (crate::mlp_bench::timed).
+                net.run(&args)
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("{file} on {}", rt.label()))?;
+                let ms = crate::mlp_bench::timed(a.runs, || {
+                    let _ = net.run(&args);
+                }) * 1e3;
                 rows[row].2[ri] = Some(ms);
                 if a.profile && matches!(rt, Runtime::Tract) {
                     let nodes = net.profile(&args, a.runs).map_err(anyhow::Error::msg)?;

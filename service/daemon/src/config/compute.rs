@@ -2,6 +2,7 @@
 
 use serde::Deserialize;
 use std::path::PathBuf;
+use volcap_engine::model::RuntimeChoice;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -35,32 +36,11 @@ pub struct ComputeConfig {
     /// (ONNX Runtime when its library is found and loads, else tract, logged and shown in
     /// `/state` and D-Bus). Default `auto`.
     #[serde(default)]
-    pub runtime: RuntimeSetting,
+    pub runtime: RuntimeChoice,
     /// ONNX Runtime's library (`libonnxruntime.so`); default: searched in
     /// `$VOLCAP_ONNXRUNTIME`, `/usr/lib/volcap/onnxruntime/`, `target/onnxruntime/`.
     #[serde(default)]
     pub onnxruntime_lib: Option<PathBuf>,
-}
-
-/// `compute.runtime`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum RuntimeSetting {
-    Tract,
-    Onnxruntime,
-    #[default]
-    Auto,
-}
-
-impl RuntimeSetting {
-    pub fn choice(self) -> volcap_engine::model::RuntimeChoice {
-        use volcap_engine::model::RuntimeChoice;
-        match self {
-            Self::Tract => RuntimeChoice::Tract,
-            Self::Onnxruntime => RuntimeChoice::OnnxRuntime,
-            Self::Auto => RuntimeChoice::Auto,
-        }
-    }
 }
 
 /// Default of `compute.segment_thread_up_to`: measured on 2 cores, the split takes 129^3 from
@@ -78,7 +58,7 @@ impl Default for ComputeConfig {
             backend: ComputeBackend::default(),
             threads: d_threads(),
             segment_thread_up_to: d_segment_thread_up_to(),
-            runtime: RuntimeSetting::default(),
+            runtime: RuntimeChoice::default(),
             onnxruntime_lib: None,
         }
     }

@@ -142,14 +142,14 @@ fn errors_name_file_line_and_key() {
 /// key and the value's line.
 #[test]
 fn compute_runtime_defaults_and_bad_values() {
-    use super::RuntimeSetting;
+    use volcap_engine::model::RuntimeChoice;
     let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
     let c = Config::parse(base, Path::new("b.toml")).unwrap();
-    assert_eq!(c.compute.runtime, RuntimeSetting::Auto);
+    assert_eq!(c.compute.runtime, RuntimeChoice::Auto);
     for (v, want) in [
-        ("tract", RuntimeSetting::Tract),
-        ("onnxruntime", RuntimeSetting::Onnxruntime),
-        ("auto", RuntimeSetting::Auto),
+        ("tract", RuntimeChoice::Tract),
+        ("onnxruntime", RuntimeChoice::OnnxRuntime),
+        ("auto", RuntimeChoice::Auto),
     ] {
         let c = Config::parse(
             &format!("{base}[compute]\nruntime = \"{v}\"\n"),

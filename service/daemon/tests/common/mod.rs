@@ -8,6 +8,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+/// The volcapd built for these tests.
+pub fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_volcapd")
+}
+
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
@@ -251,4 +256,21 @@ pub fn trickling(addr: &str, from: &str, n: usize) -> Vec<TcpStream> {
             Some(s)
         })
         .collect()
+}
+
+/// `volcapd --check-config --config PATH`: the exit code and stderr.
+pub fn check_config(path: &std::path::Path) -> (Option<i32>, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_volcapd"))
+        .args(["--check-config", "--config"])
+        .arg(path)
+        .output()
+        .unwrap();
+    (
+        o.status.code(),
+        format!(
+            "{}{}",
+            String::from_utf8_lossy(&o.stderr),
+            String::from_utf8_lossy(&o.stdout)
+        ),
+    )
 }

@@ -11,8 +11,9 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// `[compute] runtime`: what the configuration asks for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// `[compute] runtime`: what the configuration asks for (`tract`, `onnxruntime`, `auto`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum RuntimeChoice {
     /// tract, always available.
     Tract,

@@ -107,25 +107,14 @@ impl TemporalSettings {
                 Err((name, format!("{name} = {v}: need a value in {range}")))
             }
         };
-        let (c, m, g) = (
-            self.crop_min_cutoff_hz,
-            self.map_min_cutoff_hz,
-            self.max_gap_s,
-        );
-        within(
-            "crop_min_cutoff_hz",
-            c,
-            c > 0.0 && c <= 100.0,
-            "(0, 100] Hz",
-        )?;
-        within("map_min_cutoff_hz", m, m > 0.0 && m <= 100.0, "(0, 100] Hz")?;
-        let mc = self.map_change_cutoff_hz;
-        within(
-            "map_change_cutoff_hz",
-            mc,
-            mc > 0.0 && mc <= 100.0,
-            "(0, 100] Hz",
-        )?;
+        for (name, v) in [
+            ("crop_min_cutoff_hz", self.crop_min_cutoff_hz),
+            ("map_min_cutoff_hz", self.map_min_cutoff_hz),
+            ("map_change_cutoff_hz", self.map_change_cutoff_hz),
+        ] {
+            within(name, v, v > 0.0 && v <= 100.0, "(0, 100] Hz")?;
+        }
+        let g = self.max_gap_s;
         within("max_gap_s", g, g > 0.0 && g <= 60.0, "(0, 60] s")?;
         for (name, v) in [("crop_beta", self.crop_beta), ("map_beta", self.map_beta)] {
             within(name, v, (0.0..=10_000.0).contains(&v), "[0, 10000]")?;
@@ -247,6 +236,13 @@ struct LastMaps {
     /// Per shape-map value: its filtered rate of change (per second).
     rate: Vec<f32>,
     color: Option<(MapLayout, Vec<f32>)>,
+    /// Kept from frame to frame: the taps of a moved crop (shape and colour grids) and the
+    /// buffers the last maps and rates are resampled into.
+    shape_taps: Taps,
+    color_taps: Taps,
+    spare: Vec<f32>,
+    spare_rate: Vec<f32>,
+    spare_color: Vec<f32>,
 }
 
 /// What [`Temporal::steady_input`] did with a frame.
@@ -341,16 +337,28 @@ impl Temporal {
     ) -> (Option<Crop>, Step) {
         let size = (mask.len() as f64).sqrt() as usize;
         let step = self.continuation(t_s, people, mask, crop);
-        if let Step::Reset(_) = step {
-            self.reset();
-            self.resets += 1;
-            self.on = mask.iter().map(|&m| m > 0.5).collect();
-            self.against = vec![0; mask.len()];
-        } else {
+        // Where the segmenter's mask moved since the last frame (a reset starts again from
+        // this one); then this mask, before steadying, is the next frame's last one.
+        let moving = match step {
+            Step::Continued => Some(moving_blocks(
+                mask,
+                &self.raw,
+                size,
+                self.settings.mask_motion,
+            )),
+            Step::Reset(_) => {
+                self.reset();
+                self.resets += 1;
+                self.on = mask.iter().map(|&m| m > 0.5).collect();
+                self.against = vec![0; mask.len()];
+                None
+            }
+        };
+        self.raw.clear();
+        self.raw.extend_from_slice(mask);
+        if let Some(moving) = moving {
             self.continued += 1;
             let (lo, hi) = (self.settings.mask_low, self.settings.mask_high);
-            let raw_now = mask.to_vec();
-            let moving = moving_blocks(&raw_now, &self.raw, size, self.settings.mask_motion);
             let nb = size.div_ceil(MOTION_BLOCK);
             let hold = self.settings.mask_hold_frames.min(255) as u8;
             let pixels = mask.iter_mut().zip(&mut self.on).zip(&mut self.against);
@@ -370,11 +378,6 @@ impl Temporal {
                     *m = *out;
                 }
             }
-            self.raw = raw_now;
-        }
-        if let Step::Reset(_) = step {
-            self.raw.clear();
-            self.raw.extend_from_slice(mask);
         }
         self.out.clear();
         self.out.extend_from_slice(mask);
@@ -470,37 +473,33 @@ impl Temporal {
             Some(mut last) if self.dt > 0.0 && same_layout(&last, &color) => {
                 // The last maps in this frame's crop (as they are when the crop did not
                 // move), once per map: the weights and the blend read the same values.
-                let taps = Taps::between(shape.0.size, last.crop, crop);
-                let (old, valid) = resampled(taps.as_ref(), shape.0, &last.shape.1);
-                let mut rate = match &taps {
-                    None => std::mem::take(&mut last.rate),
-                    Some(t) => t.apply(shape.0, &last.rate),
-                };
-                let weights = self.blend_weights(&old, valid, shape.0, shape.1, &mut rate);
-                last.rate = rate;
-                blend(&old, valid, shape.0, shape.1, &weights);
-                drop(old);
-                if let (Some((_, lc)), Some((l, d))) = (&mut last.color, color.as_mut()) {
-                    let l = *l;
-                    // The shape map's weights at the colour map's pixels (nearest: both
-                    // grids span the crop's NDC corner to corner).
-                    let w = if l.size == shape.0.size {
-                        weights
+                let l = shape.0;
+                let moved = last.shape_taps.set(l.size, last.crop, crop);
+                if moved {
+                    last.shape_taps.apply(l, &last.rate, &mut last.spare_rate);
+                    std::mem::swap(&mut last.rate, &mut last.spare_rate);
+                }
+                let (old, valid) =
+                    resampled(&last.shape_taps, moved, l, &last.shape.1, &mut last.spare);
+                let weights = self.blend_weights(old, valid, l, shape.1, &mut last.rate);
+                blend(old, valid, l, shape.1, &weights);
+                if let (Some((_, lc)), Some((lcol, d))) = (&mut last.color, color.as_mut()) {
+                    let lcol = *lcol;
+                    let (w, taps, moved) = if lcol.size == l.size {
+                        (weights, &last.shape_taps, moved)
                     } else {
-                        let (a, b) = (shape.0.size - 1, l.size - 1);
+                        // The shape map's weights at the colour map's pixels (nearest:
+                        // both grids span the crop's NDC corner to corner).
+                        let (a, b) = (l.size - 1, lcol.size - 1);
                         let near = |i: usize| (i * a + b / 2) / b;
-                        (0..l.size * l.size)
-                            .map(|p| weights[near(p / l.size) * shape.0.size + near(p % l.size)])
-                            .collect()
+                        let w = (0..lcol.size * lcol.size)
+                            .map(|p| weights[near(p / lcol.size) * l.size + near(p % lcol.size)])
+                            .collect();
+                        let moved = last.color_taps.set(lcol.size, last.crop, crop);
+                        (w, &last.color_taps, moved)
                     };
-                    let taps = if l.size == shape.0.size {
-                        taps
-                    } else {
-                        Taps::between(l.size, last.crop, crop)
-                    };
-                    let (old, valid) = resampled(taps.as_ref(), l, lc);
-                    blend(&old, valid, l, d, &w);
-                    drop(old);
+                    let (old, valid) = resampled(taps, moved, lcol, lc, &mut last.spare_color);
+                    blend(old, valid, lcol, d, &w);
                     lc.copy_from_slice(d);
                 }
                 // This frame's maps are the next one's last (in the same buffers).
@@ -514,6 +513,11 @@ impl Temporal {
                     shape: (shape.0, shape.1.to_vec()),
                     rate: vec![0.0; shape.1.len()],
                     color: color.map(|(l, d)| (l, d.to_vec())),
+                    shape_taps: Taps::default(),
+                    color_taps: Taps::default(),
+                    spare: Vec::new(),
+                    spare_rate: Vec::new(),
+                    spare_color: Vec::new(),
                 });
             }
         }

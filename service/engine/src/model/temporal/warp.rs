@@ -1,32 +1,36 @@
 //! The temporal filter's maps between frames: the last frame's maps resampled into this
-//! frame's crop (bilinear taps, computed once per crop change and map size) and the blend.
+//! frame's crop (bilinear taps, computed once per crop change and map size, into buffers
+//! kept from frame to frame) and the blend.
 
 use super::{Crop, MapLayout};
 
 /// A resampling of a `size x size` map from one crop's pixels into another's: bilinear
 /// taps per pixel, and whether the pixel fell inside the old map.
+#[derive(Default)]
 pub(super) struct Taps {
     taps: Vec<([usize; 4], [f32; 4])>,
     pub(super) valid: Vec<bool>,
 }
 
 impl Taps {
-    /// The taps that bring a map made through `from` into the pixels of `to`; `None` when
-    /// the crop moved less than a hundredth of a map pixel anywhere (a still person's
-    /// filtered box): the map as it is.
-    pub(super) fn between(size: usize, from: Crop, to: Crop) -> Option<Self> {
+    /// Set to the taps that bring a map made through `from` into the pixels of `to`; false
+    /// (nothing set) when the crop moved less than a hundredth of a map pixel anywhere (a
+    /// still person's filtered box): the map as it is.
+    pub(super) fn set(&mut self, size: usize, from: Crop, to: Crop) -> bool {
         let px = 0.5 * (size - 1) as f32;
         let moved = ((to.tx - from.tx).abs() + (to.ty - from.ty).abs()) / from.s
             + 2.0 * (to.s / from.s - 1.0).abs();
         if moved * px < 0.01 {
-            return None;
+            return false;
         }
         let n = size * size;
-        let mut taps = vec![([0usize; 4], [0.0f32; 4]); n];
-        let mut valid = vec![false; n];
+        self.taps.clear();
+        self.taps.resize(n, ([0usize; 4], [0.0f32; 4]));
+        self.valid.clear();
+        self.valid.resize(n, false);
         let m = (size - 1) as f32;
         let ndc = |i: usize| -1.0 + 2.0 * i as f32 / m;
-        for (p, (ok, tap)) in valid.iter_mut().zip(&mut taps).enumerate() {
+        for (p, (ok, tap)) in self.valid.iter_mut().zip(&mut self.taps).enumerate() {
             let (ux, uy) = (ndc(p % size), ndc(p / size));
             // This crop's NDC -> input NDC -> the last crop's NDC -> its pixels.
             let (x, y) = (to.s * ux + to.tx, to.s * uy + to.ty);
@@ -52,14 +56,15 @@ impl Taps {
                 ],
             );
         }
-        Some(Self { taps, valid })
+        true
     }
 
-    /// `data` (layout `l`, made through the old crop) in the new crop's pixels; 0 where
-    /// the pixel fell outside the old map.
-    pub(super) fn apply(&self, l: MapLayout, data: &[f32]) -> Vec<f32> {
+    /// `data` (layout `l`, made through the old crop) in the new crop's pixels, into `out`;
+    /// 0 where the pixel fell outside the old map.
+    pub(super) fn apply(&self, l: MapLayout, data: &[f32], out: &mut Vec<f32>) {
         let n = l.size * l.size;
-        let mut out = vec![0.0f32; data.len()];
+        out.clear();
+        out.resize(data.len(), 0.0);
         let c = l.channels;
         if l.interleaved {
             for (p, (idx, w)) in self.taps.iter().enumerate() {
@@ -84,20 +89,23 @@ impl Taps {
                 }
             }
         }
-        out
     }
 }
 
-/// The last map in this frame's pixels (borrowed when the crop did not move) and which
-/// pixels have a value (`None`: all).
+/// The last map in this frame's pixels, and which pixels have a value (`None`: all): the
+/// map itself when the crop did not move (`moved` false), else resampled into `spare`.
 pub(super) fn resampled<'a>(
-    taps: Option<&'a Taps>,
+    taps: &'a Taps,
+    moved: bool,
     l: MapLayout,
     last: &'a [f32],
-) -> (std::borrow::Cow<'a, [f32]>, Option<&'a [bool]>) {
-    match taps {
-        None => (std::borrow::Cow::Borrowed(last), None),
-        Some(t) => (std::borrow::Cow::Owned(t.apply(l, last)), Some(&t.valid)),
+    spare: &'a mut Vec<f32>,
+) -> (&'a [f32], Option<&'a [bool]>) {
+    if moved {
+        taps.apply(l, last, spare);
+        (spare, Some(&taps.valid))
+    } else {
+        (last, None)
     }
 }
 
