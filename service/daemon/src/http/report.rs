@@ -1,0 +1,150 @@
+//! What the daemon reports over HTTP: `/state` (JSON; stream clients' addresses only with
+//! the token) and `/metrics` (Prometheus text).
+
+use super::{App, peer_ip, token_refusal};
+use crate::pipeline::STAGES;
+use axum::extract::{ConnectInfo, State};
+use axum::http::{HeaderMap, header};
+use axum::response::{IntoResponse, Response};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// What `superseded` counts, said where it is shown (`/state`, `/metrics`).
+pub(super) const SUPERSEDED_NOTE: &str = "frames replaced by a newer one before the next stage needed them (latest frame wins: nothing queues, the next stage takes the newest); not lost";
+
+/// `/state`; stream clients' addresses only with the token (`details`), counts to anyone.
+pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
+    let sh = &app.shared;
+    let st = sh.state.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    let (state, reason) = st.name_reason();
+    let stages: serde_json::Map<String, serde_json::Value> = STAGES
+        .iter()
+        .zip(&sh.stats)
+        .map(|(n, s)| {
+            let (p50, p99) = s.percentiles();
+            (n.to_string(), serde_json::json!({"p50_ms": p50, "p99_ms": p99, "frames": s.frames.load(Ordering::Relaxed), "superseded": s.superseded.load(Ordering::Relaxed), "lost": s.lost.load(Ordering::Relaxed)}))
+        })
+        .collect();
+    let (l50, l99) = sh.e2e.percentiles();
+    let published = sh.e2e.frames.load(Ordering::Relaxed);
+    let up = sh.started.elapsed().as_secs_f64();
+    let live = sh.live();
+    let camera = sh.camera.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    let per_client: Vec<serde_json::Value> = app
+        .table
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .iter()
+        .map(|(id, c)| {
+            let secs = c.since.elapsed().as_secs_f64();
+            let sent = c.sent.load(Ordering::Relaxed);
+            let mut v = serde_json::json!({
+                "id": id, "connected_s": secs, "frames_sent": sent,
+                "frames_skipped": c.skipped.load(Ordering::Relaxed),
+                "fps": if secs > 0.0 { sent as f64 / secs } else { 0.0 },
+            });
+            if details {
+                v["peer"] = c.peer.clone().into();
+            }
+            v
+        })
+        .collect();
+    serde_json::json!({
+        "state": state, "reason": reason, "mode": sh.mode,
+        "mode_note": match sh.mode {
+            "oracle" => "ground-truth field rendered through the engine: not a reconstruction",
+            "camera" => "the camera frame itself: no reconstruction",
+            "model" => "reconstruction by the trained networks (segmentation, shape, colour; see models/)",
+            _ => "",
+        },
+        "people": match sh.people.load(Ordering::Relaxed) {
+            usize::MAX => serde_json::Value::Null,
+            n => n.into(),
+        },
+        "field": sh.field_label,
+        "runtime": (!sh.runtime.is_empty()).then(|| serde_json::json!({
+            "name": sh.runtime,
+            "note": sh.runtime_note,
+        })),
+        "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
+        "temporal": sh.temporal.then(|| serde_json::json!({
+            "resets": sh.temporal_resets.load(Ordering::Relaxed),
+        })),
+        "resolution": live.resolution,
+        "display_size": live.out_size(),
+        "paused": live.paused,
+        "frames_published": published,
+        "fps": if up > 0.0 { published as f64 / up } else { 0.0 },
+        "latency_ms": {"p50": l50, "p99": l99},
+        "stages": stages,
+        "stage_notes": {
+            "superseded": SUPERSEDED_NOTE,
+            "lost": "frames a stage failed on (an error): frames lost",
+        },
+        "camera": camera,
+        "showing_placeholder": sh.published.borrow().as_ref().is_some_and(|f| f.placeholder),
+        "clients": app.clients.load(Ordering::SeqCst),
+        "per_client": per_client,
+        "client_limit": app.client_limit.load(Ordering::SeqCst),
+        "controls": app.controls(),
+        "view": {"yaw": live.yaw, "pitch": live.pitch, "distance": live.distance},
+        "uptime_s": up,
+    })
+}
+
+pub(super) async fn state(
+    State(app): State<Arc<App>>,
+    headers: HeaderMap,
+    peer: Option<axum::Extension<ConnectInfo<SocketAddr>>>,
+) -> Response {
+    // A wrong token here counts like one on /view (no free guessing through /state).
+    let details = headers.contains_key(header::AUTHORIZATION)
+        && match token_refusal(&app, &headers, peer_ip(&peer)) {
+            None => true,
+            Some(r) => return r,
+        };
+    (
+        [(header::CONTENT_TYPE, "application/json")],
+        state_json(&app, details).to_string(),
+    )
+        .into_response()
+}
+
+pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
+    let sh = &app.shared;
+    let mut s = String::new();
+    s.push_str("# TYPE volcap_frames_published_total counter\n");
+    s.push_str(&format!(
+        "volcap_frames_published_total {}\n",
+        sh.e2e.frames.load(Ordering::Relaxed)
+    ));
+    s.push_str("# TYPE volcap_stage_ms summary\n");
+    for (n, st) in STAGES.iter().zip(&sh.stats) {
+        let (p50, p99) = st.percentiles();
+        s.push_str(&format!("volcap_stage_ms{{stage=\"{n}\",quantile=\"0.5\"}} {p50}\nvolcap_stage_ms{{stage=\"{n}\",quantile=\"0.99\"}} {p99}\n"));
+    }
+    s.push_str(&format!(
+        "# HELP volcap_stage_superseded_total {SUPERSEDED_NOTE}\n# TYPE volcap_stage_superseded_total counter\n"
+    ));
+    for (n, st) in STAGES.iter().zip(&sh.stats) {
+        s.push_str(&format!(
+            "volcap_stage_superseded_total{{stage=\"{n}\"}} {}\n",
+            st.superseded.load(Ordering::Relaxed)
+        ));
+    }
+    s.push_str("# HELP volcap_stage_lost_total frames a stage failed on (an error)\n# TYPE volcap_stage_lost_total counter\n");
+    for (n, st) in STAGES.iter().zip(&sh.stats) {
+        s.push_str(&format!(
+            "volcap_stage_lost_total{{stage=\"{n}\"}} {}\n",
+            st.lost.load(Ordering::Relaxed)
+        ));
+    }
+    let (l50, l99) = sh.e2e.percentiles();
+    s.push_str(&format!("# TYPE volcap_latency_ms summary\nvolcap_latency_ms{{quantile=\"0.5\"}} {l50}\nvolcap_latency_ms{{quantile=\"0.99\"}} {l99}\n"));
+    s.push_str(&format!(
+        "# TYPE volcap_clients gauge\nvolcap_clients {}\n",
+        app.clients.load(Ordering::SeqCst)
+    ));
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()
+}
