@@ -7,7 +7,7 @@
 #   --root DIR      install under DIR (a staging root, as for packaging and tests); default /
 #   --board NAME    board-config/NAME.toml becomes /etc/volcap/volcapd.toml (default: sim)
 #   --binary PATH   install this volcapd instead of building one
-#   --features L    cargo features for the build (default: appliance, i.e. v4l2)
+#   --features L    cargo features for the build (default: appliance, i.e. v4l2 and rtsp)
 #   --force         overwrite an existing /etc/volcap/volcapd.toml
 #
 # Paths inside the installed config point at the final locations (/usr/share/volcap/...).
@@ -28,6 +28,24 @@ while [ $# -gt 0 ]; do
   esac
 done
 [ -f "board-config/$board.toml" ] || { echo "install.sh: no board-config/$board.toml" >&2; exit 2; }
+
+# The packages the features need: to build (headers) and to run (GStreamer's encoders,
+# RTSP server and client plugins); installed on a real root with apt, named otherwise.
+pkgs=
+case ",$features," in *,appliance,*|*,v4l2,*) pkgs="$pkgs libclang-dev" ;; esac
+case ",$features," in
+  *,appliance,*|*,rtsp,*)
+    pkgs="$pkgs libgstreamer1.0-dev libgstreamer-plugins-base1.0-dev libgstrtspserver-1.0-dev \
+      gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-ugly \
+      gstreamer1.0-plugins-bad gstreamer1.0-rtsp" ;;
+esac
+if [ -n "$pkgs" ]; then
+  if [ "$root" = / ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $pkgs >/dev/null
+  else
+    echo "install.sh: features $features need these Debian packages:$pkgs" >&2
+  fi
+fi
 
 if [ -z "$binary" ]; then
   cargo build --release -p volcapd --features "$features"

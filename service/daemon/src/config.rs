@@ -3,9 +3,11 @@
 
 mod compute;
 mod live;
+pub mod rtsp;
 mod temporal;
 pub use compute::{ComputeBackend, ComputeConfig, DEFAULT_SEGMENT_THREAD_UP_TO, THREADS};
 pub use live::{Live, LiveError};
+pub use rtsp::RtspConfig;
 pub use temporal::TemporalConfig;
 
 use serde::Deserialize;
@@ -370,6 +372,8 @@ pub struct Config {
     pub compute: ComputeConfig,
     #[serde(default)]
     pub temporal: TemporalConfig,
+    #[serde(default)]
+    pub rtsp: RtspConfig,
     #[serde(skip)]
     pub file: PathBuf,
 }
@@ -478,6 +482,24 @@ impl Config {
         in_range("compute.threads", self.compute.threads, &THREADS, "")?;
         if let Err((key, msg)) = self.temporal.values().check() {
             return bad(format!("temporal.{key}"), msg);
+        }
+        if let Err((key, msg)) = self.rtsp.check() {
+            return bad(format!("rtsp.{key}"), msg);
+        }
+        if let Some(b) = self.rtsp.bind
+            && b.port() != 0
+            && b.port() == self.http.bind.port()
+            && (b.ip() == self.http.bind.ip()
+                || b.ip().is_unspecified()
+                || self.http.bind.ip().is_unspecified())
+        {
+            return bad(
+                "rtsp.bind",
+                format!(
+                    "{b} is the HTTP server's address (http.bind = {})",
+                    self.http.bind
+                ),
+            );
         }
         in_range(
             "model.close_range_frames",

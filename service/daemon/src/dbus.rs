@@ -118,6 +118,13 @@ impl Control {
         if new.compute.threads != old.compute.threads {
             restart.push("compute.threads");
         }
+        if new.rtsp != old.rtsp {
+            restart.push("rtsp");
+        }
+        if new.rtsp.bind.is_some() && new.http.token != old.http.token {
+            // The RTSP server's credentials are set when it starts.
+            restart.push("http.token (for RTSP)");
+        }
         // Keep what is running, take the rest of the new file.
         let mut keep = new;
         keep.http.bind = old.http.bind;
@@ -247,6 +254,13 @@ impl Capture1 {
     #[zbus(property)]
     fn model(&self) -> String {
         self.ctl.snapshot().model
+    }
+
+    /// H.264 over RTSP (`[rtsp]`): `off`, or where it is served and how many clients are
+    /// admitted, the push's target and state, and the encoder.
+    #[zbus(property)]
+    fn rtsp(&self) -> String {
+        self.ctl.app.rtsp.summary()
     }
 
     /// Grid points per axis (2^level + 1).

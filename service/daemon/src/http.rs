@@ -39,6 +39,8 @@ pub struct App {
     /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can
     /// never share its address), resolution, coarse level, and the bytes.
     pub mesh_cache: Mutex<Option<MeshCache>>,
+    /// RTSP's figures (`[rtsp]`; off unless the daemon sets them after `new`).
+    pub rtsp: Arc<crate::rtsp::Status>,
 }
 
 pub use mesh::{MESH_CONCURRENCY, MeshCache};
@@ -63,6 +65,7 @@ impl App {
             loopback_bind,
             mesh_gate: mesh::mesh_gate(),
             mesh_cache: Mutex::new(None),
+            rtsp: Default::default(),
         }
     }
 

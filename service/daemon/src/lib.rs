@@ -9,3 +9,4 @@ pub mod netguard;
 pub mod notify;
 pub mod pipeline;
 pub mod placeholder;
+pub mod rtsp;

@@ -12,7 +12,7 @@ use std::process::ExitCode;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use volcapd::{capture, config, dbus, http, notify, pipeline};
+use volcapd::{capture, config, dbus, http, notify, pipeline, rtsp};
 
 #[derive(Parser)]
 #[command(name = "volcapd", version, about = "volcap appliance daemon")]
@@ -150,8 +150,21 @@ fn main() -> ExitCode {
         }
     };
     if cli.check_config {
-        println!("{}", summary(&source));
+        match rtsp::missing_feature(&cfg) {
+            Some(feature) => println!(
+                "{}\nnote: this volcapd was built without the `{feature}` feature, so it cannot serve this board's [rtsp]; build the daemon with `--features {feature}` for it",
+                summary(&source)
+            ),
+            None => println!("{}", summary(&source)),
+        }
         return ExitCode::SUCCESS;
+    }
+    if let Some(feature) = rtsp::missing_feature(&cfg) {
+        eprintln!(
+            "volcapd: [rtsp] in {}: this volcapd was built without the `{feature}` feature; rebuild with `--features {feature}` (needs libgstreamer1.0-dev, libgstrtspserver-1.0-dev) or remove [rtsp]",
+            cli.config.display()
+        );
+        return ExitCode::from(EXIT_CONFIG);
     }
     tracing::info!(config = %cli.config.display(), board = %cfg.description, "starting");
     let (tx, _rx) = tokio::sync::watch::channel(None);
@@ -160,13 +173,16 @@ fn main() -> ExitCode {
         shared.set_runtime(label, fallback);
     }
     let shared = Arc::new(shared);
-    let app = Arc::new(http::App::new(
+    let rtsp_status = Arc::new(rtsp::Status::new(&cfg));
+    let mut app = http::App::new(
         shared.clone(),
         cfg.http.client_limit,
         cfg.http.token.clone(),
         &cfg.http.allowed_hosts,
         cfg.http.bind.ip().is_loopback(),
-    ));
+    );
+    app.rtsp = rtsp_status.clone();
+    let app = Arc::new(app);
     let ctl = Arc::new(dbus::Control {
         shared: shared.clone(),
         app: app.clone(),
@@ -204,14 +220,28 @@ fn main() -> ExitCode {
         }
     };
     let addr = listener.local_addr().unwrap_or(cfg.http.bind);
-    let threads = pipeline::start(&cfg, factory, shared.clone(), models);
+    let mut threads = pipeline::start(&cfg, factory, shared.clone(), models);
+    match rtsp::start(&cfg, shared.clone(), rtsp_status.clone()) {
+        Ok(r) => threads.extend(r.threads),
+        Err(e) => {
+            shared.stop.store(true, Ordering::Relaxed);
+            eprintln!("volcapd: {e}");
+            return ExitCode::from(EXIT_CONFIG);
+        }
+    }
+
     let notifier = notify::spawn(shared.clone());
     if let Err(e) = &notifier {
         tracing::warn!("no systemd notifier thread: {e}");
     }
+    // One line: tests and scripts read the address from the first.
     println!(
-        "volcapd: viewer at http://{addr}/ (mode: {mode}, {}^3, camera {source})",
+        "volcapd: viewer at http://{addr}/ (mode: {mode}, {}^3, camera {source}){}",
         cfg.render.resolution.0,
+        rtsp_status
+            .url()
+            .map(|u| format!("; H.264 over RTSP at {u}"))
+            .unwrap_or_default()
     );
     let bus = cfg.dbus.bus;
     let limits = http::Limits::new(&cfg.http);

@@ -87,6 +87,7 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         "clients": app.clients.load(Ordering::SeqCst),
         "per_client": per_client,
         "client_limit": app.client_limit.load(Ordering::SeqCst),
+        "rtsp": app.rtsp.to_json(),
         "controls": app.controls(),
         "view": {"yaw": live.yaw, "pitch": live.pitch, "distance": live.distance},
         "uptime_s": up,
@@ -146,5 +147,6 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
         "# TYPE volcap_clients gauge\nvolcap_clients {}\n",
         app.clients.load(Ordering::SeqCst)
     ));
+    s.push_str(&app.rtsp.metrics());
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()
 }
