@@ -105,6 +105,53 @@ fn pct(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
+/// PSNR of the RGB -> I420 (limited range, as the encoders take it) -> RGB round trip
+/// alone: the ceiling of any H.264 stream's PSNR against the RGB render.
+fn yuv_ceiling(frames: &[Vec<u8>], size: usize) -> f64 {
+    let p = gst::parse::launch(&format!(
+        "appsrc name=src format=time caps=video/x-raw,format=RGBx,width={size},height={size},framerate={FPS}/1 \
+         ! videoconvert ! video/x-raw,format=I420 ! videoconvert ! video/x-raw,format=RGB \
+         ! appsink name=sink sync=false"
+    ))
+    .expect("round-trip pipeline")
+    .downcast::<gst::Pipeline>()
+    .unwrap();
+    let src = p
+        .by_name("src")
+        .unwrap()
+        .downcast::<gst_app::AppSrc>()
+        .unwrap();
+    let sink = p
+        .by_name("sink")
+        .unwrap()
+        .downcast::<gst_app::AppSink>()
+        .unwrap();
+    p.set_state(gst::State::Playing).unwrap();
+    let mut sum = 0.0;
+    for (i, f) in frames.iter().enumerate() {
+        let x: Vec<u8> = f
+            .chunks_exact(3)
+            .flat_map(|p| [p[0], p[1], p[2], 255])
+            .collect();
+        let mut b = gst::Buffer::from_slice(x);
+        b.get_mut().unwrap().set_pts(gst::ClockTime::from_nseconds(
+            i as u64 * 1_000_000_000 / FPS as u64,
+        ));
+        src.push_buffer(b).unwrap();
+        let s = sink
+            .try_pull_sample(gst::ClockTime::from_seconds(5))
+            .expect("a frame");
+        let b = s.buffer().unwrap().map_readable().unwrap();
+        let stride = b.len() / size;
+        let rgb: Vec<u8> = (0..size)
+            .flat_map(|y| b[y * stride..y * stride + size * 3].to_vec())
+            .collect();
+        sum += psnr(f, &rgb);
+    }
+    p.set_state(gst::State::Null).unwrap();
+    sum / frames.len() as f64
+}
+
 /// Encode `frames` with `enc_launch`, decode them back: (kbit/s at 30 fps, mean PSNR, ms).
 fn h264(frames: &[Vec<u8>], size: usize, enc_launch: &str) -> (f64, f64, Vec<f64>) {
     let enc = gst::parse::launch(&format!(
@@ -382,6 +429,77 @@ fn even(frames: &[Vec<u8>], size: usize) -> (Vec<Vec<u8>>, usize) {
     (out, side)
 }
 
+/// PSNR over bitrate, one panel per size: a line per H.264 encoder, MJPEG q85 a point.
+fn plot(rows: &[Row], path: &std::path::Path) -> Result<(), String> {
+    use plotters::prelude::*;
+    static FONT: &[u8] = include_bytes!("../../../tools/volcap/assets/DejaVuSansMono.ttf");
+    let _ = plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, FONT);
+    let e = |e: &dyn std::fmt::Display| e.to_string();
+    let root = BitMapBackend::new(path, (1100, 460)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let (l, r) = root.split_horizontally(550);
+    for (area, size) in [&l, &r].into_iter().zip(SIZES) {
+        let sub: Vec<&Row> = rows.iter().filter(|r| r.size == size).collect();
+        let kmax = sub.iter().map(|r| r.kbps).fold(1000.0, f64::max) * 1.3;
+        let (pmin, pmax) = sub.iter().fold((f64::MAX, f64::MIN), |(a, b), r| {
+            (a.min(r.psnr), b.max(r.psnr))
+        });
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                format!("{size} px: quality over bitrate"),
+                ("sans-serif", 20),
+            )
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(50)
+            .build_cartesian_2d((150.0..kmax).log_scale(), (pmin - 1.0)..(pmax + 1.0))
+            .map_err(|x| e(&x))?;
+        chart
+            .configure_mesh()
+            .x_desc("kbit/s at 30 fps")
+            .y_desc("PSNR vs the render, dB")
+            .draw()
+            .map_err(|x| e(&x))?;
+        for (i, name) in ["x264", "openh264"].into_iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            let pts: Vec<(f64, f64)> = sub
+                .iter()
+                .filter(|r| r.codec.contains(name))
+                .map(|r| (r.kbps, r.psnr))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(|x| e(&x))?
+                .label(format!("H.264 {name}"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                .map_err(|x| e(&x))?;
+        }
+        let mj: Vec<(f64, f64)> = sub
+            .iter()
+            .filter(|r| r.codec.starts_with("MJPEG"))
+            .map(|r| (r.kbps, r.psnr))
+            .collect();
+        chart
+            .draw_series(
+                mj.iter()
+                    .map(|&p| TriangleMarker::new(p, 6, BLACK.filled())),
+            )
+            .map_err(|x| e(&x))?
+            .label("MJPEG q85 (the HTTP stream)")
+            .legend(|(x, y)| TriangleMarker::new((x + 8, y), 5, BLACK.filled()));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|x| e(&x))?;
+    }
+    root.present().map_err(|x| e(&x))
+}
+
 fn main() {
     let mut n = 90usize;
     let mut out = std::path::PathBuf::from("docs/bench/rtsp.md");
@@ -420,6 +538,14 @@ fn main() {
             psnr: p / n as f64,
             ms_p50: pct(&mut ms.clone(), 0.5),
             ms_p95: pct(&mut ms, 0.95),
+        });
+        rows.push(Row {
+            codec: "I420 round trip, no codec (H.264's ceiling)".into(),
+            size,
+            kbps: f64::NAN,
+            psnr: yuv_ceiling(&frames, side),
+            ms_p50: f64::NAN,
+            ms_p95: f64::NAN,
         });
         let bar = indicatif::ProgressBar::new((BITRATES.len() * 2) as u64)
             .with_message(format!("H.264 at {size} px"));
@@ -467,17 +593,29 @@ fn main() {
          complexity), MJPEG the daemon's JPEG (quality 85) alone.\n\n\
          | codec | px | kbit/s | PSNR dB | encode ms p50 | p95 |\n|---|---|---|---|---|---|\n",
     );
+    let num = |v: f64, d: usize| {
+        if v.is_finite() {
+            format!("{v:.d$}")
+        } else {
+            "-".into()
+        }
+    };
     for r in &rows {
         md.push_str(&format!(
-            "| {} | {} | {:.0} | {:.2} | {:.2} | {:.2} |\n",
-            r.codec, r.size, r.kbps, r.psnr, r.ms_p50, r.ms_p95
+            "| {} | {} | {} | {:.2} | {} | {} |\n",
+            r.codec,
+            r.size,
+            num(r.kbps, 0),
+            r.psnr,
+            num(r.ms_p50, 2),
+            num(r.ms_p95, 2)
         ));
     }
     md.push_str(
         "\n**Equal quality.** H.264 goes through 8-bit limited-range 4:2:0 YUV (what players expect), JPEG\n\
-         through full-range YCbCr: the round trip alone caps H.264's PSNR against the RGB render\n\
-         below MJPEG's, so \"equal\" is read as each encoder's plateau: the lowest bitrate within\n\
-         0.3 dB of the best this encoder reaches in the table, against MJPEG q85:\n\n\
+         through full-range YCbCr: the round trip alone (the `I420 round trip` rows) caps H.264's PSNR\n\
+         against the RGB render below MJPEG's, so \"equal\" is read as each encoder's plateau: the lowest\n\
+         bitrate within 0.3 dB of the best this encoder reaches in the table, against MJPEG q85:\n\n\
          | px | MJPEG kbit/s (PSNR) | x264 | openh264 |\n|---|---|---|---|\n",
     );
     for size in SIZES {
@@ -522,6 +660,14 @@ fn main() {
     if let Some(d) = out.parent() {
         let _ = std::fs::create_dir_all(d);
     }
+    let png = out.with_extension("png");
+    md.push_str(&format!(
+        "\n![PSNR over bitrate]({})\n",
+        png.file_name()
+            .map(|f| f.to_string_lossy().to_string())
+            .unwrap_or_default()
+    ));
     std::fs::write(&out, md).expect("writing the report");
-    eprintln!("wrote {}", out.display());
+    plot(&rows, &png).expect("writing the plot");
+    eprintln!("wrote {} and {}", out.display(), png.display());
 }
