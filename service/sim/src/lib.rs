@@ -19,6 +19,7 @@ pub mod effects;
 pub mod files;
 pub mod makehuman;
 pub mod oracle;
+pub mod parts;
 pub mod pose;
 pub mod raster;
 pub mod rays;

@@ -16,7 +16,7 @@
 use crate::camera::Camera;
 use crate::oracle::Oracle;
 use glam::Vec3;
-use volcap_engine::model::fourier::{FourierMaps, interval_coeffs};
+use volcap_engine::model::fourier::{Basis, FourierMaps};
 use volcap_engine::model::preprocess::Crop;
 
 /// Ray intervals of one image, row-major pixels.
@@ -171,6 +171,18 @@ pub fn fourier_maps(
     size: usize,
     zeta_scale: f32,
 ) -> Option<FourierMaps> {
+    basis_maps(rays, crop, Basis::Fourier, k, size, zeta_scale)
+}
+
+/// [`fourier_maps`] in `basis` (the same 2K + 1 channels).
+pub fn basis_maps(
+    rays: &RayIntervals,
+    crop: &Crop,
+    basis: Basis,
+    k: usize,
+    size: usize,
+    zeta_scale: f32,
+) -> Option<FourierMaps> {
     let (w, h) = (rays.width, rays.height);
     let c = 2 * k + 1;
     // Coefficients per input pixel (only pixels with intervals are non-zero).
@@ -187,7 +199,7 @@ pub fn fourier_maps(
                 [f(*lo), f(*hi)]
             })
             .collect();
-        *slot = Some(interval_coeffs(&zs, k));
+        *slot = Some(basis.interval_coeffs(&zs, k));
     }
     let mut planar = vec![0.0f32; c * size * size];
     let plane = size * size;
@@ -218,7 +230,7 @@ pub fn fourier_maps(
             }
         }
     }
-    FourierMaps::from_planar(&planar, k, size, zeta_scale)
+    FourierMaps::from_planar(&planar, k, size, zeta_scale).map(|m| m.with_basis(basis))
 }
 
 #[cfg(test)]

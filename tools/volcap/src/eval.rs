@@ -19,6 +19,7 @@ use volcap_engine::grid::{Grid, GridSpec};
 use volcap_engine::localize::{Localizer, Method, default_coarse};
 use volcap_engine::mesh::{Mesh, marching_cubes};
 use volcap_engine::metrics::{chamfer, iou_bits, point_to_surface, sample_surface};
+use volcap_engine::model::fourier::Basis;
 use volcap_engine::model::{DepthFrame, FrameError, ModelView, Models, Precision, ShapeModel};
 use volcap_sim::pose::Style;
 use volcap_sim::scene::Scene;
@@ -62,7 +63,8 @@ pub struct EvalArgs {
     pub res: usize,
     /// Models: NAME or NAME@int8 (files models/shape-NAME.*), comma-separated; `truth-kK`
     /// is the ground-truth Fourier field of order K (crop from the true mask): the Fourier
-    /// family's upper bound at that truncation.
+    /// family's upper bound at that truncation; `truth-cosN` the ground-truth half-range
+    /// cosine series of N terms (N odd; FOF-X's basis) at the same channel count 2K + 1 = N.
     #[arg(long, value_delimiter = ',', default_value = "fourier-small")]
     pub model: Vec<String>,
     /// Folder of the ONNX models.
@@ -115,7 +117,7 @@ pub enum FrameArg {
 }
 
 /// The depth frame a model is compared in (ground-truth rows: always the camera's).
-fn frame_of(arg: FrameArg, models: &Models, truth_k: Option<usize>) -> DepthFrame {
+fn frame_of(arg: FrameArg, models: &Models, truth_k: Option<(Basis, usize)>) -> DepthFrame {
     match (arg, truth_k, &models.shape) {
         (_, Some(_), _) | (FrameArg::Camera, _, _) => DepthFrame::Camera,
         (FrameArg::Body, _, _) => DepthFrame::Body,
@@ -144,6 +146,11 @@ pub struct ImageRow {
     pub encode_ms: f64,
     pub localize_ms: f64,
     pub mesh_ms: f64,
+    /// Per body part ([`volcap_sim::parts::Part::ALL`]: head, torso, arms, hands, legs,
+    /// feet): mean distance (cm) from the true surface of that part (10k samples, labelled
+    /// by the nearest body vertex's bone) to the reconstruction; NaN where the frame shows
+    /// none of it. A missing hand is a large hands value.
+    pub part_cm: [f64; 6],
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -173,6 +180,8 @@ pub struct ModelRow {
     pub gmacs_frame: Option<f64>,
     pub macs_point: Option<f64>,
     pub params: Option<u64>,
+    /// [`ImageRow::part_cm`] averaged over the images that show the part.
+    pub part_cm: [f64; 6],
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
@@ -200,6 +209,8 @@ struct Case {
     rays: volcap_sim::rays::RayIntervals,
     /// The frame's height span over the dataset's ([`ToCamera`]).
     z_scale: f32,
+    /// Body part of a point of the true surface.
+    parts: volcap_sim::parts::PartLabeler,
 }
 
 fn subjects(a: &EvalArgs) -> anyhow::Result<Vec<(String, String)>> {
@@ -246,6 +257,7 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
         None => volcap_sim::HumanAssets::embedded().map_err(anyhow::Error::msg)?,
     });
     let subs = subjects(a)?;
+    let vertex_parts = volcap_sim::parts::vertex_parts(&assets);
     let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(a.seed);
     let mut cases = Vec::new();
     let size = volcap_engine::model::preprocess::INPUT_SIZE;
@@ -271,6 +283,14 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
                 sim.set_view_yaw(yaw);
                 let f = sim.render(frame)?;
                 let gt_mesh = volcap_sim::dataset::clothed_surface(&sim);
+                let parts = {
+                    let meshes = sim.world_meshes();
+                    let body = meshes
+                        .first()
+                        .and_then(|(closed, _)| closed.first())
+                        .ok_or_else(|| anyhow!("{id}: the scene has no subject"))?;
+                    volcap_sim::parts::PartLabeler::new(body.verts, body.tris, &vertex_parts)
+                };
                 let oracle = sim.oracle(volcap_sim::oracle::DEFAULT_VOXEL_M);
                 let rays = volcap_sim::rays::ray_intervals(
                     &oracle.oracle,
@@ -288,6 +308,7 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
                     oracle,
                     rays,
                     z_scale: height_m / volcap_sim::dataset::WHOLE_HEIGHT_M,
+                    parts,
                 });
             }
         }
@@ -300,9 +321,20 @@ fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
 const TRUTH_MAP_SIZE: usize = 128;
 const TRUTH_ZETA_SCALE: f32 = 2.0;
 
-/// `truth-kK` names the ground-truth Fourier field of order K (the family's upper bound).
-fn truth_order(name: &str) -> Option<usize> {
-    name.strip_prefix("truth-k").and_then(|k| k.parse().ok())
+/// `truth-kK` names the ground-truth Fourier field of order K (2K + 1 coefficients, the
+/// family's upper bound); `truth-cosN` the ground-truth half-range cosine series of N
+/// coefficients (N odd: the same channels as K = (N - 1) / 2).
+fn truth_order(name: &str) -> Option<(Basis, usize)> {
+    if let Some(n) = name.strip_prefix("truth-cos") {
+        return n
+            .parse::<usize>()
+            .ok()
+            .filter(|n| n % 2 == 1)
+            .map(|n| (Basis::Cosine, (n - 1) / 2));
+    }
+    name.strip_prefix("truth-k")
+        .and_then(|k| k.parse().ok())
+        .map(|k| (Basis::Fourier, k))
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -315,7 +347,7 @@ fn run_case(
     grid: &mut Grid,
     truth: &mut Grid,
     gt_mask: bool,
-    truth_k: Option<usize>,
+    truth_k: Option<(Basis, usize)>,
     to_cam: ToCamera,
 ) -> anyhow::Result<ImageRow> {
     let mut row = ImageRow {
@@ -334,6 +366,7 @@ fn run_case(
         encode_ms: 0.0,
         localize_ms: 0.0,
         mesh_ms: 0.0,
+        part_cm: [f64::NAN; 6],
     };
     let s = c.size;
     let truth_mask: Vec<f32> = c.mask.iter().map(|&m| m as f32 / 255.0).collect();
@@ -367,11 +400,17 @@ fn run_case(
     };
     let t = Instant::now();
     let field = match truth_k {
-        // The Fourier family's upper bound: ground-truth coefficients of order K.
-        Some(k) => {
-            let maps =
-                volcap_sim::rays::fourier_maps(&c.rays, &crop, k, TRUTH_MAP_SIZE, TRUTH_ZETA_SCALE)
-                    .ok_or_else(|| anyhow!("ground-truth Fourier maps"))?;
+        // The family's upper bound: ground-truth coefficients of 2K + 1 terms in `basis`.
+        Some((basis, k)) => {
+            let maps = volcap_sim::rays::basis_maps(
+                &c.rays,
+                &crop,
+                basis,
+                k,
+                TRUTH_MAP_SIZE,
+                TRUTH_ZETA_SCALE,
+            )
+            .ok_or_else(|| anyhow!("ground-truth {} maps", basis.name()))?;
             volcap_engine::model::ModelField::new(
                 crop.apply(&prob, 1, s),
                 volcap_engine::model::ShapeState::Fourier(maps),
@@ -410,10 +449,11 @@ fn run_case(
     let t = Instant::now();
     let mesh = marching_cubes(grid);
     row.mesh_ms = t.elapsed().as_secs_f64() * 1e3;
-    match surface_distances(mesh, crop, to_cam, &c.oracle, &c.gt_mesh) {
-        Some((ch, p2s)) => {
+    match surface_distances(mesh, crop, to_cam, &c.oracle, &c.gt_mesh, Some(&c.parts)) {
+        Some((ch, p2s, parts)) => {
             row.chamfer_cm = ch;
             row.p2s_cm = p2s;
+            row.part_cm = parts;
         }
         None => row.status = "empty surface".into(),
     }
@@ -421,15 +461,17 @@ fn run_case(
 }
 
 /// Chamfer and point-to-surface distance (cm) of a mesh in the model's crop NDC against
-/// the ground-truth world mesh, both where the frame shows them (10,000 samples each);
-/// `None` for an empty surface.
+/// the ground-truth world mesh, both where the frame shows them (10,000 samples each), and
+/// with `parts`, per body part the mean distance from the true surface's samples of that
+/// part to the mesh (cm, NaN for a part not shown); `None` for an empty surface.
 fn surface_distances(
     mut mesh: Mesh,
     crop: volcap_engine::model::preprocess::Crop,
     to_cam: ToCamera,
     oracle: &volcap_sim::oracle::SceneField,
     gt_mesh: &Mesh,
-) -> Option<(f64, f64)> {
+    parts: Option<&volcap_sim::parts::PartLabeler>,
+) -> Option<(f64, f64, [f64; 6])> {
     if mesh.triangles.is_empty() {
         return None;
     }
@@ -450,9 +492,39 @@ fn surface_distances(
     if pred.is_empty() {
         return None;
     }
+    // Completeness per part: each true sample's distance to the reconstruction.
+    let index = volcap_engine::metrics::TriangleIndex::new(
+        mesh.triangles
+            .iter()
+            .map(|t| t.map(|i| mesh.vertices[i as usize].as_dvec3()))
+            .collect(),
+    );
+    let mut sum = [0.0f64; 6];
+    let mut n = [0usize; 6];
+    for p in gt.iter().filter(|_| parts.is_some()) {
+        let Some(part) = parts.map(|l| l.label(*p)) else {
+            continue;
+        };
+        let i = volcap_sim::parts::Part::ALL
+            .iter()
+            .position(|x| *x == part)
+            .unwrap_or(1);
+        if let Some((_, _, _, d)) = index.nearest(*p) {
+            sum[i] += d;
+            n[i] += 1;
+        }
+    }
+    let part_cm = std::array::from_fn(|i| {
+        if n[i] == 0 {
+            f64::NAN
+        } else {
+            sum[i] / n[i] as f64 * 100.0
+        }
+    });
     Some((
         chamfer(&pred, &gt) * 100.0,
         point_to_surface(&pred, gt_mesh) * 100.0,
+        part_cm,
     ))
 }
 
@@ -589,8 +661,12 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 ShapeModel::Fourier(f) if truth_k.is_none() => Some(f.iso_level),
                 _ => None,
             },
-            family: if truth_k.is_some() {
-                "fourier (ground truth)".to_string()
+            family: if let Some((basis, k)) = truth_k {
+                format!(
+                    "{} series, {} terms (ground truth)",
+                    basis.name(),
+                    2 * k + 1
+                )
             } else {
                 models.shape.family().to_string()
             },
@@ -613,6 +689,9 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             gmacs_frame: g,
             macs_point: mp,
             params: p,
+            part_cm: std::array::from_fn(|i| {
+                mean(ok.iter().map(|r| r.part_cm[i]).filter(|v| v.is_finite()))
+            }),
         };
         if a.json {
             println!("{}", serde_json::to_string(&m)?);

@@ -1,6 +1,7 @@
-//! `volcap eval` run as a user would, on the ground-truth Fourier field (`truth-k15`, no
-//! trained model in the loop): the whole scoring path (render, crop, field, localization,
-//! mesh, Chamfer / P2S / IoU against the truth) in both framings.
+//! `volcap eval` run as a user would, on the ground-truth series (`truth-k15` and the
+//! half-range cosine `truth-cos31` of the same channel count; no trained model in the loop):
+//! the whole scoring path (render, crop, field, localization, mesh, Chamfer / P2S / IoU and
+//! the per-part distances against the truth) in both framings.
 
 use std::process::Command;
 
@@ -25,7 +26,7 @@ fn eval(framing: &str) -> Vec<serde_json::Value> {
             "--res",
             "65",
             "--model",
-            "truth-k15",
+            "truth-k15,truth-cos31",
             "--json",
             "--framing",
             framing,
@@ -50,26 +51,53 @@ fn eval(framing: &str) -> Vec<serde_json::Value> {
         .collect()
 }
 
-/// The truth's own series scores near zero distance and near-full IoU whether or not the frame
-/// cuts the person: in the `upper` framing the truth is what the frame shows (were the legs
-/// below the edge kept, the Chamfer distance would be tens of centimetres).
+/// Both bases' truth series score near zero distance and near-full IoU whether or not the
+/// frame cuts the person: in the `upper` framing the truth is what the frame shows (were the
+/// legs below the edge kept, the Chamfer distance would be tens of centimetres). Per part:
+/// every part is scored in the whole framing, the feet are not in the upper one.
 #[test]
 fn both_framings_score_the_truth_as_near_exact() {
     for (framing, cut) in [("whole", false), ("upper", true)] {
         let rows = eval(framing);
-        // Two images, then the model's summary.
-        assert_eq!(rows.len(), 3, "{framing}: {rows:?}");
-        for r in &rows[..2] {
-            assert_eq!(r["status"], "ok", "{framing}: {r}");
-            assert_eq!(r["cut_by_frame"], cut, "{framing}: {r}");
-            let (ch, p2s, iou) = (
-                r["chamfer_cm"].as_f64().unwrap(),
-                r["p2s_cm"].as_f64().unwrap(),
-                r["iou"].as_f64().unwrap(),
-            );
-            assert!(ch < 2.0 && p2s < 1.5, "{framing}: {r}");
-            assert!(iou > 0.85, "{framing}: {r}");
+        // Per model: two images, then its summary.
+        assert_eq!(rows.len(), 6, "{framing}: {rows:?}");
+        for m in rows.chunks(3) {
+            for r in &m[..2] {
+                assert_eq!(r["status"], "ok", "{framing}: {r}");
+                assert_eq!(r["cut_by_frame"], cut, "{framing}: {r}");
+                let (ch, p2s, iou) = (
+                    r["chamfer_cm"].as_f64().unwrap(),
+                    r["p2s_cm"].as_f64().unwrap(),
+                    r["iou"].as_f64().unwrap(),
+                );
+                assert!(ch < 2.0 && p2s < 1.5, "{framing}: {r}");
+                assert!(iou > 0.85, "{framing}: {r}");
+                let parts = r["part_cm"].as_array().unwrap();
+                assert_eq!(parts.len(), 6);
+                // head, torso, arms, hands, legs: shown in both framings, near the truth
+                // (hands, 2-3 cm thick, are coarse on this test's 65^3 grid: the truth's
+                // own series scores about 3 cm there, against under 1 cm for the rest).
+                for (i, v) in parts[..5].iter().enumerate() {
+                    let v = v.as_f64().unwrap_or(f64::NAN);
+                    let bound = if i == 3 { 5.0 } else { 2.0 };
+                    assert!(v.is_finite() && v < bound, "{framing}: part {i}: {r}");
+                }
+                // Feet: in the whole framing only.
+                assert_eq!(parts[5].is_null(), cut, "{framing}: feet: {r}");
+            }
+            assert_eq!(m[2]["failed"], 0, "{framing}");
         }
-        assert_eq!(rows[2]["failed"], 0, "{framing}");
+        assert!(rows[2]["model"].as_str().unwrap().starts_with("truth-k15"));
+        assert!(
+            rows[5]["model"]
+                .as_str()
+                .unwrap()
+                .starts_with("truth-cos31")
+        );
+        assert!(
+            rows[5]["family"].as_str().unwrap().contains("cosine"),
+            "{}",
+            rows[5]
+        );
     }
 }

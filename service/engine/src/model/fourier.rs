@@ -18,6 +18,12 @@
 //! ([`basis`]: one `sin_cos`, then two multiply-adds per term; exact at zeta = +-1). The maps are
 //! stored pixel-interleaved so a tap reads 2K + 1 contiguous floats: about 4 (2K + 1) + 4K
 //! multiply-adds per point (184 for K = 15) instead of an MLP's tens of thousands.
+//!
+//! [`Basis::Cosine`] (FOF-X): the same 2K + 1 channels hold a half-range cosine series on
+//! `t = (zeta + 1) / 2` in [0, 1], `occ(t) = c0 + sum_{n=1..2K} a_n cos(n pi t)` (`c0 = a_0 / 2`);
+//! its even extension has no jump between the ends of the depth range, so it rings less for
+//! the same count. Ground truth: `c0 = sum (hi - lo)`, `a_n = 2 sum (sin(n pi hi) - sin(n pi lo)) /
+//! (n pi)` with `lo, hi` in t. A head says which in its metadata `volcap.basis`.
 
 use super::preprocess::INPUT_SIZE;
 use super::sample::taps;
@@ -47,6 +53,94 @@ pub fn basis(zeta: f32, k: usize, out: &mut [f32]) {
         c = cn;
         s = sn;
     }
+}
+
+/// Which series the maps hold (ONNX metadata `volcap.basis`; absent: `fourier`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Basis {
+    /// Full range, period 2 in zeta: `[c0, a_1, b_1, ..., a_K, b_K]`.
+    #[default]
+    Fourier,
+    /// Half-range cosine on `t = (zeta + 1) / 2`: `[c0, a_1, ..., a_2K]`.
+    Cosine,
+}
+
+impl Basis {
+    pub fn name(self) -> &'static str {
+        match self {
+            Basis::Fourier => "fourier",
+            Basis::Cosine => "cosine",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "fourier" => Some(Basis::Fourier),
+            "cosine" => Some(Basis::Cosine),
+            _ => None,
+        }
+    }
+
+    /// The 2K + 1 basis values at `zeta` into `out`.
+    #[inline]
+    pub fn values(self, zeta: f32, k: usize, out: &mut [f32]) {
+        match self {
+            Basis::Fourier => basis(zeta, k, out),
+            Basis::Cosine => cosine_basis(zeta, k, out),
+        }
+    }
+
+    /// Ground-truth coefficients `[2K+1]` (f64) of the indicator of `intervals` (zeta, each
+    /// clipped to [-1, 1]).
+    pub fn interval_coeffs(self, intervals: &[[f64; 2]], k: usize) -> Vec<f64> {
+        match self {
+            Basis::Fourier => interval_coeffs(intervals, k),
+            Basis::Cosine => cosine_interval_coeffs(intervals, k),
+        }
+    }
+}
+
+/// `[1, cos(pi t), cos(2 pi t), ..., cos(2K pi t)]` at `t = (zeta + 1) / 2` into
+/// `out[..2K+1]`, by the angle-addition recurrence; exact at `t = 0` (all 1) and `t = 1`
+/// (`(-1)^n`). Non-finite `zeta` gives the basis of `t = 0.5`.
+#[inline]
+pub fn cosine_basis(zeta: f32, k: usize, out: &mut [f32]) {
+    let zeta = if zeta.is_finite() { zeta } else { 0.0 };
+    let t = (zeta + 1.0) * 0.5;
+    out[0] = 1.0;
+    let (s1, c1) = if t == 0.0 {
+        (0.0, 1.0)
+    } else if t == 1.0 {
+        (0.0, -1.0)
+    } else {
+        (t * std::f32::consts::PI).sin_cos()
+    };
+    let (mut c, mut s) = (c1, s1);
+    for v in out[1..=2 * k].iter_mut() {
+        *v = c;
+        let (cn, sn) = (c * c1 - s * s1, s * c1 + c * s1);
+        c = cn;
+        s = sn;
+    }
+}
+
+/// Ground-truth half-range cosine coefficients `[2K+1]` (f64) of the indicator of
+/// `intervals` (zeta, each clipped to [-1, 1]).
+pub fn cosine_interval_coeffs(intervals: &[[f64; 2]], k: usize) -> Vec<f64> {
+    let mut out = vec![0.0; 2 * k + 1];
+    for iv in intervals {
+        let (lo, hi) = (iv[0].clamp(-1.0, 1.0), iv[1].clamp(-1.0, 1.0));
+        if hi <= lo {
+            continue;
+        }
+        let (lo, hi) = ((lo + 1.0) * 0.5, (hi + 1.0) * 0.5);
+        out[0] += hi - lo;
+        for (n, o) in out.iter_mut().enumerate().skip(1) {
+            let w = n as f64 * std::f64::consts::PI;
+            *o += 2.0 * ((w * hi).sin() - (w * lo).sin()) / w;
+        }
+    }
+    out
 }
 
 /// Ground-truth coefficients `[2K+1]` (f64) of the indicator of `intervals` (zeta, each
@@ -79,6 +173,7 @@ pub struct FourierMaps {
     /// Added to every decoded value before the clamp: `0.5 - iso level`, so that the model's
     /// calibrated level set becomes the 0.5 level every field is read at (0 by default).
     offset: f32,
+    basis: Basis,
 }
 
 impl FourierMaps {
@@ -105,7 +200,18 @@ impl FourierMaps {
             zeta_scale,
             data,
             offset: 0.0,
+            basis: Basis::Fourier,
         })
+    }
+
+    /// The maps hold `basis`'s coefficients (the same 2K + 1 channels).
+    pub fn with_basis(mut self, basis: Basis) -> Self {
+        self.basis = basis;
+        self
+    }
+
+    pub fn basis(&self) -> Basis {
+        self.basis
     }
 
     /// The surface at `occ = iso` of the series instead of 0.5 (a model's calibrated level,
@@ -160,7 +266,7 @@ impl FourierMaps {
                 *o = 0.0;
                 continue;
             }
-            basis(zeta, self.k, b);
+            self.basis.values(zeta, self.k, b);
             let (idx, w) = taps(self.size, self.size, u.x, u.y);
             let mut acc = 0.0f32;
             for t in 0..4 {
@@ -219,6 +325,8 @@ pub struct FourierNet {
     /// series crosses 0.5 away from the true surface: below it thin parts shrink, above it
     /// the surface swells.
     pub iso_level: f32,
+    /// The series the maps hold (metadata `volcap.basis`, absent: fourier).
+    pub basis: Basis,
 }
 
 impl FourierNet {
@@ -276,6 +384,15 @@ impl FourierNet {
                     found: format!("{v:?}"),
                 })?,
         };
+        let basis = match meta.get("volcap.basis") {
+            None => Basis::Fourier,
+            Some(v) => Basis::parse(v).ok_or_else(|| ModelError::Mismatch {
+                path: path.display().to_string(),
+                what: "metadata volcap.basis".into(),
+                expected: "\"fourier\" or \"cosine\"".into(),
+                found: format!("{v:?}"),
+            })?,
+        };
         let net = Net::load_on(
             &path,
             "shape-fourier",
@@ -293,6 +410,7 @@ impl FourierNet {
             zeta_scale,
             depth_frame,
             iso_level,
+            basis,
         })
     }
 
@@ -301,7 +419,7 @@ impl FourierNet {
         let s = INPUT_SIZE;
         let planar = self.net.run(&[(&[1, 4, s, s], x)])?;
         FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale)
-            .map(|m| m.with_iso_level(self.iso_level))
+            .map(|m| m.with_iso_level(self.iso_level).with_basis(self.basis))
             .ok_or_else(|| ModelError::Run {
                 path: self.net.path().display().to_string(),
                 msg: "non-finite Fourier coefficients".into(),
@@ -401,6 +519,103 @@ mod tests {
         ];
         maps.occupancy(&pts, &mut out, &mut Vec::new());
         assert_eq!(out, [0.0; 3]);
+    }
+
+    /// The cosine basis against f64 trig, exact at both ends of the depth range; its
+    /// coefficients against a numerical integral of the indicator (f64 midpoint rule); its
+    /// series reconstructs the indicator through `FourierMaps` like the full one, and an
+    /// interval touching an end of the range is reproduced there without the full series'
+    /// jump (the cosine's even extension is continuous at the ends).
+    #[test]
+    fn cosine_basis_coefficients_and_reconstruction() {
+        for k in [7usize, 15, 31] {
+            let mut b = vec![0.0f32; 2 * k + 1];
+            for i in 0..=400 {
+                let z = -1.0 + 2.0 * i as f64 / 400.0;
+                cosine_basis(z as f32, k, &mut b);
+                let t = (z as f32 as f64 + 1.0) * 0.5;
+                for (n, x) in b.iter().enumerate() {
+                    let y = (n as f64 * std::f64::consts::PI * t).cos();
+                    assert!(
+                        (*x as f64 - y).abs() < 3e-5 * k as f64,
+                        "k {k} z {z} n {n}: {x} vs {y}"
+                    );
+                }
+            }
+            cosine_basis(-1.0, k, &mut b);
+            assert!(b.iter().all(|v| *v == 1.0));
+            cosine_basis(1.0, k, &mut b);
+            for (n, v) in b.iter().enumerate() {
+                assert_eq!(*v, if n % 2 == 0 { 1.0 } else { -1.0 });
+            }
+            cosine_basis(f32::NAN, k, &mut b);
+            assert!(b.iter().all(|v| v.is_finite()));
+        }
+        let iv = [[-0.6, -0.2], [0.1, 0.5]];
+        let k = 15;
+        let c = cosine_interval_coeffs(&iv, k);
+        let m = 200_000;
+        for (n, cn) in c.iter().enumerate() {
+            // a_n = 2 * int_0^1 f(t) cos(n pi t) dt, and c0 = a_0 / 2.
+            let integral: f64 = (0..m)
+                .map(|i| {
+                    let t = (i as f64 + 0.5) / m as f64;
+                    let z = 2.0 * t - 1.0;
+                    let f = iv.iter().any(|w| w[0] <= z && z <= w[1]) as u8 as f64;
+                    f * (n as f64 * std::f64::consts::PI * t).cos() / m as f64
+                })
+                .sum();
+            let want = if n == 0 { integral } else { 2.0 * integral };
+            assert!((cn - want).abs() < 1e-4, "n {n}: {cn} vs {want}");
+        }
+        assert_eq!(Basis::Cosine.interval_coeffs(&iv, k), c);
+        assert_eq!(
+            Basis::Fourier.interval_coeffs(&iv, k),
+            interval_coeffs(&iv, k)
+        );
+        // Through the maps, with an interval touching the back end of the range.
+        let iv = [[-1.0, -0.7], [0.1, 0.5]];
+        for k in [15usize, 31] {
+            let decode = |basis: Basis, z: f32| {
+                let c = basis.interval_coeffs(&iv, k);
+                let cf: Vec<f32> = c.iter().map(|v| *v as f32).collect();
+                let maps = FourierMaps::from_planar(
+                    &cf.iter().flat_map(|v| [*v; 4]).collect::<Vec<_>>(),
+                    k,
+                    2,
+                    1.0,
+                )
+                .unwrap()
+                .with_basis(basis);
+                assert_eq!(maps.basis(), basis);
+                let mut out = [0.0f32];
+                maps.occupancy(&[Vec3::new(0.1, 0.2, z)], &mut out, &mut Vec::new());
+                out[0]
+            };
+            for i in 0..=200 {
+                let z = -1.0 + 2.0 * i as f32 / 200.0;
+                let dist = iv
+                    .iter()
+                    .flat_map(|w| [(w[0] as f32 - z).abs(), (w[1] as f32 - z).abs()])
+                    .filter(|d| *d > 0.0 || z > -1.0)
+                    .fold(f32::MAX, f32::min);
+                let truth = iv.iter().any(|w| w[0] as f32 <= z && z <= w[1] as f32);
+                if dist > 4.0 / k as f32 {
+                    let v = decode(Basis::Cosine, z);
+                    assert_eq!(v > 0.5, truth, "cosine k {k} z {z}: {v}");
+                }
+            }
+            // At the back end, inside: the cosine series is about 1, the full series about
+            // 1/2 (its periodic extension jumps there).
+            assert!(decode(Basis::Cosine, -0.999) > 0.9, "cosine at the end");
+            assert!(
+                (decode(Basis::Fourier, -1.0) - 0.5).abs() < 0.1,
+                "fourier at the end"
+            );
+        }
+        assert_eq!(Basis::parse("cosine"), Some(Basis::Cosine));
+        assert_eq!(Basis::parse("fourier"), Some(Basis::Fourier));
+        assert_eq!(Basis::parse("chebyshev"), None);
     }
 
     /// A level under 0.5 widens the decoded interval by where the series crosses that level
