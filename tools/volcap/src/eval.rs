@@ -100,6 +100,11 @@ pub struct EvalArgs {
     /// `volcap.iso_level`, to calibrate or show the knob. Other families ignore it.
     #[arg(long, value_delimiter = ',')]
     pub iso_level: Vec<f32>,
+    /// Experimental, Fourier models: read a pixel's surface at FRAC of its series' peak
+    /// where that peak is under the surface level but at least MIN (thin parts that a
+    /// smooth fit blurs under the level), `FRAC,MIN` (e.g. 0.5,0.2).
+    #[arg(long, value_delimiter = ',')]
+    pub peak_level: Option<Vec<f32>>,
     /// Framing of the test images: `whole` (the whole person in the frame, as the dataset) or
     /// `upper` (a person close to the camera, cut by the frame's lower edge between the hips
     /// and the knees: a webcam's view, where a close-range model takes over). Either way the
@@ -552,6 +557,11 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         };
         specs.push((name.to_string(), prec));
     }
+    if let Some(pl) = &a.peak_level
+        && (pl.len() != 2 || !(pl[0] > 0.0 && pl[0] < 1.0) || !(0.0..1.0).contains(&pl[1]))
+    {
+        bail!("--peak-level {pl:?}: FRAC,MIN with FRAC in (0, 1) and MIN in [0, 1)");
+    }
     for l in &a.iso_level {
         if !(l.is_finite() && *l > 0.0 && *l < 1.0) {
             anyhow::bail!("--iso-level {l}: each level must lie in (0, 1)");
@@ -588,6 +598,15 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             *prec,
             &runtime,
         )?;
+        let peak = match (&mut models.shape, &a.peak_level) {
+            (ShapeModel::Fourier(f), Some(pl)) if truth_k.is_none() && pl.len() == 2 => {
+                Arc::get_mut(f)
+                    .ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?
+                    .peak_level = Some((pl[0], pl[1]));
+                Some(pl[0])
+            }
+            _ => None,
+        };
         let level = match (&mut models.shape, level) {
             (ShapeModel::Fourier(f), Some(l)) if truth_k.is_none() => {
                 Arc::get_mut(f)
@@ -603,10 +622,11 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             _ => None,
         };
         let label = format!(
-            "{name}-{}{}{}",
+            "{name}-{}{}{}{}",
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
-            level.map(|l| format!("-iso{l:.2}")).unwrap_or_default()
+            level.map(|l| format!("-iso{l:.2}")).unwrap_or_default(),
+            peak.map(|f| format!("-peak{f:.2}")).unwrap_or_default()
         );
         pb.set_message(label.clone());
         let frame = frame_of(a.depth_frame, &models, truth_k);

@@ -223,6 +223,44 @@ impl FourierMaps {
         self
     }
 
+    /// A peak-relative surface for thin parts: where a pixel's series peaks (over its ray)
+    /// below `iso` (the ray would decode empty) but at `min_peak` or more, its surface is
+    /// read at `frac` of its peak instead of at `iso` (a blurred thin part, a hand or a wrist, peaks under the
+    /// global level and would vanish; half its peak is where its blurred edges are). The
+    /// shift is folded into the pixel's constant term, so decoding is unchanged. Pixels
+    /// peaking under `min_peak` (nothing there) keep `iso`.
+    pub fn with_peak_relative_level(mut self, frac: f32, min_peak: f32) -> Self {
+        if !(frac > 0.0 && frac < 1.0 && min_peak.is_finite()) {
+            return self;
+        }
+        let c = 2 * self.k + 1;
+        let iso = self.iso_level();
+        let mut b = vec![0.0f32; c];
+        // The peak sampled at 129 depths (the series is band-limited to K cycles).
+        let zs: Vec<Vec<f32>> = (0..129)
+            .map(|i| {
+                let mut v = vec![0.0f32; c];
+                self.basis
+                    .values(-1.0 + 2.0 * i as f32 / 128.0, self.k, &mut v);
+                v
+            })
+            .collect();
+        for px in self.data.chunks_exact_mut(c) {
+            let mut peak = f32::MIN;
+            for v in &zs {
+                b.copy_from_slice(v);
+                let d: f32 = px.iter().zip(&b).map(|(x, y)| x * y).sum();
+                peak = peak.max(d);
+            }
+            // Only rays that would vanish (peak under the level) and hold something.
+            if peak >= min_peak && peak < iso {
+                // Read at frac * peak: raise the series by iso - frac * peak.
+                px[0] += iso - frac * peak;
+            }
+        }
+        self
+    }
+
     /// The level of the series that decodes as 0.5 (0.5 unless [`Self::with_iso_level`]).
     pub fn iso_level(&self) -> f32 {
         0.5 - self.offset
@@ -327,6 +365,9 @@ pub struct FourierNet {
     pub iso_level: f32,
     /// The series the maps hold (metadata `volcap.basis`, absent: fourier).
     pub basis: Basis,
+    /// Experimental: [`FourierMaps::with_peak_relative_level`] `(frac, min_peak)` on every
+    /// frame's maps (`volcap eval --peak-level`); off by default.
+    pub peak_level: Option<(f32, f32)>,
 }
 
 impl FourierNet {
@@ -411,6 +452,7 @@ impl FourierNet {
             depth_frame,
             iso_level,
             basis,
+            peak_level: None,
         })
     }
 
@@ -419,7 +461,13 @@ impl FourierNet {
         let s = INPUT_SIZE;
         let planar = self.net.run(&[(&[1, 4, s, s], x)])?;
         FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale)
-            .map(|m| m.with_iso_level(self.iso_level).with_basis(self.basis))
+            .map(|m| {
+                let m = m.with_iso_level(self.iso_level).with_basis(self.basis);
+                match self.peak_level {
+                    Some((frac, min_peak)) => m.with_peak_relative_level(frac, min_peak),
+                    None => m,
+                }
+            })
             .ok_or_else(|| ModelError::Run {
                 path: self.net.path().display().to_string(),
                 msg: "non-finite Fourier coefficients".into(),
@@ -664,6 +712,55 @@ mod tests {
             "series at the edge {}",
             series(edge)
         );
+    }
+
+    /// The peak-relative level brings back a thin part whose blurred series peaks under the
+    /// surface level, at half its peak (about its true width), and leaves alone a thick part
+    /// (peak over the level / frac) and an empty ray (peak under `min_peak`).
+    #[test]
+    fn peak_relative_level_keeps_thin_parts_and_nothing_else() {
+        let k = 15;
+        let scaled = |iv: [f64; 2], g: f32| -> FourierMaps {
+            let c: Vec<f32> = interval_coeffs(&[iv], k)
+                .iter()
+                .map(|v| g * *v as f32)
+                .collect();
+            let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
+            FourierMaps::from_planar(&planar, k, 2, 1.0)
+                .unwrap()
+                .with_iso_level(0.55)
+        };
+        let inside = |m: &FourierMaps| {
+            let (mut out, mut s) = ([0.0f32], Vec::new());
+            (0..=2000)
+                .filter(|i| {
+                    let z = -1.0 + 2.0 * *i as f32 / 2000.0;
+                    m.occupancy(&[Vec3::new(0.1, 0.1, z)], &mut out, &mut s);
+                    out[0] > 0.5
+                })
+                .count() as f64
+                / 1000.0
+        };
+        // A thin part (true width 0.2) blurred to a peak of about 0.45: gone at 0.55.
+        let thin = scaled([-0.1, 0.1], 0.45);
+        assert_eq!(inside(&thin), 0.0);
+        let back = inside(&thin.clone().with_peak_relative_level(0.5, 0.2));
+        assert!(
+            (back - 0.2).abs() < 0.06,
+            "thin part decodes {back} wide (0.2 true)"
+        );
+        // A thick part at full height: unchanged.
+        let thick = scaled([-0.5, 0.3], 1.0);
+        assert_eq!(
+            inside(&thick),
+            inside(&thick.clone().with_peak_relative_level(0.5, 0.2))
+        );
+        // Nearly nothing on the ray: still nothing.
+        let faint = scaled([-0.1, 0.1], 0.15);
+        assert_eq!(inside(&faint.with_peak_relative_level(0.5, 0.2)), 0.0);
+        // Out-of-range knobs leave the maps as they were.
+        let same = thin.clone().with_peak_relative_level(1.5, 0.2);
+        assert_eq!(same.pixel(0, 0), thin.pixel(0, 0));
     }
 
     #[test]
