@@ -236,6 +236,63 @@ fn the_rtsp_picture_is_the_published_render() {
     );
 }
 
+/// `rtsp.udp_ports`: a UDP client is sent RTP from a port in the configured range (what a
+/// firewall rule names), and ffprobe reads the stream over UDP through it.
+#[test]
+fn udp_ports_stay_in_the_configured_range() {
+    let _g = serial();
+    if !tools() {
+        return;
+    }
+    // An even first port, 20 ports, from this process id (tests run one at a time).
+    let first = 40_000 + (std::process::id() % 1000) as u16 * 20;
+    let dir = tmp("rtsp-udp");
+    let cfg = config(
+        &dir,
+        &format!(
+            "bind = \"127.0.0.1:0\"\ngop = 10\ntransports = [\"udp\"]\nudp_ports = [{first}, {}]",
+            first + 19
+        ),
+        "",
+    );
+    let (_d, addr) = launch_publishing(&cfg, 2);
+    let url = rtsp_url(&addr);
+    let host = url
+        .strip_prefix("rtsp://")
+        .unwrap()
+        .split('/')
+        .next()
+        .unwrap()
+        .to_string();
+    let mut s = TcpStream::connect(&host).unwrap();
+    assert_eq!(rtsp_status(&mut s, "DESCRIBE", &url, 1, ""), 200);
+    write!(
+        s,
+        "SETUP {url}/stream=0 RTSP/1.0\r\nCSeq: 2\r\nTransport: RTP/AVP;unicast;client_port=50100-50101\r\n\r\n"
+    )
+    .unwrap();
+    let mut buf = [0u8; 2048];
+    let n = s.read(&mut buf).unwrap();
+    let head = String::from_utf8_lossy(&buf[..n]).to_string();
+    let port: u16 = head
+        .split("server_port=")
+        .nth(1)
+        .and_then(|p| p.split('-').next())
+        .and_then(|p| p.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no server_port in {head}"));
+    assert!(
+        (first..=first + 19).contains(&port),
+        "server port {port} outside [{first}, {}]",
+        first + 19
+    );
+    drop(s);
+    check_frames(
+        &probe_frames(&url, "udp", 3),
+        8,
+        "ffprobe over UDP from the range",
+    );
+}
+
 /// Write an RTSP request and read the status code of the response (0 if none).
 fn rtsp_status(s: &mut TcpStream, method: &str, url: &str, cseq: u32, extra: &str) -> u16 {
     write!(

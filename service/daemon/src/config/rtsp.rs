@@ -91,6 +91,10 @@ pub struct RtspConfig {
     /// 1 s up to it).
     #[serde(default = "d_retry_max")]
     pub push_retry_max_s: u32,
+    /// UDP ports the server sends RTP/RTCP from, `[first, last]` (first even, 1024 or more),
+    /// for a firewall that must name them; absent: any free port.
+    #[serde(default)]
+    pub udp_ports: Option<[u16; 2]>,
 }
 
 fn d_path() -> String {
@@ -134,6 +138,7 @@ impl Default for RtspConfig {
             client_limit: d_client_limit(),
             per_address_limit: d_per_address(),
             push_retry_max_s: d_retry_max(),
+            udp_ports: None,
         }
     }
 }
@@ -200,6 +205,16 @@ impl RtspConfig {
                 "path",
                 format!(
                     "{p:?} must be '/' then 1-63 letters, digits, '-', '_', '.', '/' (e.g. \"/live\")"
+                ),
+            ));
+        }
+        if let Some([a, b]) = self.udp_ports
+            && (a < 1024 || a % 2 != 0 || b <= a)
+        {
+            return Err((
+                "udp_ports",
+                format!(
+                    "[{a}, {b}] must be [first, last] with first even and at least 1024, last above it (RTP and RTCP take a pair)"
                 ),
             ));
         }
@@ -292,6 +307,9 @@ mod tests {
             ("push = \"http://x/y\"", "push"),
             ("push = \"rtsp:///y\"", "push"),
             ("push = \"rtsp://a b/y\"", "push"),
+            ("udp_ports = [5001, 5009]", "udp_ports"),
+            ("udp_ports = [80, 90]", "udp_ports"),
+            ("udp_ports = [5000, 5000]", "udp_ports"),
         ] {
             let e = parse(text).unwrap_err();
             assert!(e.starts_with(key), "{text}: {e}");

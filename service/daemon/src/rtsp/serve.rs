@@ -77,6 +77,18 @@ pub(super) fn start(
         };
     }
     factory.set_protocols(lower);
+    if let Some([first, last]) = r.udp_ports {
+        let pool = gst_rtsp_server::RTSPAddressPool::new();
+        pool.add_range(
+            gst_rtsp_server::RTSP_ADDRESS_POOL_ANY_IPV4,
+            gst_rtsp_server::RTSP_ADDRESS_POOL_ANY_IPV4,
+            first,
+            last,
+            0,
+        )
+        .map_err(|e| format!("rtsp.udp_ports = [{first}, {last}]: {e}"))?;
+        factory.set_address_pool(Some(&pool));
+    }
     {
         let targets = targets.clone();
         factory.connect_media_configure(move |_, media| {
