@@ -47,16 +47,9 @@ fn renders(display: usize, n: usize) -> Vec<Vec<u8>> {
         }
         let f = rx.borrow_and_update().clone();
         if let Some(f) = f.filter(|f| !f.placeholder) {
-            out.push(
-                f.rgba
-                    .chunks_exact(4)
-                    .flat_map(|p| {
-                        let a = p[3] as f32 / 255.0;
-                        [0, 1, 2]
-                            .map(|c| (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8)
-                    })
-                    .collect(),
-            );
+            let mut rgb = Vec::new();
+            volcapd::pipeline::composite_over(&f.rgba, bg, false, &mut rgb);
+            out.push(rgb);
             bar.inc(1);
         }
     }
@@ -105,17 +98,12 @@ fn pct(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-/// PSNR of the RGB -> I420 (limited range, as the encoders take it) -> RGB round trip
-/// alone: the ceiling of any H.264 stream's PSNR against the RGB render.
-fn yuv_ceiling(frames: &[Vec<u8>], size: usize) -> f64 {
-    let p = gst::parse::launch(&format!(
-        "appsrc name=src format=time caps=video/x-raw,format=RGBx,width={size},height={size},framerate={FPS}/1 \
-         ! videoconvert ! video/x-raw,format=I420 ! videoconvert ! video/x-raw,format=RGB \
-         ! appsink name=sink sync=false"
-    ))
-    .expect("round-trip pipeline")
-    .downcast::<gst::Pipeline>()
-    .unwrap();
+/// A pipeline from `launch` with an `appsrc` named src and an `appsink` named sink, playing.
+fn app_pipeline(launch: &str) -> (gst::Pipeline, gst_app::AppSrc, gst_app::AppSink) {
+    let p = gst::parse::launch(launch)
+        .unwrap_or_else(|e| panic!("{launch}: {e}"))
+        .downcast::<gst::Pipeline>()
+        .unwrap();
     let src = p
         .by_name("src")
         .unwrap()
@@ -127,26 +115,46 @@ fn yuv_ceiling(frames: &[Vec<u8>], size: usize) -> f64 {
         .downcast::<gst_app::AppSink>()
         .unwrap();
     p.set_state(gst::State::Playing).unwrap();
+    (p, src, sink)
+}
+
+/// Frame `i` (RGB) as the daemon feeds its encoder: RGBx, stamped at 30 fps.
+fn rgbx_buffer(rgb: &[u8], i: usize) -> gst::Buffer {
+    let x: Vec<u8> = rgb
+        .chunks_exact(3)
+        .flat_map(|p| [p[0], p[1], p[2], 255])
+        .collect();
+    let mut b = gst::Buffer::from_slice(x);
+    b.get_mut().unwrap().set_pts(gst::ClockTime::from_nseconds(
+        i as u64 * 1_000_000_000 / FPS as u64,
+    ));
+    b
+}
+
+/// GStreamer's RGB rows (padded to 4 bytes) as tight `size x size` RGB.
+fn unpadded_rgb(b: &[u8], size: usize) -> Vec<u8> {
+    let stride = b.len() / size;
+    (0..size)
+        .flat_map(|y| b[y * stride..y * stride + size * 3].to_vec())
+        .collect()
+}
+
+/// PSNR of the RGB -> I420 (limited range, as the encoders take it) -> RGB round trip
+/// alone: the ceiling of any H.264 stream's PSNR against the RGB render.
+fn yuv_ceiling(frames: &[Vec<u8>], size: usize) -> f64 {
+    let (p, src, sink) = app_pipeline(&format!(
+        "appsrc name=src format=time caps=video/x-raw,format=RGBx,width={size},height={size},framerate={FPS}/1 \
+         ! videoconvert ! video/x-raw,format=I420 ! videoconvert ! video/x-raw,format=RGB \
+         ! appsink name=sink sync=false"
+    ));
     let mut sum = 0.0;
     for (i, f) in frames.iter().enumerate() {
-        let x: Vec<u8> = f
-            .chunks_exact(3)
-            .flat_map(|p| [p[0], p[1], p[2], 255])
-            .collect();
-        let mut b = gst::Buffer::from_slice(x);
-        b.get_mut().unwrap().set_pts(gst::ClockTime::from_nseconds(
-            i as u64 * 1_000_000_000 / FPS as u64,
-        ));
-        src.push_buffer(b).unwrap();
+        src.push_buffer(rgbx_buffer(f, i)).unwrap();
         let s = sink
             .try_pull_sample(gst::ClockTime::from_seconds(5))
             .expect("a frame");
         let b = s.buffer().unwrap().map_readable().unwrap();
-        let stride = b.len() / size;
-        let rgb: Vec<u8> = (0..size)
-            .flat_map(|y| b[y * stride..y * stride + size * 3].to_vec())
-            .collect();
-        sum += psnr(f, &rgb);
+        sum += psnr(f, &unpadded_rgb(&b, size));
     }
     p.set_state(gst::State::Null).unwrap();
     sum / frames.len() as f64
@@ -154,35 +162,14 @@ fn yuv_ceiling(frames: &[Vec<u8>], size: usize) -> f64 {
 
 /// Encode `frames` with `enc_launch`, decode them back: (kbit/s at 30 fps, mean PSNR, ms).
 fn h264(frames: &[Vec<u8>], size: usize, enc_launch: &str) -> (f64, f64, Vec<f64>) {
-    let enc = gst::parse::launch(&format!(
+    let (enc, src, sink) = app_pipeline(&format!(
         "appsrc name=src format=time caps=video/x-raw,format=RGBx,width={size},height={size},framerate={FPS}/1 \
          ! videoconvert ! {enc_launch} ! appsink name=sink sync=false"
-    ))
-    .expect("encoder pipeline")
-    .downcast::<gst::Pipeline>()
-    .unwrap();
-    let src = enc
-        .by_name("src")
-        .unwrap()
-        .downcast::<gst_app::AppSrc>()
-        .unwrap();
-    let sink = enc
-        .by_name("sink")
-        .unwrap()
-        .downcast::<gst_app::AppSink>()
-        .unwrap();
-    enc.set_state(gst::State::Playing).unwrap();
+    ));
     let mut aus = Vec::new();
     let mut ms = Vec::new();
     for (i, f) in frames.iter().enumerate() {
-        // RGBx, as the daemon feeds it.
-        let x: Vec<u8> = f
-            .chunks_exact(3)
-            .flat_map(|p| [p[0], p[1], p[2], 255])
-            .collect();
-        let mut b = gst::Buffer::from_slice(x);
-        let pts = gst::ClockTime::from_nseconds(i as u64 * 1_000_000_000 / FPS as u64);
-        b.get_mut().unwrap().set_pts(pts);
+        let b = rgbx_buffer(f, i);
         let t = Instant::now();
         src.push_buffer(b).unwrap();
         // A frame the encoder's rate control skipped gives no access unit.
@@ -196,24 +183,10 @@ fn h264(frames: &[Vec<u8>], size: usize, enc_launch: &str) -> (f64, f64, Vec<f64
     let bytes: usize = aus.iter().map(|b| b.size()).sum();
     let kbps = bytes as f64 * 8.0 / 1000.0 / (frames.len() as f64 / FPS as f64);
     // Decode.
-    let dec = gst::parse::launch(
+    let (dec, src, sink) = app_pipeline(
         "appsrc name=src format=time caps=video/x-h264,stream-format=byte-stream,alignment=au \
          ! h264parse ! avdec_h264 ! videoconvert ! video/x-raw,format=RGB ! appsink name=sink sync=false",
-    )
-    .unwrap()
-    .downcast::<gst::Pipeline>()
-    .unwrap();
-    let src = dec
-        .by_name("src")
-        .unwrap()
-        .downcast::<gst_app::AppSrc>()
-        .unwrap();
-    let sink = dec
-        .by_name("sink")
-        .unwrap()
-        .downcast::<gst_app::AppSink>()
-        .unwrap();
-    dec.set_state(gst::State::Playing).unwrap();
+    );
     for b in aus {
         src.push_buffer(b).unwrap();
     }
@@ -228,14 +201,8 @@ fn h264(frames: &[Vec<u8>], size: usize, enc_launch: &str) -> (f64, f64, Vec<f64
         let t0 = *first.get_or_insert(pts);
         let i = ((pts - t0) as f64 * FPS as f64 / 1e9).round() as usize;
         let b = buf.map_readable().unwrap();
-        // Rows may be padded to 4 bytes.
-        let stride = b.len() / size;
         if let Some(d) = decoded.get_mut(i) {
-            *d = Some(
-                (0..size)
-                    .flat_map(|y| b[y * stride..y * stride + size * 3].to_vec())
-                    .collect(),
-            );
+            *d = Some(unpadded_rgb(&b, size));
         }
     }
     dec.set_state(gst::State::Null).unwrap();

@@ -282,6 +282,24 @@ fn orbit(cam: &SimView, yaw_deg: f32, pitch_deg: f32, distance: f32) -> SimView 
     }
 }
 
+/// An RGBA render composited over the background colour `bg` (RGB in [0, 1]) into `out`:
+/// 3-byte RGB, or with `pad` 4-byte RGBx (x = 255), for codecs without alpha (the JPEG of
+/// the encode stage, RTSP's H.264).
+pub fn composite_over(rgba: &[u8], bg: [f32; 4], pad: bool, out: &mut Vec<u8>) {
+    out.clear();
+    let n = if pad { 4 } else { 3 };
+    out.reserve(rgba.len() / 4 * n);
+    for p in rgba.chunks_exact(4) {
+        let a = p[3] as f32 / 255.0;
+        for c in 0..3 {
+            out.push((p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8);
+        }
+        if pad {
+            out.push(255);
+        }
+    }
+}
+
 /// The camera frame fitted into a `size x size` RGBA square (aspect kept, nearest sample,
 /// integer indices), transparent around it.
 pub fn letterbox(rgb: &[u8], w: usize, h: usize, size: usize) -> Vec<u8> {

@@ -10,7 +10,6 @@
 use anyhow::{Context, anyhow, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use rand::{Rng, SeedableRng};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -21,14 +20,13 @@ use volcap_engine::mesh::{Mesh, marching_cubes};
 use volcap_engine::metrics::{chamfer, iou_bits, point_to_surface, sample_surface};
 use volcap_engine::model::fourier::Basis;
 use volcap_engine::model::{DepthFrame, FrameError, ModelView, Models, Precision, ShapeModel};
-use volcap_sim::pose::Style;
-use volcap_sim::scene::Scene;
-use volcap_sim::sim::Simulator;
 
+mod cases;
 mod framing;
 mod report;
 mod turntable;
 pub mod video;
+use cases::{Case, render_cases};
 pub use framing::Framing;
 use framing::{OracleInCrop, ToCamera, in_frame};
 use report::{plot, report};
@@ -198,127 +196,6 @@ fn worst10(rows: &[&ImageRow], key: impl Fn(&ImageRow) -> f64) -> f64 {
     let mut v: Vec<f64> = rows.iter().map(|r| key(r)).collect();
     v.sort_by(|a, b| b.total_cmp(a));
     mean(v.into_iter().take(10))
-}
-
-struct Case {
-    subject: String,
-    pose: usize,
-    yaw: f32,
-    rgb: Vec<u8>,
-    mask: Vec<u8>,
-    size: usize,
-    /// Ground truth: world mesh (clothed), occupancy oracle, the frame's camera.
-    gt_mesh: Mesh,
-    oracle: volcap_sim::oracle::SceneField,
-    /// Inside intervals along every pixel ray (the Fourier ground truth).
-    rays: volcap_sim::rays::RayIntervals,
-    /// The frame's height span over the dataset's ([`ToCamera`]).
-    z_scale: f32,
-    /// Body part of a point of the true surface.
-    parts: volcap_sim::parts::PartLabeler,
-}
-
-fn subjects(a: &EvalArgs) -> anyhow::Result<Vec<(String, String)>> {
-    let text = std::fs::read_to_string(&a.manifest)
-        .with_context(|| format!("{}: cannot read the dataset manifest", a.manifest.display()))?;
-    let m: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not JSON", a.manifest.display()))?;
-    let tables = m["subject_tables"]
-        .as_object()
-        .ok_or_else(|| anyhow!("{}: no subject_tables", a.manifest.display()))?;
-    let split = m["split"].as_object();
-    let mut out = Vec::new();
-    for want in &a.subjects {
-        let ids: Vec<&String> = if want == "val" || want == "train" {
-            let mut v: Vec<&String> = tables
-                .keys()
-                .filter(|id| split.and_then(|s| s.get(*id)).and_then(|v| v.as_str()) == Some(want))
-                .collect();
-            v.sort();
-            v
-        } else {
-            vec![tables.keys().find(|k| *k == want).ok_or_else(|| {
-                anyhow!(
-                    "--subjects: {want:?} is not in {} (ids: {})",
-                    a.manifest.display(),
-                    tables.keys().cloned().collect::<Vec<_>>().join(", ")
-                )
-            })?]
-        };
-        for id in ids {
-            let t = tables[id].as_str().unwrap_or_default().to_string();
-            out.push((id.clone(), t));
-        }
-    }
-    if out.is_empty() {
-        bail!("--subjects selected no subject");
-    }
-    Ok(out)
-}
-
-fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
-    let assets = Arc::new(match &a.data {
-        Some(p) => volcap_sim::HumanAssets::load(p).map_err(anyhow::Error::msg)?,
-        None => volcap_sim::HumanAssets::embedded().map_err(anyhow::Error::msg)?,
-    });
-    let subs = subjects(a)?;
-    let vertex_parts = volcap_sim::parts::vertex_parts(&assets);
-    let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(a.seed);
-    let mut cases = Vec::new();
-    let size = volcap_engine::model::preprocess::INPUT_SIZE;
-    for (id, table) in &subs {
-        for pose in 0..a.poses {
-            let style = Style::ALL[r.random_range(0..Style::ALL.len())];
-            let frame: u64 = r.random_range(0..60);
-            let seed = r.random::<u32>();
-            let (height_m, look_y) = a.framing.camera(&mut r);
-            let text = volcap_sim::dataset::scene_text_framed(
-                size,
-                table,
-                style,
-                seed,
-                height_m,
-                look_y,
-                volcap_sim::dataset::STUDIO_LIGHTING,
-            );
-            let scene = Scene::parse(&text, Path::new("<eval>")).map_err(|e| anyhow!("{e}"))?;
-            let mut sim = Simulator::new(scene, assets.clone())?;
-            for v in 0..a.views {
-                let yaw = 360.0 * v as f32 / a.views as f32;
-                sim.set_view_yaw(yaw);
-                let f = sim.render(frame)?;
-                let gt_mesh = volcap_sim::dataset::clothed_surface(&sim);
-                let parts = {
-                    let meshes = sim.world_meshes();
-                    let body = meshes
-                        .first()
-                        .and_then(|(closed, _)| closed.first())
-                        .ok_or_else(|| anyhow!("{id}: the scene has no subject"))?;
-                    volcap_sim::parts::PartLabeler::new(body.verts, body.tris, &vertex_parts)
-                };
-                let oracle = sim.oracle(volcap_sim::oracle::DEFAULT_VOXEL_M);
-                let rays = volcap_sim::rays::ray_intervals(
-                    &oracle.oracle,
-                    &f.camera,
-                    volcap_sim::rays::DEFAULT_STEP_M,
-                );
-                cases.push(Case {
-                    subject: id.clone(),
-                    pose,
-                    yaw,
-                    mask: f.person_mask(),
-                    rgb: f.rgb.clone(),
-                    size: f.width,
-                    gt_mesh,
-                    oracle,
-                    rays,
-                    z_scale: height_m / volcap_sim::dataset::WHOLE_HEIGHT_M,
-                    parts,
-                });
-            }
-        }
-    }
-    Ok(cases)
 }
 
 /// Map size and depth scale of the ground-truth Fourier fields (`truth-kK`), the trained

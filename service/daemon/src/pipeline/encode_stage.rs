@@ -19,11 +19,7 @@ pub(super) fn spawn(sh: Arc<Shared>, input: Arc<Slot<Rendered>>) -> std::thread:
                 let bg = sh.live().background;
                 let t = Instant::now();
                 // JPEG has no alpha: composite over the background colour.
-                rgb.clear();
-                rgb.extend(r.rgba.chunks_exact(4).flat_map(|p| {
-                    let a = p[3] as f32 / 255.0;
-                    [0, 1, 2].map(|c| (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8)
-                }));
+                composite_over(&r.rgba, bg, false, &mut rgb);
                 let mut jpeg = Vec::new();
                 let ok = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 85)
                     .encode(

@@ -305,14 +305,7 @@ impl Encoder {
                 continue;
             }
             let bg = shared.live().background;
-            composite.clear();
-            composite.extend(frame.rgba.chunks_exact(4).flat_map(|p| {
-                let a = p[3] as f32 / 255.0;
-                [0, 1, 2, 3].map(|c| match c {
-                    3 => 255,
-                    c => (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8,
-                })
-            }));
+            crate::pipeline::composite_over(&frame.rgba, bg, true, &mut composite);
             if frame.size == 0 || composite.len() != frame.size * frame.size * 4 {
                 continue;
             }

@@ -1,0 +1,296 @@
+//! Tests of the Fourier (and cosine) series, maps and levels.
+use super::*;
+
+fn basis64(z: f64, k: usize) -> Vec<f64> {
+    let mut v = vec![1.0];
+    for n in 1..=k {
+        let a = n as f64 * std::f64::consts::PI * z;
+        v.push(a.cos());
+        v.push(a.sin());
+    }
+    v
+}
+
+#[test]
+fn recurrence_matches_f64_trig_and_is_exact_at_the_ends() {
+    for k in [7usize, 15, 31] {
+        let mut b = vec![0.0f32; 2 * k + 1];
+        for i in 0..=400 {
+            let z = -1.0 + 2.0 * i as f64 / 400.0;
+            basis(z as f32, k, &mut b);
+            let r = basis64(z as f32 as f64, k);
+            for (x, y) in b.iter().zip(&r) {
+                assert!(
+                    (*x as f64 - y).abs() < 2e-5 * k as f64,
+                    "k {k} z {z}: {x} vs {y}"
+                );
+            }
+        }
+        for z in [-1.0f32, 1.0] {
+            basis(z, k, &mut b);
+            assert_eq!(b[0], 1.0);
+            for n in 1..=k {
+                let sign = if n % 2 == 0 { 1.0 } else { -1.0 };
+                assert_eq!(b[2 * n - 1], sign, "cos({n} pi) at {z}");
+                assert_eq!(b[2 * n], 0.0, "sin({n} pi) at {z}");
+            }
+        }
+        for z in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            basis(z, k, &mut b);
+            assert!(b.iter().all(|v| v.is_finite()));
+        }
+    }
+}
+
+/// The coefficients are the L2 projection of the indicator: the series converges to it
+/// (away from the edges) and crosses 0.5 at the edges of a wide interval.
+#[test]
+fn series_of_interval_coefficients_reconstructs_the_indicator() {
+    let iv = [[-0.6, -0.2], [0.1, 0.5]];
+    for k in [15usize, 31, 63] {
+        let c = interval_coeffs(&iv, k);
+        let cf: Vec<f32> = c.iter().map(|v| *v as f32).collect();
+        let maps = FourierMaps::from_planar(
+            &cf.iter().flat_map(|v| [*v; 4]).collect::<Vec<_>>(),
+            k,
+            2,
+            1.0,
+        )
+        .unwrap();
+        let mut out = [0.0f32];
+        let mut s = Vec::new();
+        let mut worst: f32 = 0.0;
+        for i in 0..=200 {
+            let z = -1.0 + 2.0 * i as f32 / 200.0;
+            let dist = iv
+                .iter()
+                .flat_map(|w| [(w[0] as f32 - z).abs(), (w[1] as f32 - z).abs()])
+                .fold(f32::MAX, f32::min);
+            maps.occupancy(&[Vec3::new(0.3, -0.2, z)], &mut out, &mut s);
+            let truth = iv.iter().any(|w| w[0] as f32 <= z && z <= w[1] as f32);
+            // Away from an edge by a few wavelengths the partial sum is on the right side.
+            if dist > 4.0 / k as f32 {
+                assert_eq!(out[0] > 0.5, truth, "k {k} z {z}: {}", out[0]);
+                worst = worst.max((out[0] - truth as u8 as f32).abs());
+            }
+        }
+        assert!(worst < 0.2, "k {k}: worst error {worst}");
+        // At an edge of a wide interval the series is 1/2 (Gibbs is symmetric there).
+        maps.occupancy(&[Vec3::new(0.0, 0.0, 0.1)], &mut out, &mut s);
+        assert!((out[0] - 0.5).abs() < 0.06, "k {k}: edge value {}", out[0]);
+    }
+    // Outside the depth range: 0; non-finite: 0.
+    let maps = FourierMaps::from_planar(&[1.0; 4], 0, 2, 1.0).unwrap();
+    let mut out = [9.0f32; 3];
+    let pts = [
+        Vec3::new(0.0, 0.0, 1.01),
+        Vec3::new(0.0, 0.0, f32::NAN),
+        Vec3::new(f32::INFINITY, 0.0, 0.0),
+    ];
+    maps.occupancy(&pts, &mut out, &mut Vec::new());
+    assert_eq!(out, [0.0; 3]);
+}
+
+/// The cosine basis against f64 trig, exact at both ends of the depth range; its
+/// coefficients against a numerical integral of the indicator (f64 midpoint rule); its
+/// series reconstructs the indicator through `FourierMaps` like the full one, and an
+/// interval touching an end of the range is reproduced there without the full series'
+/// jump (the cosine's even extension is continuous at the ends).
+#[test]
+fn cosine_basis_coefficients_and_reconstruction() {
+    for k in [7usize, 15, 31] {
+        let mut b = vec![0.0f32; 2 * k + 1];
+        for i in 0..=400 {
+            let z = -1.0 + 2.0 * i as f64 / 400.0;
+            cosine_basis(z as f32, k, &mut b);
+            let t = (z as f32 as f64 + 1.0) * 0.5;
+            for (n, x) in b.iter().enumerate() {
+                let y = (n as f64 * std::f64::consts::PI * t).cos();
+                assert!(
+                    (*x as f64 - y).abs() < 3e-5 * k as f64,
+                    "k {k} z {z} n {n}: {x} vs {y}"
+                );
+            }
+        }
+        cosine_basis(-1.0, k, &mut b);
+        assert!(b.iter().all(|v| *v == 1.0));
+        cosine_basis(1.0, k, &mut b);
+        for (n, v) in b.iter().enumerate() {
+            assert_eq!(*v, if n % 2 == 0 { 1.0 } else { -1.0 });
+        }
+        cosine_basis(f32::NAN, k, &mut b);
+        assert!(b.iter().all(|v| v.is_finite()));
+    }
+    let iv = [[-0.6, -0.2], [0.1, 0.5]];
+    let k = 15;
+    let c = cosine_interval_coeffs(&iv, k);
+    let m = 200_000;
+    for (n, cn) in c.iter().enumerate() {
+        // a_n = 2 * int_0^1 f(t) cos(n pi t) dt, and c0 = a_0 / 2.
+        let integral: f64 = (0..m)
+            .map(|i| {
+                let t = (i as f64 + 0.5) / m as f64;
+                let z = 2.0 * t - 1.0;
+                let f = iv.iter().any(|w| w[0] <= z && z <= w[1]) as u8 as f64;
+                f * (n as f64 * std::f64::consts::PI * t).cos() / m as f64
+            })
+            .sum();
+        let want = if n == 0 { integral } else { 2.0 * integral };
+        assert!((cn - want).abs() < 1e-4, "n {n}: {cn} vs {want}");
+    }
+    assert_eq!(Basis::Cosine.interval_coeffs(&iv, k), c);
+    assert_eq!(
+        Basis::Fourier.interval_coeffs(&iv, k),
+        interval_coeffs(&iv, k)
+    );
+    // Through the maps, with an interval touching the back end of the range.
+    let iv = [[-1.0, -0.7], [0.1, 0.5]];
+    for k in [15usize, 31] {
+        let decode = |basis: Basis, z: f32| {
+            let c = basis.interval_coeffs(&iv, k);
+            let cf: Vec<f32> = c.iter().map(|v| *v as f32).collect();
+            let maps = FourierMaps::from_planar(
+                &cf.iter().flat_map(|v| [*v; 4]).collect::<Vec<_>>(),
+                k,
+                2,
+                1.0,
+            )
+            .unwrap()
+            .with_basis(basis);
+            assert_eq!(maps.basis(), basis);
+            let mut out = [0.0f32];
+            maps.occupancy(&[Vec3::new(0.1, 0.2, z)], &mut out, &mut Vec::new());
+            out[0]
+        };
+        for i in 0..=200 {
+            let z = -1.0 + 2.0 * i as f32 / 200.0;
+            let dist = iv
+                .iter()
+                .flat_map(|w| [(w[0] as f32 - z).abs(), (w[1] as f32 - z).abs()])
+                .filter(|d| *d > 0.0 || z > -1.0)
+                .fold(f32::MAX, f32::min);
+            let truth = iv.iter().any(|w| w[0] as f32 <= z && z <= w[1] as f32);
+            if dist > 4.0 / k as f32 {
+                let v = decode(Basis::Cosine, z);
+                assert_eq!(v > 0.5, truth, "cosine k {k} z {z}: {v}");
+            }
+        }
+        // At the back end, inside: the cosine series is about 1, the full series about
+        // 1/2 (its periodic extension jumps there).
+        assert!(decode(Basis::Cosine, -0.999) > 0.9, "cosine at the end");
+        assert!(
+            (decode(Basis::Fourier, -1.0) - 0.5).abs() < 0.1,
+            "fourier at the end"
+        );
+    }
+    assert_eq!(Basis::parse("cosine"), Some(Basis::Cosine));
+    assert_eq!(Basis::parse("fourier"), Some(Basis::Fourier));
+    assert_eq!(Basis::parse("chebyshev"), None);
+}
+
+/// A level under 0.5 widens the decoded interval by where the series crosses that level
+/// (a blurred thin part comes back), a level above narrows it; occupancy stays in [0, 1]
+/// and the default is the series' own 0.5 crossing.
+#[test]
+fn iso_level_moves_the_surface_to_that_level_of_the_series() {
+    let k = 15;
+    // A thin interval, its series scaled as a blurring regression would leave it: peak
+    // well under 1, so at 0.5 it decodes narrower than it is.
+    let c: Vec<f32> = interval_coeffs(&[[-0.1, 0.1]], k)
+        .iter()
+        .map(|v| 0.6 * *v as f32)
+        .collect();
+    let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
+    let raw = FourierMaps::from_planar(&planar, k, 2, 1.0).unwrap();
+    assert_eq!(raw.iso_level(), 0.5);
+    let width = |m: &FourierMaps| {
+        let (mut out, mut s, mut n) = ([0.0f32], Vec::new(), 0);
+        for i in 0..=2000 {
+            let z = -1.0 + 2.0 * i as f32 / 2000.0;
+            m.occupancy(&[Vec3::new(0.1, 0.1, z)], &mut out, &mut s);
+            assert!((0.0..=1.0).contains(&out[0]), "{}", out[0]);
+            n += (out[0] > 0.5) as usize;
+        }
+        n as f64 / 1000.0
+    };
+    let (w_raw, w_low, w_high) = (
+        width(&raw),
+        width(&raw.clone().with_iso_level(0.3)),
+        width(&raw.clone().with_iso_level(0.58)),
+    );
+    assert!(w_low > w_raw && w_raw > w_high, "{w_low} {w_raw} {w_high}");
+    // The level-0.3 surface is where the series equals 0.3: check one crossing in f64.
+    let series = |z: f64| -> f64 {
+        let mut b = vec![0.0f32; 2 * k + 1];
+        basis(z as f32, k, &mut b);
+        c.iter()
+            .zip(&b)
+            .map(|(x, y)| (*x as f64) * (*y as f64))
+            .sum()
+    };
+    let edge = w_low / 2.0;
+    assert!(
+        (series(edge) - 0.3).abs() < 0.02,
+        "series at the edge {}",
+        series(edge)
+    );
+}
+
+/// The peak-relative level brings back a thin part whose blurred series peaks under the
+/// surface level, at half its peak (about its true width), and leaves alone a thick part
+/// (peak over the level / frac) and an empty ray (peak under `min_peak`).
+#[test]
+fn peak_relative_level_keeps_thin_parts_and_nothing_else() {
+    let k = 15;
+    let scaled = |iv: [f64; 2], g: f32| -> FourierMaps {
+        let c: Vec<f32> = interval_coeffs(&[iv], k)
+            .iter()
+            .map(|v| g * *v as f32)
+            .collect();
+        let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
+        FourierMaps::from_planar(&planar, k, 2, 1.0)
+            .unwrap()
+            .with_iso_level(0.55)
+    };
+    let inside = |m: &FourierMaps| {
+        let (mut out, mut s) = ([0.0f32], Vec::new());
+        (0..=2000)
+            .filter(|i| {
+                let z = -1.0 + 2.0 * *i as f32 / 2000.0;
+                m.occupancy(&[Vec3::new(0.1, 0.1, z)], &mut out, &mut s);
+                out[0] > 0.5
+            })
+            .count() as f64
+            / 1000.0
+    };
+    // A thin part (true width 0.2) blurred to a peak of about 0.45: gone at 0.55.
+    let thin = scaled([-0.1, 0.1], 0.45);
+    assert_eq!(inside(&thin), 0.0);
+    let back = inside(&thin.clone().with_peak_relative_level(0.5, 0.2));
+    assert!(
+        (back - 0.2).abs() < 0.06,
+        "thin part decodes {back} wide (0.2 true)"
+    );
+    // A thick part at full height: unchanged.
+    let thick = scaled([-0.5, 0.3], 1.0);
+    assert_eq!(
+        inside(&thick),
+        inside(&thick.clone().with_peak_relative_level(0.5, 0.2))
+    );
+    // Nearly nothing on the ray: still nothing.
+    let faint = scaled([-0.1, 0.1], 0.15);
+    assert_eq!(inside(&faint.with_peak_relative_level(0.5, 0.2)), 0.0);
+    // Out-of-range knobs leave the maps as they were.
+    let same = thin.clone().with_peak_relative_level(1.5, 0.2);
+    assert_eq!(same.pixel(0, 0), thin.pixel(0, 0));
+}
+
+#[test]
+fn maps_refuse_bad_shapes_and_non_finite_values() {
+    assert!(FourierMaps::from_planar(&[0.0; 12], 1, 2, 1.0).is_some());
+    assert!(FourierMaps::from_planar(&[0.0; 11], 1, 2, 1.0).is_none());
+    let mut v = [0.0f32; 12];
+    v[5] = f32::NAN;
+    assert!(FourierMaps::from_planar(&v, 1, 2, 1.0).is_none());
+    assert!(FourierMaps::from_planar(&[0.0; 12], 1, 2, 0.0).is_none());
+}
