@@ -7,7 +7,7 @@
 #   --root DIR      install under DIR (a staging root, as for packaging and tests); default /
 #   --board NAME    board-config/NAME.toml becomes /etc/volcap/volcapd.toml (default: sim)
 #   --binary PATH   install this volcapd instead of building one
-#   --features L    cargo features for the build (default: appliance, i.e. v4l2 and rtsp)
+#   --features L    cargo features for the build (default: appliance, i.e. v4l2, rtsp and wgpu)
 #   --force         overwrite an existing /etc/volcap/volcapd.toml
 #
 # Paths inside the installed config point at the final locations (/usr/share/volcap/...).
@@ -39,6 +39,8 @@ case ",$features," in
       gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-plugins-ugly \
       gstreamer1.0-plugins-bad gstreamer1.0-rtsp" ;;
 esac
+# The GPU backend loads Vulkan at run time (the board's driver provides the adapter).
+case ",$features," in *,appliance,*|*,wgpu,*) pkgs="$pkgs libvulkan1" ;; esac
 if [ -n "$pkgs" ]; then
   if [ "$root" = / ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $pkgs >/dev/null

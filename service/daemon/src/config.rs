@@ -5,7 +5,9 @@ mod compute;
 mod live;
 pub mod rtsp;
 mod temporal;
-pub use compute::{ComputeBackend, ComputeConfig, DEFAULT_SEGMENT_THREAD_UP_TO, THREADS};
+pub use compute::{
+    ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, THREADS,
+};
 pub use live::{Live, LiveError};
 pub use rtsp::RtspConfig;
 pub use temporal::TemporalConfig;

@@ -118,6 +118,17 @@ impl Control {
         if new.compute.threads != old.compute.threads {
             restart.push("compute.threads");
         }
+        if (
+            new.compute.backend,
+            &new.compute.adapter,
+            new.compute.fallback,
+        ) != (
+            old.compute.backend,
+            &old.compute.adapter,
+            old.compute.fallback,
+        ) {
+            restart.push("compute.backend");
+        }
         if new.rtsp != old.rtsp {
             restart.push("rtsp");
         }
@@ -134,6 +145,9 @@ impl Control {
         keep.http.allowed_hosts = old.http.allowed_hosts.clone();
         keep.http.reserved_for = old.http.reserved_for.clone();
         keep.compute.threads = old.compute.threads;
+        keep.compute.backend = old.compute.backend;
+        keep.compute.adapter = old.compute.adapter.clone();
+        keep.compute.fallback = old.compute.fallback;
         keep.render.field = old.render.field;
         keep.render.oracle_voxel_m = old.render.oracle_voxel_m;
         keep.dbus = old.dbus;
@@ -254,6 +268,13 @@ impl Capture1 {
     #[zbus(property)]
     fn model(&self) -> String {
         self.ctl.snapshot().model
+    }
+
+    /// `[compute] backend`: `cpu`, `cpu (wgpu fell back: WHY)` or `wgpu: ADAPTER; on the
+    /// adapter: STAGES; on the CPU: STAGES`.
+    #[zbus(property)]
+    fn compute(&self) -> String {
+        self.ctl.shared.compute.summary()
     }
 
     /// H.264 over RTSP (`[rtsp]`): `off`, or where it is served and how many clients are

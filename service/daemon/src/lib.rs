@@ -2,6 +2,7 @@
 //! and the fuzz targets.
 
 pub mod capture;
+pub mod compute;
 pub mod config;
 pub mod dbus;
 pub mod http;

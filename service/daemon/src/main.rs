@@ -70,6 +70,18 @@ fn main() -> ExitCode {
         };
     }
     let mode = cfg.field().name();
+    // [compute] backend: the adapter the networks run on, or the CPU.
+    let (gpu_runtime, compute) = match volcapd::compute::open(
+        &cfg.compute,
+        cfg.field() == config::FieldMode::Model,
+        cfg.model.precision == config::Precision::Int8,
+    ) {
+        Ok(o) => o,
+        Err(e) => {
+            eprintln!("volcapd: compute.backend in {}: {e}", cli.config.display());
+            return ExitCode::from(EXIT_CONFIG);
+        }
+    };
     // Model mode: the networks' runtime (label) and why `auto` fell back to tract.
     let mut runtime: Option<(String, Option<String>)> = None;
     let models = if cfg.field() == config::FieldMode::Model {
@@ -79,8 +91,14 @@ fn main() -> ExitCode {
             config::Precision::Int8 => volcap_engine::model::Precision::Int8,
         };
         let lib = cfg.compute.onnxruntime_lib.as_ref().map(|p| cfg.resolve(p));
-        let opened = match volcap_engine::model::Runtime::open(cfg.compute.runtime, lib.as_deref())
-        {
+        let opened = match gpu_runtime.map(|runtime| volcap_engine::model::runtime::Opened {
+            runtime,
+            fallback: None,
+        }) {
+            Some(o) => Ok(o),
+            None => volcap_engine::model::Runtime::open(cfg.compute.runtime, lib.as_deref()),
+        };
+        let opened = match opened {
             Ok(o) => o,
             Err(e) => {
                 eprintln!("volcapd: compute.runtime in {}: {e}", cli.config.display());
@@ -172,6 +190,7 @@ fn main() -> ExitCode {
     if let Some((label, fallback)) = runtime {
         shared.set_runtime(label, fallback);
     }
+    shared.compute = compute;
     let shared = Arc::new(shared);
     let rtsp_status = Arc::new(rtsp::Status::new(&cfg));
     let mut app = http::App::new(

@@ -120,6 +120,8 @@ pub struct Shared {
     /// other modes) and, when `compute.runtime = "auto"` fell back to tract, why.
     pub runtime: String,
     pub runtime_note: Option<String>,
+    /// `[compute] backend`: the CPU or the adapter, and what runs there.
+    pub compute: crate::compute::ComputeStatus,
     /// The latest rendered frame's field (oracle or model mode), for meshes on request.
     pub latest_field: Mutex<Option<Arc<dyn MeshField>>>,
     /// A new camera for the capture thread to switch to (config reload).
@@ -190,6 +192,7 @@ impl Shared {
             },
             runtime: String::new(),
             runtime_note: None,
+            compute: crate::compute::ComputeStatus::cpu(None),
             latest_field: Mutex::new(None),
             camera_swap: Mutex::new(None),
             beats: Default::default(),

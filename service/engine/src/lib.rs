@@ -10,9 +10,12 @@
 //! * [`metrics`]: IoU, connected components, band bound, Chamfer and point-to-surface.
 //! * [`softz`]: the SoftZ depth encoding.
 //! * [`model`]: the trained networks (ONNX via tract) as occupancy and colour fields.
+//! * [`gpu`] (feature `wgpu`): the GPU backend, WGSL compute kernels on one adapter.
 
 pub mod analytic;
 pub mod field;
+#[cfg(feature = "wgpu")]
+pub mod gpu;
 pub mod grid;
 pub mod localize;
 mod mc_tables;

@@ -248,6 +248,18 @@ def predict_points(net: FourierNet, rgb: torch.Tensor, mask: torch.Tensor, point
     return torch.cat(out)
 
 
+def thin_mask(coeff: torch.Tensor, radius: int) -> torch.Tensor:
+    """[B, 2K+1, H, W] target maps -> [B, 1, H, W] in {0, 1}: the occupied pixels (c0, half the
+    ray's inside length, above 0.005) that a morphological opening of `radius` pixels removes,
+    i.e. the parts narrower than about 2 radius + 1 map pixels (hands, wrists, ankles, the
+    arms seen edge-on): where the dense loss is small in area and the hands were lost."""
+    occ = (coeff[:, :1] > 0.005).float()
+    k = 2 * radius + 1
+    eroded = -F.max_pool2d(-occ, k, stride=1, padding=radius)
+    opened = F.max_pool2d(eroded, k, stride=1, padding=radius)
+    return occ * (1.0 - opened)
+
+
 def fourier_query(coeff: torch.Tensor, pts: torch.Tensor, k: int) -> torch.Tensor:
     """The whole point query of the Fourier head: coefficient maps [B, 2K+1, H, W], crop-NDC
     points [B, N, 3] -> occupancy [B, N] (grid_sample rule of the engine, zeta from crop z)."""
@@ -535,13 +547,23 @@ def train_fourier(args):
             m = perturb_mask(m, g)
         return encoder_input(rgb, m)
 
-    def losses(pred, d, idx, pidx):
+    def losses(pred, d, idx, pidx, thin=0.0):
         target = d["coeff"][idx].float()
-        dense = FO.parseval_l2(pred, target, dim=1).mean()
+        l2 = FO.parseval_l2(pred, target, dim=1)
         pts = torch.gather(d["points"][idx], 1, pidx.unsqueeze(-1).expand(-1, -1, 3))
         lab = torch.gather(d["occ"][idx], 1, pidx)
         occ = fourier_query(pred, pts, k)
         bce = F.binary_cross_entropy_with_logits(tau * (occ - 0.5), lab, reduction="none")
+        if thin > 0:
+            # --thin-weight: thin parts' rays and points count (1 + thin) times; the means
+            # are normalized by the weights so the loss scale stays the unweighted one's.
+            t = thin_mask(target, args.thin_radius)
+            w = 1.0 + thin * t[:, 0]
+            dense = (l2 * w).sum() / w.sum()
+            wp = 1.0 + thin * sample_features(t, pts[..., :2])[..., 0]  # the query's sampling rule
+            bce = bce * wp / wp.mean()
+        else:
+            dense = l2.mean()
         return dense, bce, occ, lab
 
     def step_fn(step):
@@ -556,7 +578,7 @@ def train_fourier(args):
         # the same as training on the mirrored person with mirrored targets.
         pred = mirror_some(pred, flips)
         d = mirror_some(d, flips) if d is not None else None
-        dense, bce, occ, lab = losses(pred, tr, items, pidx)
+        dense, bce, occ, lab = losses(pred, tr, items, pidx, args.thin_weight)
         loss = dense + args.point_weight * bce.mean()
         if args.moment_weight > 0:
             # Depth order: L1 on each ray's first moment int z f dz (linear in the sine terms),
@@ -616,6 +638,8 @@ def main(argv=None):
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
     ap.add_argument("--seg", type=Path, default=None, help="Fourier: crops and mask channels from this ONNX segmentation model's masks (e.g. ../../models/seg.onnx, the product's) instead of the ground truth's (seg_masks)")
     ap.add_argument("--ckpt-every", type=int, default=100)
+    ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
+    ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)

@@ -39,6 +39,13 @@ pub struct EvalArgs {
     /// accuracy is the same on both, tests/runtimes.rs; the ms columns are the runtime's).
     #[arg(long, default_value = "tract")]
     pub runtime: String,
+    /// Where the networks run: cpu (with --runtime) or wgpu (the GPU backend; build with
+    /// `--features wgpu`).
+    #[arg(long, default_value = "cpu")]
+    pub backend: String,
+    /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
+    #[arg(long, default_value = "auto")]
+    pub adapter: String,
     /// Human assets: a MakeHuman folder or a pack file (default: the embedded pack), so other
     /// asset folders can be evaluated.
     #[arg(long)]
@@ -455,11 +462,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let choice = volcap_engine::model::RuntimeChoice::parse(&a.runtime)
-        .map_err(|e| anyhow!("--runtime: {e}"))?;
-    let runtime = volcap_engine::model::Runtime::open(choice, None)
-        .map_err(|e| anyhow!("--runtime {}: {e}", a.runtime))?
-        .runtime;
+    let (runtime, _) = crate::backend::open(&a.backend, &a.runtime, &a.adapter)?;
     let mut images = Vec::new();
     let mut summary = Vec::new();
     let (mut loc, mut grid, mut truth) = (Localizer::new(), Grid::new(spec), Grid::new(spec));

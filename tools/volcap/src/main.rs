@@ -1,5 +1,6 @@
 //! `volcap`: the command line for benchmarks, evaluation and simulation.
 
+mod backend;
 mod bench;
 mod ctl;
 mod eval;
@@ -115,6 +116,13 @@ pub struct PipelineArgs {
     /// auto (ONNX Runtime when its library is found, else tract).
     #[arg(long = "runtime", value_delimiter = ',', default_value = "auto")]
     pub runtimes: Vec<String>,
+    /// Where the networks run (`compute.backend`, comma-separated): cpu (each --runtime),
+    /// wgpu (the GPU backend on --adapter; build with `--features wgpu`).
+    #[arg(long = "backend", value_delimiter = ',', default_value = "cpu")]
+    pub backends: Vec<String>,
+    /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
+    #[arg(long, default_value = "auto")]
+    pub adapter: String,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,

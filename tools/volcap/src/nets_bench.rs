@@ -19,7 +19,8 @@ pub struct NetsArgs {
     #[arg(long = "model", value_delimiter = ',', default_value = "fourier-small")]
     pub models: Vec<String>,
     /// Runtimes (comma-separated): tract, onnxruntime (its library as the daemon finds it:
-    /// $VOLCAP_ONNXRUNTIME, /usr/lib/volcap/onnxruntime/, target/onnxruntime/).
+    /// $VOLCAP_ONNXRUNTIME, /usr/lib/volcap/onnxruntime/, target/onnxruntime/), wgpu (the
+    /// GPU backend's kernels; build with `--features wgpu`).
     #[arg(
         long = "runtime",
         value_delimiter = ',',
@@ -60,6 +61,11 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
     let filter = temporal_cost(a.runs)?;
     let mut runtimes = Vec::new();
     for r in &a.runtimes {
+        if r.trim() == "wgpu" {
+            // The GPU backend's kernels on the first adapter `auto` picks.
+            runtimes.push(crate::backend::open("wgpu", "tract", "auto")?.0);
+            continue;
+        }
         let choice = RuntimeChoice::parse(r.trim()).map_err(|e| anyhow!("--runtime: {e}"))?;
         let opened = Runtime::open(choice, None).map_err(|e| anyhow!("--runtime {r}: {e}"))?;
         runtimes.push(opened.runtime);

@@ -51,6 +51,11 @@ pub struct Row {
     pub seconds: f64,
     /// fps over the fps of the same (model, resolution, coarse level) with one thread.
     pub speedup_vs_1_thread: Option<f64>,
+    /// Bytes written to and read back from the adapter per published frame, and compute
+    /// dispatches per frame (0 off the GPU).
+    pub bytes_up_per_frame: f64,
+    pub bytes_down_per_frame: f64,
+    pub dispatches_per_frame: f64,
     /// Why the run produced no frames, if it did not.
     pub error: Option<String>,
 }
@@ -123,13 +128,17 @@ fn measure(
     let factory: volcapd::capture::CameraFactory =
         Box::new(move || Ok(Box::new(ReplayCamera::new(stills, fps)) as Box<dyn Camera>));
     let runtime = models.runtime.label();
+    let work = |m: &Models| crate::backend::adapter_work(&m.runtime);
+    let models_ref = models.clone();
     let threads = pipeline::start(cfg, factory, shared.clone(), Some(models));
     std::thread::sleep(Duration::from_secs_f64(warmup));
     let t0 = Instant::now();
     let published0 = shared.e2e.frames.load(Ordering::Relaxed);
     let rendered0 = shared.stats[stage::RENDER].frames.load(Ordering::Relaxed);
     let evals0 = shared.evaluations.load(Ordering::Relaxed);
+    let work0 = work(&models_ref);
     std::thread::sleep(Duration::from_secs_f64(seconds));
+    let work1 = work(&models_ref);
     let wall = t0.elapsed().as_secs_f64();
     let published = shared.e2e.frames.load(Ordering::Relaxed) - published0;
     let rendered = shared.stats[stage::RENDER].frames.load(Ordering::Relaxed) - rendered0;
@@ -166,6 +175,9 @@ fn measure(
         frames: published,
         seconds: wall,
         speedup_vs_1_thread: None,
+        bytes_up_per_frame: (work1[0] - work0[0]) as f64 / published.max(1) as f64,
+        bytes_down_per_frame: (work1[1] - work0[1]) as f64 / published.max(1) as f64,
+        dispatches_per_frame: (work1[2] - work0[2]) as f64 / published.max(1) as f64,
         error,
     }
 }
@@ -193,13 +205,21 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         .canonicalize()
         .with_context(|| format!("--models-dir {}", a.models_dir.display()))?;
     let mut runtimes = Vec::new();
-    for r in &a.runtimes {
-        let choice = RuntimeChoice::parse(r.trim()).map_err(|e| anyhow!("--runtime: {e}"))?;
-        let opened = Runtime::open(choice, None).map_err(|e| anyhow!("--runtime {r}: {e}"))?;
-        if let Some(why) = &opened.fallback {
-            eprintln!("--runtime {r}: on tract ({why})");
+    for b in &a.backends {
+        if b.trim() != "cpu" {
+            // The GPU backend: one runtime whatever --runtime says (the CPU's choice).
+            let (rt, _) = crate::backend::open(b, "tract", &a.adapter)?;
+            runtimes.push((RuntimeChoice::Tract, rt));
+            continue;
         }
-        runtimes.push((choice, opened.runtime));
+        for r in &a.runtimes {
+            let choice = RuntimeChoice::parse(r.trim()).map_err(|e| anyhow!("--runtime: {e}"))?;
+            let opened = Runtime::open(choice, None).map_err(|e| anyhow!("--runtime {r}: {e}"))?;
+            if let Some(why) = &opened.fallback {
+                eprintln!("--runtime {r}: on tract ({why})");
+            }
+            runtimes.push((choice, opened.runtime));
+        }
     }
     let mut configs = Vec::new();
     for m in &a.models {
@@ -314,7 +334,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
              evaluations per rendered frame; x1 = fps over the one-thread row of the same model, \
              resolution and coarse level, measured in the same run. Each row is one run of a few seconds: on a \
              shared 2-core machine repeated runs of the same row differ by up to about 10 %, so compare rows \
-             of one run.\n\n{}",
+             of one run.\n\n{}{}",
             cmd.join(" "),
             a.scene.display(),
             a.frames,
@@ -324,7 +344,15 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
-            table(&rows)
+            table(&rows),
+            if rows.iter().any(|r| r.runtime.contains("llvmpipe")) {
+                "\nRows on `wgpu llvmpipe` ran the GPU backend's kernels on Mesa's lavapipe, Vulkan emulated \
+                 on this CPU: their times say nothing about a GPU (the kernels are written for thousands of \
+                 GPU threads, not for two cores); they show that the path runs whole and what crosses \
+                 between host and adapter per frame.\n"
+            } else {
+                ""
+            }
         );
         std::fs::write(&md, text).with_context(|| format!("writing {}", md.display()))?;
         let png = dir.join("pipeline.png");
@@ -374,7 +402,17 @@ fn table(rows: &[Row]) -> String {
             r.stage_p50_ms[3],
             r.stage_p50_ms[4],
             r.evaluations,
-            r.error.as_deref().unwrap_or(""),
+            match (&r.error, r.dispatches_per_frame > 0.0) {
+                (Some(e), _) => e.clone(),
+                // The GPU backend's traffic: what crosses between host and adapter per frame.
+                (None, true) => format!(
+                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches",
+                    r.bytes_up_per_frame / 1e6,
+                    r.bytes_down_per_frame / 1e6,
+                    r.dispatches_per_frame
+                ),
+                (None, false) => String::new(),
+            },
         );
     }
     s

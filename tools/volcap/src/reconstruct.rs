@@ -54,6 +54,13 @@ pub struct ReconstructArgs {
     /// mask and the four renders, each tile --res pixels, on grey.
     #[arg(long, value_name = "PNG")]
     pub sheet: Option<PathBuf>,
+    /// Where the networks run: cpu (tract) or wgpu (the GPU backend; build with `--features
+    /// wgpu`).
+    #[arg(long, default_value = "cpu")]
+    pub backend: String,
+    /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
+    #[arg(long, default_value = "auto")]
+    pub adapter: String,
 }
 
 #[derive(Debug, Default, serde::Serialize)]
@@ -244,7 +251,8 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
         ),
         None => (a.model.as_str(), Precision::F32),
     };
-    let models = Models::load(&a.models_dir, name, precision)?;
+    let (runtime, _) = crate::backend::open(&a.backend, "tract", &a.adapter)?;
+    let models = Models::load_on(&a.models_dir, name, precision, &runtime)?;
     let models = match &a.close_range {
         Some(close) => models.with_close_range(&a.models_dir, close)?,
         None => models,

@@ -10,6 +10,30 @@ pub enum ComputeBackend {
     /// Native threads on the CPU (the engine's localization and renderer, tract).
     #[default]
     Cpu,
+    /// The GPU backend (volcapd built with the `wgpu` feature): the networks run in WGSL
+    /// compute shaders on `adapter`; the other stages stay on the CPU until their kernels
+    /// land (`/state` `compute.on_adapter` lists what runs there).
+    Wgpu,
+}
+
+impl ComputeBackend {
+    pub fn name(&self) -> &'static str {
+        match self {
+            ComputeBackend::Cpu => "cpu",
+            ComputeBackend::Wgpu => "wgpu",
+        }
+    }
+}
+
+/// `compute.fallback`: what a `wgpu` backend does when no adapter matches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ComputeFallback {
+    /// Refuse to start (exit 2, the adapters found listed).
+    #[default]
+    None,
+    /// Run on the CPU and say so (log, `/state`, D-Bus `Compute`).
+    Cpu,
 }
 
 /// The compute section.
@@ -18,6 +42,14 @@ pub enum ComputeBackend {
 pub struct ComputeConfig {
     #[serde(default)]
     pub backend: ComputeBackend,
+    /// `backend = "wgpu"`: the adapter, `auto` (the most capable found: a discrete GPU,
+    /// then integrated, ..., the CPU's lavapipe last) or a case-insensitive substring of
+    /// its name or driver ("orin", "llvmpipe").
+    #[serde(default = "d_adapter")]
+    pub adapter: String,
+    /// `backend = "wgpu"` with no adapter matching: `none` (default: startup fails) or `cpu`.
+    #[serde(default)]
+    pub fallback: ComputeFallback,
     /// Threads that evaluate the field for the render stage (each batch of points split
     /// across them; the image does not change) and that the field stage's networks spread
     /// their matrix products over (tract's pool), [`THREADS`]. The other pipeline stages
@@ -56,12 +88,18 @@ impl Default for ComputeConfig {
     fn default() -> Self {
         Self {
             backend: ComputeBackend::default(),
+            adapter: d_adapter(),
+            fallback: ComputeFallback::default(),
             threads: d_threads(),
             segment_thread_up_to: d_segment_thread_up_to(),
             runtime: RuntimeChoice::default(),
             onnxruntime_lib: None,
         }
     }
+}
+
+fn d_adapter() -> String {
+    "auto".into()
 }
 
 fn d_threads() -> usize {

@@ -67,6 +67,7 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
             "name": sh.runtime,
             "note": sh.runtime_note,
         })),
+        "compute": sh.compute.to_json(),
         "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
         "temporal": sh.temporal.then(|| serde_json::json!({
             "resets": sh.temporal_resets.load(Ordering::Relaxed),

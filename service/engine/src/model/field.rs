@@ -34,6 +34,9 @@ pub struct ModelField {
     /// Render NDC -> crop NDC.
     to_crop: Mat3,
     identity_view: bool,
+    /// The Fourier maps on the GPU backend's adapter: the point queries run there.
+    #[cfg(feature = "wgpu")]
+    gpu_fourier: Option<crate::gpu::fourier::GpuFourier>,
 }
 
 impl ModelField {
@@ -64,7 +67,25 @@ impl ModelField {
             crop,
             to_crop,
             identity_view,
+            #[cfg(feature = "wgpu")]
+            gpu_fourier: None,
         }
+    }
+
+    /// Evaluate the Fourier maps' point queries on `gpu` (the maps uploaded once; the MLP
+    /// family stays as it is).
+    #[cfg(feature = "wgpu")]
+    pub fn on_gpu(mut self, gpu: &Arc<crate::gpu::Gpu>) -> Result<Self, ModelError> {
+        if let ShapeState::Fourier(maps) = &self.shape {
+            let g = crate::gpu::fourier::GpuFourier::new(gpu.clone(), maps).map_err(|msg| {
+                ModelError::Run {
+                    path: "(Fourier maps)".into(),
+                    msg,
+                }
+            })?;
+            self.gpu_fourier = Some(g);
+        }
+        Ok(self)
     }
 
     /// Crop NDC of a render-view NDC point.
@@ -126,6 +147,12 @@ impl OccupancyField for ModelField {
         let mut occ = vec![0.0f32; q.len()];
         match &self.shape {
             ShapeState::Mlp { nets, feat } => nets.query(feat, &q, &mut occ)?,
+            #[cfg(feature = "wgpu")]
+            ShapeState::Fourier(_) if self.gpu_fourier.is_some() => {
+                if let Some(g) = &self.gpu_fourier {
+                    g.occupancy(&q, &mut occ).map_err(FieldError::Backend)?;
+                }
+            }
             ShapeState::Fourier(maps) => maps.occupancy(&q, &mut occ, &mut Vec::new()),
         }
         for (k, &i) in idx.iter().enumerate() {

@@ -278,6 +278,11 @@ impl FourierMaps {
         self.zeta_scale
     }
 
+    /// Every pixel's coefficients, pixel-interleaved (`[pixel][2K + 1]`, pixel `j * size + i`).
+    pub fn coefficients(&self) -> &[f32] {
+        &self.data
+    }
+
     /// Every pixel's coefficients, pixel-interleaved (`[pixel][2K + 1]`, pixel `j * size +
     /// i`), for filters that work on the maps ([`super::temporal`]).
     pub fn coefficients_mut(&mut self) -> &mut [f32] {

@@ -574,13 +574,19 @@ impl Models {
         }
         // The colour MLP's pixel input, as in training: the masked RGB back in [0, 1].
         let image: Vec<f32> = x[..3 * s * s].iter().map(|v| v * 0.5 + 0.5).collect();
-        Ok(ModelField::new(
+        let field = ModelField::new(
             mask_c,
             shape,
             Some((self.color.clone(), color_feat)),
             image,
             crop,
             view,
-        ))
+        );
+        // On the GPU backend the Fourier series is evaluated where the maps were made.
+        #[cfg(feature = "wgpu")]
+        if let Some(g) = self.runtime.gpu() {
+            return field.on_gpu(g);
+        }
+        Ok(field)
     }
 }

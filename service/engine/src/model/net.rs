@@ -16,6 +16,8 @@ enum Backend {
     Tract(Plan),
     #[cfg(feature = "onnxruntime")]
     Ort(super::runtime::ort_backend::OrtNet),
+    #[cfg(feature = "wgpu")]
+    Wgpu(Box<crate::gpu::net::GpuNet>),
 }
 
 /// One ONNX network, shape-checked at load.
@@ -175,6 +177,11 @@ impl Net {
             Runtime::OnnxRuntime(rt) => {
                 Backend::Ort(super::runtime::ort_backend::OrtNet::load(rt, path).map_err(file)?)
             }
+            #[cfg(feature = "wgpu")]
+            Runtime::Wgpu(gpu) => Backend::Wgpu(Box::new(
+                crate::gpu::net::GpuNet::load(gpu.clone(), path)
+                    .map_err(|e| file(format!("the GPU backend cannot run it: {e}")))?,
+            )),
         };
         let net = Net {
             path: path.to_path_buf(),
@@ -237,6 +244,17 @@ impl Net {
             Backend::Tract(_) => "tract",
             #[cfg(feature = "onnxruntime")]
             Backend::Ort(_) => "onnxruntime",
+            #[cfg(feature = "wgpu")]
+            Backend::Wgpu(_) => "wgpu",
+        }
+    }
+
+    /// The GPU backend's network, when it runs there (its per-layer read-back).
+    #[cfg(feature = "wgpu")]
+    pub fn gpu_net(&self) -> Option<&crate::gpu::net::GpuNet> {
+        match &self.backend {
+            Backend::Wgpu(n) => Some(n),
+            _ => None,
         }
     }
 
@@ -247,6 +265,8 @@ impl Net {
             Backend::Tract(plan) => plan,
             #[cfg(feature = "onnxruntime")]
             Backend::Ort(net) => return net.run(inputs).map_err(err),
+            #[cfg(feature = "wgpu")]
+            Backend::Wgpu(net) => return net.run(inputs).map_err(err),
         };
         let mut tv: TVec<TValue> = tvec![];
         for (shape, data) in inputs {
@@ -284,6 +304,8 @@ impl Net {
             Backend::Tract(plan) => plan,
             #[cfg(feature = "onnxruntime")]
             Backend::Ort(_) => return Err(err("per-node times are tract's only".into())),
+            #[cfg(feature = "wgpu")]
+            Backend::Wgpu(_) => return Err(err("per-node times are tract's only".into())),
         };
         let model = plan.model();
         let mut times: Vec<Vec<f64>> = vec![Vec::new(); model.nodes().len()];

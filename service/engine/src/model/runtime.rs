@@ -84,6 +84,9 @@ pub enum Runtime {
     Tract,
     #[cfg(feature = "onnxruntime")]
     OnnxRuntime(Arc<ort_backend::OrtRuntime>),
+    /// The GPU backend's kernels on one adapter (`[compute] backend = "wgpu"`).
+    #[cfg(feature = "wgpu")]
+    Wgpu(Arc<crate::gpu::Gpu>),
 }
 
 impl std::fmt::Debug for Runtime {
@@ -139,21 +142,34 @@ impl Runtime {
         Err("this build has no ONNX Runtime support (the engine's `onnxruntime` feature)".into())
     }
 
-    /// "tract" or "onnxruntime 1.32.0".
+    /// "tract", "onnxruntime 1.32.0" or "wgpu llvmpipe (LLVM 15.0.6, 256 bits)".
     pub fn label(&self) -> String {
         match self {
             Runtime::Tract => "tract".into(),
             #[cfg(feature = "onnxruntime")]
             Runtime::OnnxRuntime(o) => format!("onnxruntime {}", o.version),
+            #[cfg(feature = "wgpu")]
+            Runtime::Wgpu(g) => format!("wgpu {}", g.adapter.name),
         }
     }
 
-    /// The short name: "tract" or "onnxruntime".
+    /// The short name: "tract", "onnxruntime" or "wgpu".
     pub fn name(&self) -> &'static str {
         match self {
             Runtime::Tract => "tract",
             #[cfg(feature = "onnxruntime")]
             Runtime::OnnxRuntime(_) => "onnxruntime",
+            #[cfg(feature = "wgpu")]
+            Runtime::Wgpu(_) => "wgpu",
+        }
+    }
+
+    /// The adapter the networks run on, when it is the GPU backend.
+    #[cfg(feature = "wgpu")]
+    pub fn gpu(&self) -> Option<&Arc<crate::gpu::Gpu>> {
+        match self {
+            Runtime::Wgpu(g) => Some(g),
+            _ => None,
         }
     }
 }

@@ -1,0 +1,124 @@
+//! `[compute] backend = "wgpu"`: the networks of a model-mode daemon on the GPU backend's
+//! adapter (lavapipe here and in CI), named with what runs there and counted in `/state`;
+//! an adapter that is not there is a start-up error listing the adapters found, or the CPU
+//! with `fallback = "cpu"`, said in `/state`; a build without the feature refuses the key.
+
+mod common;
+use common::{check_config, root, tmp};
+#[cfg(feature = "wgpu")]
+use common::{serial, start, wait_for};
+#[cfg(feature = "wgpu")]
+use std::time::Duration;
+
+fn config(dir: &std::path::Path, compute: &str) -> std::path::PathBuf {
+    let p = dir.join("gpu.toml");
+    std::fs::write(
+        &p,
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\ndisplay_size = 0\n[model]\ndir = \"{}\"\n[dbus]\nbus = \"none\"\n[compute]\n{compute}\n",
+            root().join("tests/scenes/front-walk.toml").display(),
+            root().join("models").display()
+        ),
+    )
+    .unwrap();
+    p
+}
+
+#[cfg(not(feature = "wgpu"))]
+#[test]
+fn a_build_without_the_gpu_backend_refuses_it_by_name() {
+    let dir = tmp("nogpu");
+    let (code, err) = check_config(&config(&dir, "backend = \"wgpu\""));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("compute.backend") && err.contains("`wgpu`"),
+        "{err}"
+    );
+}
+
+#[cfg(feature = "wgpu")]
+fn have_adapter() -> bool {
+    match volcap_engine::gpu::Gpu::open("auto") {
+        Ok(_) => true,
+        Err(e) if std::env::var_os("CI").is_some() => panic!("no GPU adapter under CI: {e}"),
+        Err(e) => {
+            println!("skipped: {e}");
+            false
+        }
+    }
+}
+
+#[cfg(feature = "wgpu")]
+#[test]
+fn an_adapter_that_is_not_there_fails_start_up_or_falls_back_when_asked() {
+    let _serial = serial();
+    let dir = tmp("gpu-missing");
+    let (code, err) = check_config(&config(
+        &dir,
+        "backend = \"wgpu\"\nadapter = \"no-such-gpu\"",
+    ));
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("compute.backend") && err.contains("no-such-gpu") && err.contains("adapter"),
+        "{err}"
+    );
+    // With the CPU as fallback it starts, and says why it is on the CPU.
+    let d = start(&config(
+        &dir,
+        "backend = \"wgpu\"\nadapter = \"no-such-gpu\"\nfallback = \"cpu\"",
+    ));
+    let s = wait_for(&d.addr, "frames", Duration::from_secs(60), |s| {
+        s["frames_published"].as_u64() > Some(0)
+    });
+    assert_eq!(s["compute"]["backend"], "cpu", "{s}");
+    assert!(
+        s["compute"]["note"]
+            .as_str()
+            .unwrap_or("")
+            .contains("no-such-gpu"),
+        "{s}"
+    );
+}
+
+#[cfg(feature = "wgpu")]
+#[test]
+fn model_mode_runs_its_networks_on_the_adapter() {
+    let _serial = serial();
+    if !have_adapter() {
+        return;
+    }
+    let dir = tmp("gpu-model");
+    let d = start(&config(&dir, "backend = \"wgpu\""));
+    let s = wait_for(
+        &d.addr,
+        "model frames on the adapter",
+        Duration::from_secs(120),
+        |s| s["frames_published"].as_u64() > Some(2),
+    );
+    let c = &s["compute"];
+    assert_eq!(c["backend"], "wgpu", "{s}");
+    assert!(
+        !c["adapter"]["name"].as_str().unwrap_or("").is_empty(),
+        "{s}"
+    );
+    assert!(
+        c["on_adapter"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|v| v == "segment"),
+        "{s}"
+    );
+    // Every published frame ran segmentation and the shape network there.
+    let runs = c["adapter_work"]["net_runs"].as_u64().unwrap();
+    assert!(
+        runs >= 2 * 3,
+        "{runs} network runs for {} frames: {s}",
+        s["frames_published"]
+    );
+    assert!(c["adapter_work"]["bytes_down"].as_u64().unwrap() > 0, "{s}");
+    // The Fourier series at the localization's and the render's points ran there too.
+    assert!(c["adapter_work"]["field_runs"].as_u64().unwrap() > 0, "{s}");
+    assert!(s["field"].as_str().unwrap().contains("wgpu"), "{s}");
+    assert_eq!(s["people"], 1, "{s}");
+}

@@ -1,0 +1,236 @@
+//! An ONNX network on the GPU: the file read at load (the same file tract or ONNX Runtime
+//! would run: one source of weights), its graph planned once per input shape
+//! ([`plan::plan`]) and realized as buffers, bind groups and one compute pass; each run
+//! writes the inputs, records the pass and reads the output back once. Weights stay on the
+//! adapter; activation buffers are reused from run to run.
+
+pub mod plan;
+
+use super::{Gpu, groups};
+use plan::{Kernel, Plan};
+use std::path::Path;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+use tract_onnx::pb::GraphProto;
+use tract_onnx::prelude::Framework;
+use wgpu::util::DeviceExt;
+
+const COMMON: &str = include_str!("net/common.wgsl");
+
+fn source(k: Kernel) -> (&'static str, &'static str) {
+    match k {
+        Kernel::Copy => ("copy", include_str!("net/copy.wgsl")),
+        Kernel::Fill => ("fill", include_str!("net/fill.wgsl")),
+        Kernel::Binary => ("binary", include_str!("net/binary.wgsl")),
+        Kernel::Unary => ("unary", include_str!("net/unary.wgsl")),
+        Kernel::Conv => ("conv", include_str!("net/conv.wgsl")),
+        Kernel::Conv4 => ("conv4", include_str!("net/conv4.wgsl")),
+        Kernel::ConvTranspose => ("conv_transpose", include_str!("net/conv_transpose.wgsl")),
+        Kernel::Pool => ("pool", include_str!("net/pool.wgsl")),
+        Kernel::Gemm => ("gemm", include_str!("net/gemm.wgsl")),
+        Kernel::Resize => ("resize", include_str!("net/resize.wgsl")),
+    }
+}
+
+/// A tensor read back: its name in the graph, shape and values.
+pub type Tensor = (String, Vec<usize>, Vec<f32>);
+
+/// A plan made real on the adapter.
+struct Realized {
+    shapes: Vec<Vec<usize>>,
+    plan: Plan,
+    buffers: Vec<wgpu::Buffer>,
+    steps: Vec<(Arc<wgpu::ComputePipeline>, wgpu::BindGroup, (u32, u32))>,
+    staging: wgpu::Buffer,
+}
+
+/// One network on one adapter.
+pub struct GpuNet {
+    gpu: Arc<Gpu>,
+    graph: GraphProto,
+    /// The plan of the last input shapes (the pipeline's shapes do not change frame to frame).
+    realized: Mutex<Option<Realized>>,
+}
+
+impl GpuNet {
+    /// Read `path` and check that every op has a kernel (the error names the op and node).
+    pub fn load(gpu: Arc<Gpu>, path: &Path) -> Result<GpuNet, String> {
+        let proto = tract_onnx::onnx()
+            .proto_model_for_path(path)
+            .map_err(|e| format!("not a readable ONNX model: {e}"))?;
+        let graph = proto.graph.ok_or("no graph")?;
+        plan::check_ops(&graph)?;
+        Ok(GpuNet {
+            gpu,
+            graph,
+            realized: Mutex::new(None),
+        })
+    }
+
+    pub fn gpu(&self) -> &Arc<Gpu> {
+        &self.gpu
+    }
+
+    fn realize(&self, shapes: &[Vec<usize>], keep_all: bool) -> Result<Realized, String> {
+        let plan = plan::plan(&self.graph, shapes, keep_all)?;
+        let dev = &self.gpu.device;
+        let usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC;
+        let limit = dev.limits().max_storage_buffer_binding_size as usize;
+        let mut buffers = Vec::with_capacity(plan.buffers.len());
+        for (i, b) in plan.buffers.iter().enumerate() {
+            let bytes = b.len.max(1) * 4;
+            if bytes > limit {
+                return Err(format!(
+                    "tensor buffer {i} needs {bytes} bytes, over the adapter's {limit} per binding"
+                ));
+            }
+            buffers.push(match &b.init {
+                Some(data) => dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: None,
+                    contents: bytemuck::cast_slice(data),
+                    usage,
+                }),
+                None => dev.create_buffer(&wgpu::BufferDescriptor {
+                    label: None,
+                    size: bytes as u64,
+                    usage,
+                    mapped_at_creation: false,
+                }),
+            });
+        }
+        let mut steps = Vec::with_capacity(plan.steps.len());
+        for s in &plan.steps {
+            let (name, src) = source(s.kernel);
+            let pipeline = self.gpu.pipeline(name, &format!("{COMMON}\n{src}"))?;
+            let params = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: None,
+                contents: bytemuck::cast_slice(&s.params),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+            let mut entries = vec![wgpu::BindGroupEntry {
+                binding: 0,
+                resource: params.as_entire_binding(),
+            }];
+            for (j, &b) in s.binds.iter().enumerate() {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: j as u32 + 1,
+                    resource: buffers[b].as_entire_binding(),
+                });
+            }
+            let bg = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
+            });
+            steps.push((pipeline, bg, groups(s.params[0])));
+        }
+        let out_len = plan.output.1.iter().product::<usize>().max(1);
+        let staging_len = if keep_all {
+            plan.buffers.iter().map(|b| b.len).max().unwrap_or(1)
+        } else {
+            out_len
+        };
+        let staging = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("read-back"),
+            size: (staging_len.max(1) * 4) as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Ok(Realized {
+            shapes: shapes.to_vec(),
+            plan,
+            buffers,
+            steps,
+            staging,
+        })
+    }
+
+    /// Write the inputs and record every dispatch; returns the encoder, not yet submitted.
+    fn record(
+        &self,
+        r: &Realized,
+        inputs: &[(&[usize], &[f32])],
+    ) -> Result<wgpu::CommandEncoder, String> {
+        for (i, (shape, data)) in inputs.iter().enumerate() {
+            let n: usize = shape.iter().product();
+            if data.len() != n {
+                return Err(format!(
+                    "input {i}: {} values for shape {shape:?}",
+                    data.len()
+                ));
+            }
+            let b = r.plan.inputs[i];
+            self.gpu
+                .queue
+                .write_buffer(&r.buffers[b], 0, bytemuck::cast_slice(data));
+            self.gpu
+                .count()
+                .bytes_up
+                .fetch_add((n * 4) as u64, Ordering::Relaxed);
+        }
+        let mut enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            for (pipeline, bg, (x, y)) in &r.steps {
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, bg, &[]);
+                pass.dispatch_workgroups(*x, *y, 1);
+            }
+        }
+        let c = self.gpu.count();
+        c.dispatches
+            .fetch_add(r.steps.len() as u64, Ordering::Relaxed);
+        c.net_runs.fetch_add(1, Ordering::Relaxed);
+        Ok(enc)
+    }
+
+    /// Run on f32 inputs (shape, data) in the graph's input order; the first output.
+    pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, String> {
+        let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
+        let mut slot = self.realized.lock().unwrap_or_else(|p| p.into_inner());
+        if slot.as_ref().is_none_or(|r| r.shapes != shapes) {
+            *slot = Some(self.realize(&shapes, false)?);
+        }
+        let r = slot.as_ref().ok_or("no plan")?;
+        let enc = self.record(r, inputs)?;
+        let (ob, oshape) = &r.plan.output;
+        let len = oshape.iter().product::<usize>();
+        self.gpu
+            .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)
+    }
+
+    /// Run with every buffer kept and read back each tensor computed on the device (name,
+    /// shape, values), in plan order: the per-layer parity check. Slow: one read per tensor.
+    pub fn run_all(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<Tensor>, String> {
+        let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
+        let r = self.realize(&shapes, true)?;
+        let enc = self.record(&r, inputs)?;
+        self.gpu.queue.submit([enc.finish()]);
+        let mut out = Vec::new();
+        for (name, b, shape) in &r.plan.tensors {
+            let len = shape.iter().product::<usize>();
+            if len == 0 {
+                continue;
+            }
+            let enc = self
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+            let v = self
+                .gpu
+                .submit_and_read(enc, &r.buffers[*b], &r.staging, len)?;
+            out.push((name.clone(), shape.clone(), v));
+        }
+        Ok(out)
+    }
+
+    /// The number of dispatches of the plan for `shapes` (planning only).
+    pub fn dispatches(&self, shapes: &[Vec<usize>]) -> Result<usize, String> {
+        Ok(plan::plan(&self.graph, shapes, false)?.steps.len())
+    }
+}

@@ -1,0 +1,950 @@
+//! Each ONNX op as kernels (or as a view, or folded at plan time when its inputs are
+//! constants). The ONNX operator semantics followed are opset 13's; older attribute forms
+//! (Slice, Unsqueeze, Squeeze, Pad, Clip taking attributes) are read too.
+
+use super::{Attrs, Data, Kernel, Planner, Val, numel, pad6, strides};
+use tract_onnx::pb::NodeProto;
+
+type Act = (u32, f32, f32);
+
+fn axis(a: i64, rank: usize) -> Result<usize, String> {
+    let r = rank as i64;
+    let v = if a < 0 { a + r } else { a };
+    if (0..r.max(1)).contains(&v) {
+        Ok(v as usize)
+    } else {
+        Err(format!("axis {a} is outside rank {rank}"))
+    }
+}
+
+/// Translate node `n` (its output named `out`: the last fused follower's); `act` is a fused
+/// activation, `bn` a batch-norm folded into a Conv.
+pub(super) fn node(
+    pl: &mut Planner,
+    n: &NodeProto,
+    out: &str,
+    act: Act,
+    bn: Option<&NodeProto>,
+) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let x = inp(0).unwrap_or("");
+    match n.op_type.as_str() {
+        "Constant" => {
+            let (shape, data) = if let Some(t) = a.get("value").and_then(|v| v.t.as_ref()) {
+                super::tensor_data(t).map_err(|e| pl.err(e))?
+            } else if let Some(v) = a.get("value_float") {
+                (vec![], Data::F(vec![v.f]))
+            } else if let Some(v) = a.get("value_floats") {
+                (vec![v.floats.len()], Data::F(v.floats.clone()))
+            } else if let Some(v) = a.get("value_int") {
+                (vec![], Data::I(vec![v.i]))
+            } else if let Some(v) = a.get("value_ints") {
+                (vec![v.ints.len()], Data::I(v.ints.clone()))
+            } else {
+                return Err(pl.err("Constant without a value this backend reads"));
+            };
+            pl.vals.insert(out.into(), Val::Const { shape, data });
+        }
+        "Identity" => alias(pl, x, out, None)?,
+        "Cast" => {
+            let to = a.int("to", 1);
+            match pl.get(x)?.clone() {
+                Val::Const { shape, data } => {
+                    let data = match to {
+                        1 => Data::F(data.floats()),
+                        6 | 7 => Data::I(data.ints()),
+                        _ => return Err(pl.err(format!("Cast to type {to}"))),
+                    };
+                    pl.vals.insert(out.into(), Val::Const { shape, data });
+                }
+                Val::Dev { .. } if to == 1 => alias(pl, x, out, None)?,
+                Val::Dev { .. } => {
+                    return Err(pl.err(format!("Cast of a device tensor to type {to}")));
+                }
+            }
+        }
+        "Shape" => {
+            let s = pl.get(x)?.shape().to_vec();
+            let r = s.len() as i64;
+            let clampi = |v: i64| (if v < 0 { v + r } else { v }).clamp(0, r) as usize;
+            let (b, e) = (clampi(a.int("start", 0)), clampi(a.int("end", r)));
+            let dims: Vec<i64> = s[b..e.max(b)].iter().map(|&d| d as i64).collect();
+            pl.vals.insert(
+                out.into(),
+                Val::Const {
+                    shape: vec![dims.len()],
+                    data: Data::I(dims),
+                },
+            );
+        }
+        "Gather" => {
+            let (shape, data) = pl.konst(x)?;
+            let (ishape, idx) = pl.konst(inp(1).unwrap_or(""))?;
+            if shape.len() != 1 || a.int("axis", 0) != 0 {
+                return Err(pl.err("Gather only of a 1-D constant (shape arithmetic)"));
+            }
+            let idx = idx.ints();
+            let n0 = shape[0] as i64;
+            let pick = |i: i64| -> Result<usize, String> {
+                let j = if i < 0 { i + n0 } else { i };
+                usize::try_from(j)
+                    .ok()
+                    .filter(|&j| j < shape[0])
+                    .ok_or_else(|| pl.err(format!("index {i} outside {n0}")))
+            };
+            let data = match data {
+                Data::F(v) => Data::F(
+                    idx.iter()
+                        .map(|&i| pick(i).map(|j| v[j]))
+                        .collect::<Result<_, _>>()?,
+                ),
+                Data::I(v) => Data::I(
+                    idx.iter()
+                        .map(|&i| pick(i).map(|j| v[j]))
+                        .collect::<Result<_, _>>()?,
+                ),
+            };
+            pl.vals.insert(
+                out.into(),
+                Val::Const {
+                    shape: ishape,
+                    data,
+                },
+            );
+        }
+        "Reshape" => {
+            let old = pl.get(x)?.shape().to_vec();
+            let (_, spec) = pl.konst(inp(1).unwrap_or(""))?;
+            let mut dims: Vec<i64> = spec.ints();
+            for (d, v) in dims.iter_mut().enumerate() {
+                if *v == 0 && a.int("allowzero", 0) == 0 {
+                    *v = *old
+                        .get(d)
+                        .ok_or_else(|| pl.err("0 in the shape past the input's rank"))?
+                        as i64;
+                }
+            }
+            let known: i64 = dims.iter().filter(|&&v| v >= 0).product();
+            let total = numel(&old) as i64;
+            let shape: Vec<usize> = dims
+                .iter()
+                .map(|&v| {
+                    if v < 0 {
+                        (total / known.max(1)) as usize
+                    } else {
+                        v as usize
+                    }
+                })
+                .collect();
+            if numel(&shape) != numel(&old) {
+                return Err(pl.err(format!("cannot reshape {old:?} to {dims:?}")));
+            }
+            alias(pl, x, out, Some(shape))?;
+        }
+        "Flatten" => {
+            let old = pl.get(x)?.shape().to_vec();
+            let k = axis(a.int("axis", 1), old.len() + 1).map_err(|e| pl.err(e))?;
+            let shape = vec![numel(&old[..k]), numel(&old[k..])];
+            alias(pl, x, out, Some(shape))?;
+        }
+        "Unsqueeze" | "Squeeze" => {
+            let old = pl.get(x)?.shape().to_vec();
+            let axes: Option<Vec<i64>> = match inp(1) {
+                Some(name) => Some(pl.konst(name)?.1.ints()),
+                None => a.ints("axes"),
+            };
+            let shape = if n.op_type == "Unsqueeze" {
+                let axes = axes.ok_or_else(|| pl.err("Unsqueeze without axes"))?;
+                let r = old.len() + axes.len();
+                let mut ax: Vec<usize> = axes
+                    .iter()
+                    .map(|&v| axis(v, r))
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| pl.err(e))?;
+                ax.sort();
+                let mut s = old.clone();
+                for v in ax {
+                    s.insert(v, 1);
+                }
+                s
+            } else {
+                let ax: Vec<usize> = match axes {
+                    Some(v) => v
+                        .iter()
+                        .map(|&v| axis(v, old.len()))
+                        .collect::<Result<_, _>>()
+                        .map_err(|e| pl.err(e))?,
+                    None => (0..old.len()).filter(|&d| old[d] == 1).collect(),
+                };
+                old.iter()
+                    .enumerate()
+                    .filter(|(d, _)| !ax.contains(d))
+                    .map(|(_, &v)| v)
+                    .collect()
+            };
+            alias(pl, x, out, Some(shape))?;
+        }
+        "Concat" => concat(pl, n, out, a.int("axis", 0))?,
+        "Slice" => slice(pl, n, out)?,
+        "Transpose" => {
+            let (buf, shape) = pl.dev(x)?;
+            let perm: Vec<usize> = match a.ints("perm") {
+                Some(p) => p
+                    .iter()
+                    .map(|&v| axis(v, shape.len()))
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| pl.err(e))?,
+                None => (0..shape.len()).rev().collect(),
+            };
+            let st = strides(&shape);
+            let oshape: Vec<usize> = perm.iter().map(|&p| shape[p]).collect();
+            let ist: Vec<i64> = perm.iter().map(|&p| st[p] as i64).collect();
+            let o = pl.alloc(numel(&oshape));
+            pl.copy(buf, 0, &ist, o, 0, &strides(&oshape), &oshape);
+            pl.define_dev(out, o, oshape);
+        }
+        "Pad" => pad(pl, n, out)?,
+        "Add" | "Sub" | "Mul" | "Div" | "Max" | "Min" => {
+            if n.input.len() != 2 {
+                return Err(pl.err(format!(
+                    "{} of {} inputs (2 run on the GPU)",
+                    n.op_type,
+                    n.input.len()
+                )));
+            }
+            let op = ["Add", "Sub", "Mul", "Div", "Max", "Min"]
+                .iter()
+                .position(|o| *o == n.op_type)
+                .unwrap_or(0) as u32;
+            binary(pl, op, x, inp(1).unwrap_or(""), out)?;
+        }
+        "Relu" | "LeakyRelu" | "HardSwish" | "Sigmoid" | "Tanh" | "HardSigmoid" | "Clip" => {
+            let (op, p1, p2) = if n.op_type == "Clip" {
+                let lo = match inp(1) {
+                    Some(m) => pl.konst(m)?.1.floats().first().copied().unwrap_or(f32::MIN),
+                    None => a.float("min", f32::MIN),
+                };
+                let hi = match inp(2) {
+                    Some(m) => pl.konst(m)?.1.floats().first().copied().unwrap_or(f32::MAX),
+                    None => a.float("max", f32::MAX),
+                };
+                (6, lo, hi)
+            } else {
+                super::activation(n).unwrap_or((0, 0.0, 0.0))
+            };
+            let (buf, shape) = pl.dev(x)?;
+            let o = pl.alloc(numel(&shape));
+            let c = numel(&shape) as u32;
+            pl.step(
+                Kernel::Unary,
+                vec![c, op, p1.to_bits(), p2.to_bits()],
+                vec![buf, o],
+            );
+            pl.define_dev(out, o, shape);
+        }
+        "Conv" | "ConvTranspose" => conv(pl, n, out, act, bn)?,
+        "AveragePool" | "MaxPool" | "GlobalAveragePool" | "GlobalMaxPool" => pool(pl, n, out)?,
+        "Gemm" | "MatMul" => gemm(pl, n, out, act)?,
+        "Resize" => resize(pl, n, out)?,
+        "BatchNormalization" => {
+            let (scale, shift) = bn_affine(pl, n)?;
+            let c = scale.len();
+            // The channel axis is 1: [C] then a unit axis per spatial axis.
+            let rank = pl.get(x)?.shape().len();
+            let cshape: Vec<usize> = std::iter::once(c)
+                .chain(std::iter::repeat_n(1, rank.saturating_sub(2)))
+                .collect();
+            let tmp = format!("{out}#scaled");
+            let sname = format!("{out}#bn_scale");
+            let bname = format!("{out}#bn_shift");
+            pl.vals.insert(
+                sname.clone(),
+                Val::Const {
+                    shape: cshape.clone(),
+                    data: Data::F(scale),
+                },
+            );
+            pl.vals.insert(
+                bname.clone(),
+                Val::Const {
+                    shape: cshape,
+                    data: Data::F(shift),
+                },
+            );
+            pl.uses.insert(tmp.clone(), 1);
+            binary(pl, 2, x, &sname, &tmp)?;
+            binary(pl, 0, &tmp, &bname, out)?;
+            pl.release(&tmp);
+        }
+        other => return Err(pl.err(format!("op {other} has no GPU kernel"))),
+    }
+    Ok(())
+}
+
+/// `out` is `x` (reshaped to `shape` when given): the same buffer, no kernel.
+fn alias(pl: &mut Planner, x: &str, out: &str, shape: Option<Vec<usize>>) -> Result<(), String> {
+    match pl.get(x)?.clone() {
+        Val::Const { shape: s, data } => {
+            pl.vals.insert(
+                out.into(),
+                Val::Const {
+                    shape: shape.unwrap_or(s),
+                    data,
+                },
+            );
+        }
+        Val::Dev { buf, shape: s } => pl.define_dev(out, buf, shape.unwrap_or(s)),
+    }
+    Ok(())
+}
+
+/// NumPy broadcasting of two shapes: the output shape and each input's strides in it.
+fn broadcast(a: &[usize], b: &[usize]) -> Option<(Vec<usize>, Vec<i64>, Vec<i64>)> {
+    let r = a.len().max(b.len());
+    let pad = |s: &[usize]| -> Vec<usize> {
+        std::iter::repeat_n(1, r - s.len())
+            .chain(s.iter().copied())
+            .collect()
+    };
+    let (pa, pb) = (pad(a), pad(b));
+    let mut out = Vec::with_capacity(r);
+    for d in 0..r {
+        let (x, y) = (pa[d], pb[d]);
+        out.push(if x == y || y == 1 {
+            x
+        } else if x == 1 {
+            y
+        } else {
+            return None;
+        });
+    }
+    let st = |p: &[usize]| -> Vec<i64> {
+        let s = strides(p);
+        (0..r)
+            .map(|d| {
+                if p[d] == 1 && out[d] != 1 {
+                    0
+                } else {
+                    s[d] as i64
+                }
+            })
+            .collect()
+    };
+    Some((out.clone(), st(&pa), st(&pb)))
+}
+
+fn binary(pl: &mut Planner, op: u32, x: &str, y: &str, out: &str) -> Result<(), String> {
+    let (sa, sb) = (pl.get(x)?.shape().to_vec(), pl.get(y)?.shape().to_vec());
+    let (oshape, ast, bst) = broadcast(&sa, &sb)
+        .ok_or_else(|| pl.err(format!("shapes {sa:?} and {sb:?} do not broadcast")))?;
+    if oshape.len() > super::MAX_RANK {
+        return Err(pl.err(format!(
+            "rank {} (at most {})",
+            oshape.len(),
+            super::MAX_RANK
+        )));
+    }
+    // Both constant: fold on the host (shape arithmetic).
+    if let (Val::Const { data: da, .. }, Val::Const { data: db, .. }) =
+        (pl.get(x)?.clone(), pl.get(y)?.clone())
+    {
+        let n = numel(&oshape);
+        let st = strides(&oshape);
+        let at = |s: &[i64], i: usize| -> usize {
+            (0..oshape.len())
+                .map(|d| (i / st[d]) % oshape[d] * s[d] as usize)
+                .sum()
+        };
+        let ints = matches!((&da, &db), (Data::I(_), Data::I(_)));
+        let (fa, fb, ia, ib) = (da.floats(), db.floats(), da.ints(), db.ints());
+        let data = if ints {
+            Data::I(
+                (0..n)
+                    .map(|i| {
+                        let (u, v) = (ia[at(&ast, i)], ib[at(&bst, i)]);
+                        match op {
+                            0 => u + v,
+                            1 => u - v,
+                            2 => u * v,
+                            3 => {
+                                if v != 0 {
+                                    u / v
+                                } else {
+                                    0
+                                }
+                            }
+                            4 => u.max(v),
+                            _ => u.min(v),
+                        }
+                    })
+                    .collect(),
+            )
+        } else {
+            Data::F(
+                (0..n)
+                    .map(|i| {
+                        let (u, v) = (fa[at(&ast, i)], fb[at(&bst, i)]);
+                        match op {
+                            0 => u + v,
+                            1 => u - v,
+                            2 => u * v,
+                            3 => u / v,
+                            4 => u.max(v),
+                            _ => u.min(v),
+                        }
+                    })
+                    .collect(),
+            )
+        };
+        pl.vals.insert(
+            out.into(),
+            Val::Const {
+                shape: oshape,
+                data,
+            },
+        );
+        return Ok(());
+    }
+    let (ba, _) = pl.dev(x)?;
+    let (bb, _) = pl.dev(y)?;
+    let o = pl.alloc(numel(&oshape));
+    let (sh, ast) = pad6(&oshape, &ast);
+    let (_, bst) = pad6(&oshape, &bst);
+    let mut p = vec![numel(&oshape) as u32, op];
+    p.extend(sh);
+    p.extend(ast);
+    p.extend(bst);
+    pl.step(Kernel::Binary, p, vec![ba, bb, o]);
+    pl.define_dev(out, o, oshape);
+    Ok(())
+}
+
+fn concat(pl: &mut Planner, n: &NodeProto, out: &str, ax: i64) -> Result<(), String> {
+    let names: Vec<&str> = n
+        .input
+        .iter()
+        .map(|s| s.as_str())
+        .filter(|s| !s.is_empty())
+        .collect();
+    let first = pl
+        .get(names.first().copied().unwrap_or(""))?
+        .shape()
+        .to_vec();
+    let k = axis(ax, first.len()).map_err(|e| pl.err(e))?;
+    let mut oshape = first.clone();
+    oshape[k] = 0;
+    for name in &names {
+        let s = pl.get(name)?.shape().to_vec();
+        if s.len() != first.len() || (0..s.len()).any(|d| d != k && s[d] != first[d]) {
+            return Err(pl.err(format!("Concat of {first:?} and {s:?} along axis {k}")));
+        }
+        oshape[k] += s[k];
+    }
+    let all_const = names
+        .iter()
+        .all(|m| matches!(pl.vals.get(*m), Some(Val::Const { .. })));
+    if all_const && first.len() == 1 {
+        let parts: Vec<Data> = names
+            .iter()
+            .map(|m| pl.konst(m).map(|c| c.1))
+            .collect::<Result<_, _>>()?;
+        let data = if parts.iter().all(|d| matches!(d, Data::I(_))) {
+            Data::I(parts.iter().flat_map(|d| d.ints()).collect())
+        } else {
+            Data::F(parts.iter().flat_map(|d| d.floats()).collect())
+        };
+        pl.vals.insert(
+            out.into(),
+            Val::Const {
+                shape: oshape,
+                data,
+            },
+        );
+        return Ok(());
+    }
+    let o = pl.alloc(numel(&oshape));
+    let ost = strides(&oshape);
+    let mut at = 0;
+    for name in names {
+        let (b, s) = pl.dev(name)?;
+        let ist: Vec<i64> = strides(&s).iter().map(|&v| v as i64).collect();
+        pl.copy(b, 0, &ist, o, at * ost[k], &ost, &s);
+        at += s[k];
+    }
+    pl.define_dev(out, o, oshape);
+    Ok(())
+}
+
+fn slice(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let x = n.input.first().map(|s| s.as_str()).unwrap_or("");
+    let shape = pl.get(x)?.shape().to_vec();
+    let r = shape.len();
+    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let get = |pl: &Planner, i: usize, attr: &str| -> Result<Option<Vec<i64>>, String> {
+        match inp(i) {
+            Some(name) => Ok(Some(pl.konst(name)?.1.ints())),
+            None => Ok(a.ints(attr)),
+        }
+    };
+    let starts = get(pl, 1, "starts")?.ok_or_else(|| pl.err("Slice without starts"))?;
+    let ends = get(pl, 2, "ends")?.ok_or_else(|| pl.err("Slice without ends"))?;
+    let axes = get(pl, 3, "axes")?.unwrap_or_else(|| (0..starts.len() as i64).collect());
+    let steps = get(pl, 4, "steps")?.unwrap_or_else(|| vec![1; starts.len()]);
+    let mut begin = vec![0i64; r];
+    let mut step = vec![1i64; r];
+    let mut oshape = shape.clone();
+    for (j, &ax) in axes.iter().enumerate() {
+        let d = axis(ax, r).map_err(|e| pl.err(e))?;
+        let dim = shape[d] as i64;
+        let st = steps.get(j).copied().unwrap_or(1);
+        if st == 0 {
+            return Err(pl.err("Slice step 0"));
+        }
+        let fix = |v: i64, lo: i64, hi: i64| (if v < 0 { v + dim } else { v }).clamp(lo, hi);
+        let (b, e) = if st > 0 {
+            (fix(starts[j], 0, dim), fix(ends[j], 0, dim))
+        } else {
+            (fix(starts[j], -1, dim - 1), fix(ends[j], -1, dim - 1))
+        };
+        let len = if st > 0 {
+            (e - b + st - 1).div_euclid(st)
+        } else {
+            (b - e + (-st) - 1).div_euclid(-st)
+        };
+        oshape[d] = len.max(0) as usize;
+        begin[d] = b;
+        step[d] = st;
+    }
+    let ist0 = strides(&shape);
+    let off: i64 = (0..r).map(|d| begin[d] * ist0[d] as i64).sum();
+    let ist: Vec<i64> = (0..r).map(|d| step[d] * ist0[d] as i64).collect();
+    if let Val::Const { data, .. } = pl.get(x)?.clone() {
+        let ost = strides(&oshape);
+        let idx = |i: usize| -> usize {
+            (off + (0..r)
+                .map(|d| ((i / ost[d]) % oshape[d]) as i64 * ist[d])
+                .sum::<i64>()) as usize
+        };
+        let m = numel(&oshape);
+        let data = match data {
+            Data::F(v) => Data::F((0..m).map(|i| v[idx(i)]).collect()),
+            Data::I(v) => Data::I((0..m).map(|i| v[idx(i)]).collect()),
+        };
+        pl.vals.insert(
+            out.into(),
+            Val::Const {
+                shape: oshape,
+                data,
+            },
+        );
+        return Ok(());
+    }
+    let (b, _) = pl.dev(x)?;
+    let o = pl.alloc(numel(&oshape));
+    pl.copy(b, off, &ist, o, 0, &strides(&oshape), &oshape);
+    pl.define_dev(out, o, oshape);
+    Ok(())
+}
+
+fn pad(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let mode = a.string("mode", "constant");
+    if mode != "constant" {
+        return Err(pl.err(format!("Pad mode {mode:?} (constant runs on the GPU)")));
+    }
+    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let x = inp(0).unwrap_or("");
+    let pads = match inp(1) {
+        Some(p) => pl.konst(p)?.1.ints(),
+        None => a.ints("pads").unwrap_or_default(),
+    };
+    let value = match inp(2) {
+        Some(v) => pl.konst(v)?.1.floats().first().copied().unwrap_or(0.0),
+        None => a.float("value", 0.0),
+    };
+    let (b, shape) = pl.dev(x)?;
+    let r = shape.len();
+    if pads.len() != 2 * r || pads.iter().any(|&p| p < 0) || inp(3).is_some() {
+        return Err(pl.err(format!(
+            "pads {pads:?} for rank {r} (non-negative, every axis)"
+        )));
+    }
+    let oshape: Vec<usize> = (0..r)
+        .map(|d| shape[d] + (pads[d] + pads[r + d]) as usize)
+        .collect();
+    let o = pl.alloc(numel(&oshape));
+    pl.step(
+        Kernel::Fill,
+        vec![numel(&oshape) as u32, value.to_bits()],
+        vec![o],
+    );
+    let ost = strides(&oshape);
+    let off: usize = (0..r).map(|d| pads[d] as usize * ost[d]).sum();
+    let ist: Vec<i64> = strides(&shape).iter().map(|&v| v as i64).collect();
+    pl.copy(b, 0, &ist, o, off, &ost, &shape);
+    pl.define_dev(out, o, oshape);
+    Ok(())
+}
+
+/// Batch-norm's per-channel (scale, shift): y = x scale + shift.
+fn bn_affine(pl: &Planner, n: &NodeProto) -> Result<(Vec<f32>, Vec<f32>), String> {
+    let eps = Attrs(&n.attribute).float("epsilon", 1e-5);
+    let get = |i: usize| -> Result<Vec<f32>, String> {
+        Ok(pl
+            .konst(n.input.get(i).map(|s| s.as_str()).unwrap_or(""))?
+            .1
+            .floats())
+    };
+    let (g, b, m, v) = (get(1)?, get(2)?, get(3)?, get(4)?);
+    let scale: Vec<f32> = g
+        .iter()
+        .zip(&v)
+        .map(|(g, v)| g / (v + eps).sqrt())
+        .collect();
+    let shift: Vec<f32> = b
+        .iter()
+        .zip(&m)
+        .zip(&scale)
+        .map(|((b, m), s)| b - m * s)
+        .collect();
+    Ok((scale, shift))
+}
+
+/// (pad_top, pad_left) and the output side for one spatial axis.
+fn conv_pads(
+    a: &Attrs,
+    shape_in: [usize; 2],
+    k: [usize; 2],
+    s: [usize; 2],
+    d: [usize; 2],
+    transpose: bool,
+) -> Result<([usize; 2], [usize; 2]), String> {
+    let auto = a.string("auto_pad", "NOTSET");
+    let pads = a.ints("pads").unwrap_or_else(|| vec![0; 4]);
+    if pads.len() != 4 || pads.iter().any(|&p| p < 0) {
+        return Err(format!("pads {pads:?}"));
+    }
+    if !matches!(auto.as_str(), "NOTSET" | "VALID")
+        || (auto == "VALID" && pads.iter().any(|&p| p != 0))
+    {
+        return Err(format!("auto_pad {auto:?} (NOTSET or VALID)"));
+    }
+    let outp = a.ints("output_padding").unwrap_or_else(|| vec![0, 0]);
+    if transpose && a.get("output_shape").is_some() {
+        return Err("ConvTranspose with output_shape (give pads)".into());
+    }
+    let mut o = [0usize; 2];
+    for i in 0..2 {
+        let span = d[i] * (k[i] - 1) + 1;
+        let (b, e) = (pads[i] as usize, pads[i + 2] as usize);
+        o[i] = if transpose {
+            ((shape_in[i] - 1) * s[i] + span + *outp.get(i).unwrap_or(&0) as usize)
+                .checked_sub(b + e)
+                .ok_or("negative output")?
+        } else {
+            let full = shape_in[i] + b + e;
+            if full < span {
+                return Err(format!("kernel {k:?} larger than the padded input"));
+            }
+            (full - span) / s[i] + 1
+        };
+    }
+    Ok(([pads[0] as usize, pads[1] as usize], o))
+}
+
+fn conv(
+    pl: &mut Planner,
+    n: &NodeProto,
+    out: &str,
+    act: Act,
+    bn: Option<&NodeProto>,
+) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let transpose = n.op_type == "ConvTranspose";
+    let x = n.input.first().map(|s| s.as_str()).unwrap_or("");
+    let (b, shape) = pl.dev(x)?;
+    let (wshape, w) = pl.konst(n.input.get(1).map(|s| s.as_str()).unwrap_or(""))?;
+    if shape.len() != 4 || wshape.len() != 4 {
+        return Err(pl.err(format!(
+            "{} of input {shape:?}, weights {wshape:?} (2-D, NCHW)",
+            n.op_type
+        )));
+    }
+    let group = a.int("group", 1).max(1) as usize;
+    let (nb, c, h, wd) = (shape[0], shape[1], shape[2], shape[3]);
+    let m = if transpose {
+        wshape[1] * group
+    } else {
+        wshape[0]
+    };
+    let cin_w = if transpose {
+        wshape[0]
+    } else {
+        wshape[1] * group
+    };
+    if cin_w != c || c % group != 0 || m % group != 0 {
+        return Err(pl.err(format!(
+            "weights {wshape:?} for {c} input channels in {group} groups"
+        )));
+    }
+    let two = |name: &str| -> [usize; 2] {
+        let v = a.ints(name).unwrap_or_else(|| vec![1, 1]);
+        [
+            v.first().copied().unwrap_or(1).max(1) as usize,
+            v.get(1).copied().unwrap_or(1).max(1) as usize,
+        ]
+    };
+    let (s, d) = (two("strides"), two("dilations"));
+    let k = [wshape[2], wshape[3]];
+    let (pt, o) = conv_pads(&a, [h, wd], k, s, d, transpose).map_err(|e| pl.err(e))?;
+    let mut w = w.floats();
+    let mut bias = match n.input.get(2).filter(|s| !s.is_empty()) {
+        Some(name) => pl.konst(name)?.1.floats(),
+        None => vec![0.0; m],
+    };
+    if let Some(bn) = bn {
+        // Folded at load: W' = W scale[m], b' = b scale[m] + shift[m].
+        let (scale, shift) = bn_affine(pl, bn)?;
+        let per = w.len() / m;
+        for (i, v) in w.iter_mut().enumerate() {
+            *v *= scale[i / per];
+        }
+        for (j, v) in bias.iter_mut().enumerate() {
+            *v = *v * scale[j] + shift[j];
+        }
+    }
+    let wb = pl.upload(w);
+    let bb = pl.upload(bias);
+    let oshape = vec![nb, m, o[0], o[1]];
+    let ob = pl.alloc(numel(&oshape));
+    let dims = [
+        nb, c, h, wd, m, o[0], o[1], k[0], k[1], s[0], s[1], pt[0], pt[1], d[0], d[1], group,
+    ];
+    // Ungrouped with a multiple of 4 outputs: four channels per invocation.
+    let blocked = !transpose && group == 1 && m % 4 == 0;
+    let kernel = match (transpose, blocked) {
+        (true, _) => Kernel::ConvTranspose,
+        (false, true) => Kernel::Conv4,
+        (false, false) => Kernel::Conv,
+    };
+    let count = if blocked {
+        numel(&oshape) / 4
+    } else {
+        numel(&oshape)
+    };
+    let mut p = vec![count as u32];
+    p.extend(dims.iter().map(|&v| v as u32));
+    p.extend([act.0, act.1.to_bits(), act.2.to_bits()]);
+    pl.step(kernel, p, vec![b, wb, bb, ob]);
+    pl.define_dev(out, ob, oshape);
+    Ok(())
+}
+
+fn pool(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let x = n.input.first().map(|s| s.as_str()).unwrap_or("");
+    let (b, shape) = pl.dev(x)?;
+    if shape.len() != 4 {
+        return Err(pl.err(format!("{} of {shape:?} (2-D, NCHW)", n.op_type)));
+    }
+    let (h, w) = (shape[2], shape[3]);
+    let global = n.op_type.starts_with("Global");
+    let max = n.op_type.ends_with("MaxPool");
+    let (k, s, pads) = if global {
+        ([h, w], [1, 1], vec![0; 4])
+    } else {
+        let ks = a
+            .ints("kernel_shape")
+            .ok_or_else(|| pl.err("pool without kernel_shape"))?;
+        let st = a.ints("strides").unwrap_or_else(|| vec![1, 1]);
+        if ks.len() != 2 || st.len() != 2 {
+            return Err(pl.err("pooling over other than 2 axes"));
+        }
+        if a.ints("dilations")
+            .is_some_and(|d| d.iter().any(|&v| v != 1))
+            || a.string("auto_pad", "NOTSET") != "NOTSET"
+        {
+            return Err(pl.err("dilated or auto-padded pooling"));
+        }
+        (
+            [ks[0] as usize, ks[1] as usize],
+            [st[0].max(1) as usize, st[1].max(1) as usize],
+            a.ints("pads").unwrap_or_else(|| vec![0; 4]),
+        )
+    };
+    let ceil = a.int("ceil_mode", 0) == 1;
+    let mut o = [0usize; 2];
+    for i in 0..2 {
+        let full = [h, w][i] + (pads[i] + pads[i + 2]).max(0) as usize;
+        if full < k[i] {
+            return Err(pl.err(format!("window {k:?} larger than the padded input")));
+        }
+        let q = full - k[i];
+        o[i] = if ceil { q.div_ceil(s[i]) } else { q / s[i] } + 1;
+    }
+    let oshape = vec![shape[0], shape[1], o[0], o[1]];
+    let ob = pl.alloc(numel(&oshape));
+    let p = [
+        numel(&oshape),
+        shape[0] * shape[1],
+        h,
+        w,
+        o[0],
+        o[1],
+        k[0],
+        k[1],
+        s[0],
+        s[1],
+        pads[0] as usize,
+        pads[1] as usize,
+        max as usize,
+        a.int("count_include_pad", 0) as usize,
+    ];
+    pl.step(
+        Kernel::Pool,
+        p.iter().map(|&v| v as u32).collect(),
+        vec![b, ob],
+    );
+    pl.define_dev(out, ob, oshape);
+    Ok(())
+}
+
+fn gemm(pl: &mut Planner, n: &NodeProto, out: &str, act: Act) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let (ba, sa) = pl.dev(inp(0).unwrap_or(""))?;
+    let (bb, sb) = pl.dev(inp(1).unwrap_or(""))?;
+    let gemm = n.op_type == "Gemm";
+    let (ta, tb) = if gemm {
+        (a.int("transA", 0) == 1, a.int("transB", 0) == 1)
+    } else {
+        (false, false)
+    };
+    if sa.len() != 2 || sb.len() != 2 {
+        return Err(pl.err(format!("{} of {sa:?} and {sb:?} (2-D only)", n.op_type)));
+    }
+    let (m, k) = if ta { (sa[1], sa[0]) } else { (sa[0], sa[1]) };
+    let (k2, nn) = if tb { (sb[1], sb[0]) } else { (sb[0], sb[1]) };
+    if k != k2 {
+        return Err(pl.err(format!("inner sizes {k} and {k2} differ")));
+    }
+    let (alpha, beta) = if gemm {
+        (a.float("alpha", 1.0), a.float("beta", 1.0))
+    } else {
+        (1.0, 0.0)
+    };
+    let (cb, crs, ccs, has_c) = match inp(2).filter(|_| gemm) {
+        Some(c) => {
+            let (cb, sc) = pl.dev(c)?;
+            let (_, st, _) = broadcast(&[m, nn], &sc)
+                .filter(|(o, _, _)| o == &vec![m, nn])
+                .map(|(o, _, s)| (o, s, ()))
+                .ok_or_else(|| pl.err(format!("C {sc:?} for [{m}, {nn}]")))?;
+            (cb, st[0] as u32, st[1] as u32, 1)
+        }
+        None => (ba, 0, 0, 0),
+    };
+    let ob = pl.alloc(m * nn);
+    let p = vec![
+        (m * nn) as u32,
+        m as u32,
+        nn as u32,
+        k as u32,
+        ta as u32,
+        tb as u32,
+        alpha.to_bits(),
+        beta.to_bits(),
+        crs,
+        ccs,
+        has_c,
+        act.0,
+        act.1.to_bits(),
+        act.2.to_bits(),
+    ];
+    pl.step(Kernel::Gemm, p, vec![ba, bb, cb, ob]);
+    pl.define_dev(out, ob, vec![m, nn]);
+    Ok(())
+}
+
+fn resize(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let (b, shape) = pl.dev(inp(0).unwrap_or(""))?;
+    if shape.len() != 4 {
+        return Err(pl.err(format!("Resize of {shape:?} (NCHW)")));
+    }
+    let scales = match inp(2) {
+        Some(s) => pl.konst(s)?.1.floats(),
+        None => vec![],
+    };
+    let sizes = match inp(3) {
+        Some(s) => pl.konst(s)?.1.ints(),
+        None => vec![],
+    };
+    let (oh, ow, sh, sw) = if sizes.len() == 4 {
+        let (oh, ow) = (sizes[2] as usize, sizes[3] as usize);
+        if sizes[0] as usize != shape[0] || sizes[1] as usize != shape[1] {
+            return Err(pl.err("Resize of N or C"));
+        }
+        (
+            oh,
+            ow,
+            oh as f32 / shape[2] as f32,
+            ow as f32 / shape[3] as f32,
+        )
+    } else if scales.len() == 4 {
+        if scales[0] != 1.0 || scales[1] != 1.0 {
+            return Err(pl.err("Resize of N or C"));
+        }
+        (
+            (shape[2] as f32 * scales[2]).floor() as usize,
+            (shape[3] as f32 * scales[3]).floor() as usize,
+            scales[2],
+            scales[3],
+        )
+    } else {
+        return Err(pl.err("Resize without 4 scales or sizes"));
+    };
+    let mode = match a.string("mode", "nearest").as_str() {
+        "nearest" => 0,
+        "linear" => 1,
+        other => return Err(pl.err(format!("Resize mode {other:?}"))),
+    };
+    let ctm = match a
+        .string("coordinate_transformation_mode", "half_pixel")
+        .as_str()
+    {
+        "half_pixel" => 0,
+        "align_corners" => 1,
+        "asymmetric" => 2,
+        "pytorch_half_pixel" => 3,
+        other => return Err(pl.err(format!("Resize coordinate_transformation_mode {other:?}"))),
+    };
+    let near = match a.string("nearest_mode", "round_prefer_floor").as_str() {
+        "round_prefer_floor" => 0,
+        "round_prefer_ceil" => 1,
+        "floor" => 2,
+        "ceil" => 3,
+        other => return Err(pl.err(format!("Resize nearest_mode {other:?}"))),
+    };
+    let oshape = vec![shape[0], shape[1], oh, ow];
+    let ob = pl.alloc(numel(&oshape));
+    let p = vec![
+        numel(&oshape) as u32,
+        (shape[0] * shape[1]) as u32,
+        shape[2] as u32,
+        shape[3] as u32,
+        oh as u32,
+        ow as u32,
+        mode,
+        ctm,
+        near,
+        sh.to_bits(),
+        sw.to_bits(),
+    ];
+    pl.step(Kernel::Resize, p, vec![b, ob]);
+    pl.define_dev(out, ob, oshape);
+    Ok(())
+}

@@ -1,0 +1,325 @@
+//! The GPU backend (feature `wgpu`) against tract, on whatever adapter opens: Mesa's lavapipe
+//! here and in CI (`WGPU_BACKEND=vulkan`), a board's GPU there. Every committed f32 network:
+//! each tensor the GPU computes within 1e-3 of tract's (relative to the tensor's scale), the
+//! output within 2e-3; hard inputs stay finite; ops without a kernel are refused at load
+//! naming op and node. Without an adapter the tests fail under CI and say so elsewhere.
+#![cfg(feature = "wgpu")]
+
+mod common;
+
+use common::{Golden, golden_input, models_dir};
+use std::path::Path;
+use std::sync::Arc;
+use tract_onnx::prelude::*;
+use volcap_engine::gpu::Gpu;
+use volcap_engine::model::Runtime;
+use volcap_engine::model::preprocess::{INPUT_SIZE, letterbox};
+
+/// Per tensor, max |gpu - tract| over max(1e-3, max |tract|).
+const LAYER_TOLERANCE: f32 = 1e-3;
+const OUTPUT_TOLERANCE: f32 = 2e-3;
+
+fn gpu() -> Option<Arc<Gpu>> {
+    match Gpu::open("auto") {
+        Ok(g) => {
+            println!("adapter: {}", g.adapter.label());
+            Some(g)
+        }
+        Err(e) if std::env::var_os("CI").is_some() => {
+            panic!("no GPU adapter under CI (install mesa-vulkan-drivers): {e}")
+        }
+        Err(e) => {
+            println!("skipped: {e}");
+            None
+        }
+    }
+}
+
+fn flat(t: &TValue) -> Vec<f32> {
+    let t = t.cast_to::<f32>().unwrap();
+    t.to_plain_array_view::<f32>()
+        .unwrap()
+        .iter()
+        .copied()
+        .collect()
+}
+
+fn scale_diff(reference: &[f32], got: &[f32]) -> f32 {
+    assert_eq!(reference.len(), got.len());
+    let scale = reference.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
+    reference
+        .iter()
+        .zip(got)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max)
+        / scale
+}
+
+/// Deterministic inputs in [-1, 1].
+fn values(n: usize, seed: usize) -> Vec<f32> {
+    (0..n)
+        .map(|i| (((i + seed) * 37 % 101) as f32 / 50.0) - 1.0)
+        .collect()
+}
+
+/// The graph's inputs (name, shape; a symbolic batch as 512 points).
+fn inputs_of(path: &Path) -> Vec<(String, Vec<usize>)> {
+    let proto = tract_onnx::onnx().proto_model_for_path(path).unwrap();
+    let g = proto.graph.unwrap();
+    let inits: Vec<&str> = g.initializer.iter().map(|t| t.name.as_str()).collect();
+    g.input
+        .iter()
+        .filter(|i| !inits.contains(&i.name.as_str()))
+        .map(|i| {
+            let dims = match i.r#type.as_ref().and_then(|t| t.value.as_ref()) {
+                Some(tract_onnx::pb::type_proto::Value::TensorType(t)) => t
+                    .shape
+                    .as_ref()
+                    .map(|s| {
+                        s.dim
+                            .iter()
+                            .map(|d| match d.value {
+                                Some(
+                                    tract_onnx::pb::tensor_shape_proto::dimension::Value::DimValue(
+                                        v,
+                                    ),
+                                ) if v > 0 => v as usize,
+                                _ => 512,
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default(),
+                _ => vec![],
+            };
+            (i.name.clone(), dims)
+        })
+        .collect()
+}
+
+/// Realistic inputs where the shape is an image the product feeds (the golden person), else
+/// deterministic values.
+fn input_values(shape: &[usize], k: usize) -> Vec<f32> {
+    let s = INPUT_SIZE;
+    if shape == [1, 4, s, s] {
+        golden_input(&Golden::load("color")).0
+    } else if shape == [1, 3, s, s] {
+        letterbox(&Golden::load("seg").u8("image_u8"), s, s)
+    } else {
+        values(shape.iter().product(), 11 * k)
+    }
+}
+
+/// The committed f32 networks (every .onnx under models/ but the int8 files).
+fn f32_networks() -> Vec<std::path::PathBuf> {
+    let mut v: Vec<_> = std::fs::read_dir(models_dir())
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            let n = p.file_name().unwrap().to_string_lossy().to_string();
+            n.ends_with(".onnx") && !n.contains(".int8.")
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn dispatch_groups_cover_every_invocation_within_the_default_limit() {
+    for count in [
+        1u32,
+        63,
+        64,
+        65,
+        64 * 65535,
+        64 * 65535 + 1,
+        513 * 513 * 513,
+    ] {
+        let (x, y) = volcap_engine::gpu::groups(count);
+        assert!(x <= 65535 && y <= 65535, "{count}: {x} x {y}");
+        assert!(
+            x as u64 * y as u64 * 64 >= count as u64,
+            "{count}: {x} x {y}"
+        );
+    }
+}
+
+#[test]
+fn an_adapter_that_is_not_there_is_refused_with_the_list_of_adapters() {
+    let e = Gpu::open("no-such-adapter-anywhere").unwrap_err();
+    assert!(
+        e.contains("no-such-adapter-anywhere")
+            && (e.contains("adapters found") || e.contains("no adapter found")),
+        "{e}"
+    );
+    println!("{e}");
+}
+
+#[test]
+fn every_layer_of_every_committed_network_matches_tract() {
+    let Some(gpu) = gpu() else { return };
+    let nets = f32_networks();
+    assert!(nets.len() >= 10, "the committed networks: {nets:?}");
+    for path in nets {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let specs = inputs_of(&path);
+        let data: Vec<(Vec<usize>, Vec<f32>)> = specs
+            .iter()
+            .enumerate()
+            .map(|(k, (_, s))| (s.clone(), input_values(s, k)))
+            .collect();
+        let args: Vec<(&[usize], &[f32])> = data
+            .iter()
+            .map(|(s, d)| (s.as_slice(), d.as_slice()))
+            .collect();
+        let net = volcap_engine::gpu::net::GpuNet::load(gpu.clone(), &path)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let layers = net.run_all(&args).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let inputs: Vec<&str> = specs.iter().map(|(n, _)| n.as_str()).collect();
+        let layers: Vec<_> = layers
+            .into_iter()
+            .filter(|(n, _, _)| !n.contains('#') && !inputs.contains(&n.as_str()))
+            .collect();
+        // tract on the same file with every one of those tensors as an output.
+        let mut model = tract_onnx::onnx().model_for_path(&path).unwrap();
+        for (i, (s, _)) in data.iter().enumerate() {
+            model = model.with_input_fact(i, f32::fact(s).into()).unwrap();
+        }
+        let model = model
+            .with_outputs_by_name(layers.iter().map(|(n, _, _)| n.as_str()))
+            .unwrap()
+            .into_optimized()
+            .unwrap()
+            .into_runnable()
+            .unwrap();
+        let tv: TVec<TValue> = data
+            .iter()
+            .map(|(s, d)| Tensor::from_shape(s, d).unwrap().into_tvalue())
+            .collect();
+        let want = model.run(tv).unwrap();
+        let mut worst = (0.0f32, String::new());
+        for ((lname, shape, got), w) in layers.iter().zip(want.iter()) {
+            let w = flat(w);
+            assert_eq!(w.len(), got.len(), "{name} {lname}: shape {shape:?}");
+            assert!(
+                got.iter().all(|v| v.is_finite()),
+                "{name} {lname}: non-finite on the GPU"
+            );
+            let d = scale_diff(&w, got);
+            if d > worst.0 {
+                worst = (d, lname.clone());
+            }
+            assert!(
+                d <= LAYER_TOLERANCE,
+                "{name} {lname} {shape:?}: GPU vs tract {d:.2e} relative, over {LAYER_TOLERANCE:.0e}"
+            );
+        }
+        // The network's output through the planned (buffer-reusing) path.
+        let out = net.run(&args).unwrap();
+        let out_name = tract_onnx::onnx()
+            .proto_model_for_path(&path)
+            .unwrap()
+            .graph
+            .unwrap()
+            .output[0]
+            .name
+            .clone();
+        let at = layers
+            .iter()
+            .position(|(n, _, _)| *n == out_name)
+            .unwrap_or_else(|| panic!("{name}: the output {out_name} is not among the tensors"));
+        let d_out = scale_diff(&flat(&want[at]), &out);
+        println!(
+            "{name}: {} tensors, worst layer {:.2e} ({}), output {:.2e}",
+            layers.len(),
+            worst.0,
+            worst.1,
+            d_out
+        );
+        assert!(d_out <= OUTPUT_TOLERANCE, "{name}: output {d_out:.2e}");
+    }
+}
+
+#[test]
+fn an_op_without_a_kernel_is_refused_at_load_naming_op_and_node() {
+    // The int8 files quantize around their products (QuantizeLinear / DequantizeLinear): a
+    // CPU-runtime format. Planning needs no adapter.
+    let path = models_dir().join("shape-fourier-small.fourier.int8.onnx");
+    let proto = tract_onnx::onnx().proto_model_for_path(&path).unwrap();
+    let e = volcap_engine::gpu::net::plan::check_ops(proto.graph.as_ref().unwrap()).unwrap_err();
+    assert!(
+        e.contains("node \"") && e.contains("Linear") && e.contains("no GPU kernel"),
+        "{e}"
+    );
+    // And through the runtime seam, the error names the file.
+    let Some(gpu) = gpu() else { return };
+    let e = match volcap_engine::model::FourierNet::load_on(
+        &models_dir(),
+        "fourier-small",
+        volcap_engine::model::Precision::Int8,
+        &Runtime::Wgpu(gpu),
+    ) {
+        Ok(_) => panic!("an int8 file loaded on the GPU backend"),
+        Err(e) => e.to_string(),
+    };
+    assert!(e.contains("int8.onnx") && e.contains("GPU backend"), "{e}");
+}
+
+#[test]
+fn the_fourier_field_at_100k_points_matches_the_cpu_for_every_committed_model() {
+    use volcap_engine::model::fourier::Basis;
+    use volcap_engine::model::{FourierNet, Precision};
+    let Some(gpu) = gpu() else { return };
+    let (x, _) = golden_input(&Golden::load("color"));
+    let mut models = common::models_of("fourier");
+    models.sort();
+    assert!(models.len() >= 3, "{models:?}");
+    // 100k points over the crop and past it (|x|, |y| up to 1.2; zeta past the depth range),
+    // the exact corners and ends, and non-finite ones.
+    let mut rng = 0x9e3779b9u32;
+    let mut next = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 17;
+        rng ^= rng << 5;
+        rng as f32 / u32::MAX as f32
+    };
+    let mut pts: Vec<glam::Vec3> = (0..100_000)
+        .map(|_| glam::Vec3::new(2.4 * next() - 1.2, 2.4 * next() - 1.2, 1.3 * next() - 0.65))
+        .collect();
+    for c in [-1.0f32, 1.0] {
+        pts.push(glam::Vec3::new(c, -c, 0.0));
+        pts.push(glam::Vec3::new(0.3, 0.1, c * 0.5));
+    }
+    pts.push(glam::Vec3::new(f32::NAN, 0.0, 0.0));
+    pts.push(glam::Vec3::new(0.0, 0.0, f32::INFINITY));
+    for name in models {
+        let net =
+            FourierNet::load_on(&models_dir(), &name, Precision::F32, &Runtime::Tract).unwrap();
+        let maps = net.maps(&x).unwrap();
+        for (label, maps) in [
+            ("fourier", maps.clone()),
+            ("cosine", maps.with_basis(Basis::Cosine)),
+        ] {
+            let mut cpu = vec![0.0f32; pts.len()];
+            maps.occupancy(&pts, &mut cpu, &mut Vec::new());
+            let field = volcap_engine::gpu::fourier::GpuFourier::new(gpu.clone(), &maps).unwrap();
+            let mut got = vec![-1.0f32; pts.len()];
+            field.occupancy(&pts, &mut got).unwrap();
+            let worst = cpu
+                .iter()
+                .zip(&got)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            let inside = cpu.iter().filter(|v| **v > 0.5).count();
+            println!(
+                "{name} ({label} basis): {} points ({inside} inside), max |gpu - cpu| {worst:.2e}",
+                pts.len()
+            );
+            assert!(
+                got.iter().all(|v| (0.0..=1.0).contains(v)),
+                "{name}: out of [0, 1]"
+            );
+            assert!(worst <= 1e-4, "{name} ({label}): {worst}");
+            assert!(inside > 100, "{name}: the points miss the person");
+        }
+    }
+}
