@@ -107,7 +107,7 @@ def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False, percen
 
 
 def load_modules(run: Path, names):
-    st = torch.load(run / "ckpt.pt", weights_only=False)
+    st = torch.load(run / "ckpt.pt", weights_only=False, map_location="cpu")
     return st, [st["modules"][n] for n in names]
 
 
@@ -466,7 +466,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     save_file(geometry_golden(net, va, 0, gen, iso), str(out / "golden" / f"geometry-{base}.safetensors"))
     # A light checkpoint (weights and step, no optimizer state) for resuming training in a
     # later session: `train fourier --init models/checkpoints/shape-NAME.pt`.
-    st = torch.load(run / "ckpt.pt", weights_only=False)
+    st = torch.load(run / "ckpt.pt", weights_only=False, map_location="cpu")
     light.save(out / "checkpoints" / f"{base}.pt", net.state_dict(), st["step"], variant)
     macs = count_macs(net, x)
     history = (run / "history.md").read_text() if (run / "history.md").exists() else ""

@@ -25,7 +25,7 @@ def from_run(run: Path, out: Path, variant: str) -> int:
     ck = run / "ckpt.pt"
     if not ck.exists():
         raise SystemExit(f"{run}: no ckpt.pt (not a run folder, or no checkpoint written yet)")
-    st = torch.load(ck, weights_only=False)
+    st = torch.load(ck, weights_only=False, map_location="cpu")
     step = int(st["step"]) if isinstance(st, dict) and "step" in st else -1
     save(out, init_weights(st, ck), step, variant)
     return step

@@ -267,6 +267,15 @@ def fourier_query(coeff: torch.Tensor, pts: torch.Tensor, k: int) -> torch.Tenso
     return FO.decode(c, pts[..., 2] * FO.ZETA_SCALE, k)
 
 
+def device(choice: str) -> torch.device:
+    """`--device`: `auto` (CUDA when present, else the CPU), `cpu` or `cuda`."""
+    if choice == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if choice == "cuda" and not torch.cuda.is_available():
+        raise SystemExit("--device cuda: no CUDA device (torch.cuda.is_available() is false)")
+    return torch.device(choice)
+
+
 def hardware():
     return {"cpu": platform.processor() or platform.machine(), "threads": torch.get_num_threads(), "torch": torch.__version__, "cuda": torch.cuda.is_available()}
 
@@ -280,7 +289,7 @@ def init_weights(ckpt, path) -> dict:
         weights = ckpt["net"] if "net" in ckpt else (ckpt.get("modules") or {}).get("net")
     if not isinstance(weights, dict):
         raise SystemExit(f"--init {path}: neither a light checkpoint (key `net`) nor a run checkpoint (key `modules.net`)")
-    return {n: v.float() for n, v in weights.items()}
+    return {n: v.float().cpu() for n, v in weights.items()}
 
 
 class Run:
@@ -297,7 +306,8 @@ class Run:
         os.replace(tmp, self.ckpt)  # atomic: a cut-off run never leaves half a checkpoint
 
     def load(self):
-        return torch.load(self.ckpt, weights_only=False) if self.ckpt.exists() else None
+        # On the CPU whatever device wrote it (a GPU run resumed here, or the reverse).
+        return torch.load(self.ckpt, weights_only=False, map_location="cpu") if self.ckpt.exists() else None
 
     def write_log(self, rows, header):
         new = not self.log.exists()
@@ -440,7 +450,7 @@ def train_shape(args):
             lab = ova[sl]
             bces.append(F.binary_cross_entropy_with_logits(logit, lab, reduction="none").mean(1))
             p, t = logit > 0, lab > 0.5
-            ious.append((p & t).sum(1).float() / (p | t).sum(1).clamp(min=1).float())
+            ious.append(((p & t).sum(1).float() / (p | t).sum(1).clamp(min=1).float()).cpu())
         iou = torch.cat(ious)
         return {"point_iou_mean": iou.mean().item(), "point_iou_worst10": iou.sort().values[:10].mean().item(), "bce": torch.cat(bces).mean().item(), "images": len(iou)}
 
@@ -525,7 +535,7 @@ def train_fourier(args):
     sched_total = max(args.steps, 1)
     run = Run(args.out, args)
     if args.init and not run.ckpt.exists():
-        light = torch.load(args.init, weights_only=False)
+        light = torch.load(args.init, weights_only=False, map_location="cpu")
         sd = init_weights(light, args.init)
         own = net.state_dict()
         for n, v in sd.items():
@@ -538,6 +548,10 @@ def train_fourier(args):
         net.load_state_dict(sd)
         print(f"initialized from {args.init} (trained {light.get('step', '?')} steps before; optimizer state restarts)")
     tau = 10.0
+    # --device: the net and each batch there; the dataset, sampling and OHEM stay on the CPU.
+    dev = device(args.device)
+    net.to(dev)
+    print(f"training on {dev}")
 
     def inputs(d, idx, g):
         rgb = d["rgb"][idx].float() / 255.0
@@ -545,13 +559,13 @@ def train_fourier(args):
         if g is not None:
             rgb = sensor(photometric(rgb, g), g)
             m = perturb_mask(m, g)
-        return encoder_input(rgb, m)
+        return encoder_input(rgb, m).to(dev)
 
     def losses(pred, d, idx, pidx, thin=0.0):
-        target = d["coeff"][idx].float()
+        target = d["coeff"][idx].float().to(dev)
         l2 = FO.parseval_l2(pred, target, dim=1)
-        pts = torch.gather(d["points"][idx], 1, pidx.unsqueeze(-1).expand(-1, -1, 3))
-        lab = torch.gather(d["occ"][idx], 1, pidx)
+        pts = torch.gather(d["points"][idx], 1, pidx.unsqueeze(-1).expand(-1, -1, 3)).to(dev)
+        lab = torch.gather(d["occ"][idx], 1, pidx).to(dev)
         occ = fourier_query(pred, pts, k)
         bce = F.binary_cross_entropy_with_logits(tau * (occ - 0.5), lab, reduction="none")
         if thin > 0:
@@ -572,7 +586,7 @@ def train_fourier(args):
         items = ohem.sample_items(args.batch, gen)
         pidx = ohem.sample_points(items, args.points, gen)
         x = inputs(tr, items, None if args.no_aug else gen)
-        flips = torch.rand(len(items), generator=gen) < 0.5 if args.flip else None
+        flips = (torch.rand(len(items), generator=gen) < 0.5).to(dev) if args.flip else None
         pred, d = net(mirror_some(x, flips), with_centre=True)
         # A mirrored image's maps, mirrored back, are compared with the image's own targets:
         # the same as training on the mirrored person with mirrored targets.
@@ -583,18 +597,18 @@ def train_fourier(args):
         if args.moment_weight > 0:
             # Depth order: L1 on each ray's first moment int z f dz (linear in the sine terms),
             # whose L2 share in the Parseval loss is small next to the ray length's.
-            t = tr["coeff"][items].float()
+            t = tr["coeff"][items].float().to(dev)
             loss = loss + args.moment_weight * (FO.first_moment(pred, k) - FO.first_moment(t, k)).abs().mean()
         if d is not None:
             # The shift variants: the depth centre supervised directly (L1, zeta units) on
             # the rays that hold the body, so the phase starts near the right depth.
-            dt, ok = FO.centroid(tr["coeff"][items].float(), k)
+            dt, ok = FO.centroid(tr["coeff"][items].float().to(dev), k)
             if ok.any():
                 loss = loss + args.centre_weight * (d[:, 0] - dt).abs()[ok].mean()
         opt.zero_grad()
         loss.backward()
         opt.step()
-        ohem.update(items, pidx, bce.detach(), occ.detach(), lab)
+        ohem.update(items, pidx, bce.detach().cpu(), occ.detach().cpu(), lab.cpu())
         return loss.item()
 
     def eval_fn():
@@ -604,7 +618,7 @@ def train_fourier(args):
             pred = net(inputs(va, idx, None))
             pidx = torch.arange(va["points"].shape[1]).expand(len(idx), -1)
             dense, _, occ, lab = losses(pred, va, idx, pidx)
-            l2s.append(FO.parseval_l2(pred, va["coeff"][idx].float(), dim=1).mean((1, 2)))
+            l2s.append(FO.parseval_l2(pred, va["coeff"][idx].float().to(dev), dim=1).mean((1, 2)).cpu())
             p, t = occ > 0.5, lab > 0.5
             ious.append((p & t).sum(1).float() / (p | t).sum(1).clamp(min=1).float())
         iou = torch.cat(ious)
@@ -638,6 +652,7 @@ def main(argv=None):
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
     ap.add_argument("--seg", type=Path, default=None, help="Fourier: crops and mask channels from this ONNX segmentation model's masks (e.g. ../../models/seg.onnx, the product's) instead of the ground truth's (seg_masks)")
     ap.add_argument("--ckpt-every", type=int, default=100)
+    ap.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="fourier: where the net trains (auto: CUDA when present)")
     ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
     ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight")
     args = ap.parse_args(argv)

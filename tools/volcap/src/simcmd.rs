@@ -80,6 +80,11 @@ pub struct PackArgs {
     pub from: PathBuf,
     #[arg(long, default_value = "service/sim/assets/human-pack.bin.gz")]
     pub out: PathBuf,
+    /// Everything in the folder (every outfit, hair, skin, macro target; textures at 512
+    /// px) as the datasets use it: the training recipe's pack (tools/train/recipe/), so a
+    /// machine without `../shared` generates the same data. Default: the runtime pack.
+    #[arg(long)]
+    pub everything: bool,
 }
 
 #[derive(Args, Clone)]
@@ -145,7 +150,12 @@ fn pack(a: &PackArgs) -> anyhow::Result<()> {
         );
     }
     let t = Instant::now();
-    let assets = HumanAssets::from_makehuman(&a.from, &Selection::runtime())?;
+    let sel = if a.everything {
+        Selection::everything(&a.from)
+    } else {
+        Selection::runtime()
+    };
+    let assets = HumanAssets::from_makehuman(&a.from, &sel)?;
     let mut f =
         std::fs::File::create(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     assets.write_pack(&mut f).map_err(anyhow::Error::msg)?;

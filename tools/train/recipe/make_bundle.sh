@@ -1,0 +1,55 @@
+#!/usr/bin/env bash
+# The training recipe as one folder that runs unchanged here and on a GPU machine with
+# PyTorch but no Rust toolchain and no network (issue 34, part 4):
+#
+#   tools/train/recipe/make_bundle.sh OUT [--binary PATH] [--assets auto|embedded|PACK]
+#   (copy OUT to the other machine)    OUT/run.sh RESULT [options, see run.sh]
+#
+# OUT holds: the simulator's release binary (`volcap.gz`, stripped and packed), the human assets as one
+# pack (`volcap sim pack --everything` from ../shared/data/makehuman when it is here, or the
+# binary's embedded runtime pack with `--assets embedded`), the Python package and its
+# requirements, the product's segmentation (the training crops use its masks) and the
+# checkpoint the run starts from. Refused above 64 MiB.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+repo="$(cd "$here/../../.." && pwd)"
+out="${1:?usage: make_bundle.sh OUT [--binary PATH] [--assets auto|embedded|PACK]}"
+shift
+binary="$repo/target/release/volcap" assets=auto
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --binary) binary="$2"; shift 2 ;;
+    --assets) assets="$2"; shift 2 ;;
+    *) echo "make_bundle.sh: unknown option $1" >&2; exit 2 ;;
+  esac
+done
+[ -x "$binary" ] || { echo "make_bundle.sh: no simulator binary at $binary (cargo build --release -p volcap)" >&2; exit 2; }
+mkdir -p "$out/models"
+cp "$binary" "$out/volcap"
+# Line tables are most of the binary; the recipe needs none of them.
+strip "$out/volcap" 2>/dev/null || objcopy --strip-debug "$out/volcap" 2>/dev/null || true
+# Packed (42 -> 16 MB): run.sh unpacks it into the result folder.
+gzip -9 -n -f "$out/volcap"
+case "$assets" in
+  auto)
+    if [ -f "$repo/../shared/data/makehuman/3dobjs/base.obj" ]; then
+      "$binary" sim pack --everything --from "$repo/../shared/data/makehuman" --out "$out/assets.pack.gz"
+    else
+      echo "make_bundle.sh: ../shared/data/makehuman not here: the bundle uses the binary's embedded runtime pack (fewer outfits)" >&2
+    fi ;;
+  embedded) ;;
+  *) cp "$assets" "$out/assets.pack.gz" ;;
+esac
+rm -rf "$out/volcap_train"
+cp -r "$repo/tools/train/volcap_train" "$out/volcap_train"
+find "$out/volcap_train" -name __pycache__ -prune -exec rm -rf {} +
+cp "$repo/tools/train/requirements.txt" "$here/run.sh" "$out/"
+cp "$repo/models/seg.onnx" "$out/models/"
+cp "$repo/models/checkpoints/shape-fourier-small.pt" "$out/models/init.pt"
+git -C "$repo" rev-parse HEAD > "$out/COMMIT" 2>/dev/null || echo unknown > "$out/COMMIT"
+bytes=$(du -sb "$out" | cut -f1)
+echo "bundle $out: $((bytes / 1048576)) MiB ($(ls "$out" | tr '\n' ' '))"
+if [ "$bytes" -gt $((64 * 1048576)) ]; then
+  echo "make_bundle.sh: the bundle is over 64 MiB" >&2
+  exit 1
+fi
