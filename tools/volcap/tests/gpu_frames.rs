@@ -39,23 +39,28 @@ struct Frame {
     render: Vec<u8>,
 }
 
+/// The surface of `field` on a grid of `spec` (the paper's hierarchical method).
+fn localize(field: &volcap_engine::model::ModelField, spec: GridSpec) -> Grid {
+    let mut grid = Grid::new(spec);
+    Localizer::new()
+        .run(
+            Method::Hierarchical,
+            field,
+            spec,
+            default_coarse(spec),
+            &mut grid,
+        )
+        .unwrap();
+    grid
+}
+
 fn frame(models: &Models, rgb: &[u8], w: usize, h: usize, spec: GridSpec) -> Frame {
     let mut info = FrameInfo::default();
     let (img, mask, crop) = models.prepare(rgb, w, h, &mut info).expect("a person");
     let field = models
         .encode(&img, &mask, crop, ModelView::default())
         .unwrap();
-    let mut grid = Grid::new(spec);
-    Localizer::new()
-        .run(
-            Method::Hierarchical,
-            &field,
-            spec,
-            default_coarse(spec),
-            &mut grid,
-        )
-        .unwrap();
-    let mesh = marching_cubes(&grid);
+    let mesh = marching_cubes(&localize(&field, spec));
     let mut r = Renderer::new();
     let opts = RenderOptions {
         background: [0.0; 4],
@@ -157,16 +162,7 @@ fn hard_frames_stay_finite_on_the_gpu() {
                 let field = models
                     .encode(&img, &mask, crop, ModelView::default())
                     .unwrap();
-                let mut grid = Grid::new(spec);
-                Localizer::new()
-                    .run(
-                        Method::Hierarchical,
-                        &field,
-                        spec,
-                        default_coarse(spec),
-                        &mut grid,
-                    )
-                    .unwrap();
+                localize(&field, spec);
                 println!(
                     "{name}: a person found ({:.3} of the frame), localized",
                     info.mask_fraction

@@ -291,6 +291,12 @@ impl Planner {
         self.vals.insert(name.to_string(), Val::Dev { buf, shape });
     }
 
+    /// Define `name` as a constant known at plan time.
+    fn define_const(&mut self, name: &str, shape: Vec<usize>, data: Data) {
+        self.vals
+            .insert(name.to_string(), Val::Const { shape, data });
+    }
+
     /// One reader of `name` is done: free its buffer when nothing else reads it.
     fn release(&mut self, name: &str) {
         if let Some(Val::Dev { buf, .. }) = self.vals.get(name) {

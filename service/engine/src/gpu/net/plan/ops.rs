@@ -7,6 +7,11 @@ use tract_onnx::pb::NodeProto;
 
 type Act = (u32, f32, f32);
 
+/// Input `i` of node `n`, `None` when absent or empty (an omitted optional input).
+fn input(n: &NodeProto, i: usize) -> Option<&str> {
+    n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty())
+}
+
 fn axis(a: i64, rank: usize) -> Result<usize, String> {
     let r = rank as i64;
     let v = if a < 0 { a + r } else { a };
@@ -27,7 +32,7 @@ pub(super) fn node(
     bn: Option<&NodeProto>,
 ) -> Result<(), String> {
     let a = Attrs(&n.attribute);
-    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let inp = |i: usize| input(n, i);
     let x = inp(0).unwrap_or("");
     match n.op_type.as_str() {
         "Constant" => {
@@ -44,7 +49,7 @@ pub(super) fn node(
             } else {
                 return Err(pl.err("Constant without a value this backend reads"));
             };
-            pl.vals.insert(out.into(), Val::Const { shape, data });
+            pl.define_const(out, shape, data);
         }
         "Identity" => alias(pl, x, out, None)?,
         "Cast" => {
@@ -56,7 +61,7 @@ pub(super) fn node(
                         6 | 7 => Data::I(data.ints()),
                         _ => return Err(pl.err(format!("Cast to type {to}"))),
                     };
-                    pl.vals.insert(out.into(), Val::Const { shape, data });
+                    pl.define_const(out, shape, data);
                 }
                 Val::Dev { .. } if to == 1 => alias(pl, x, out, None)?,
                 Val::Dev { .. } => {
@@ -70,13 +75,7 @@ pub(super) fn node(
             let clampi = |v: i64| (if v < 0 { v + r } else { v }).clamp(0, r) as usize;
             let (b, e) = (clampi(a.int("start", 0)), clampi(a.int("end", r)));
             let dims: Vec<i64> = s[b..e.max(b)].iter().map(|&d| d as i64).collect();
-            pl.vals.insert(
-                out.into(),
-                Val::Const {
-                    shape: vec![dims.len()],
-                    data: Data::I(dims),
-                },
-            );
+            pl.define_const(out, vec![dims.len()], Data::I(dims));
         }
         "Gather" => {
             let (shape, data) = pl.konst(x)?;
@@ -105,13 +104,7 @@ pub(super) fn node(
                         .collect::<Result<_, _>>()?,
                 ),
             };
-            pl.vals.insert(
-                out.into(),
-                Val::Const {
-                    shape: ishape,
-                    data,
-                },
-            );
+            pl.define_const(out, ishape, data);
         }
         "Reshape" => {
             let old = pl.get(x)?.shape().to_vec();
@@ -258,20 +251,8 @@ pub(super) fn node(
             let tmp = format!("{out}#scaled");
             let sname = format!("{out}#bn_scale");
             let bname = format!("{out}#bn_shift");
-            pl.vals.insert(
-                sname.clone(),
-                Val::Const {
-                    shape: cshape.clone(),
-                    data: Data::F(scale),
-                },
-            );
-            pl.vals.insert(
-                bname.clone(),
-                Val::Const {
-                    shape: cshape,
-                    data: Data::F(shift),
-                },
-            );
+            pl.define_const(&sname, cshape.clone(), Data::F(scale));
+            pl.define_const(&bname, cshape, Data::F(shift));
             pl.uses.insert(tmp.clone(), 1);
             binary(pl, 2, x, &sname, &tmp)?;
             binary(pl, 0, &tmp, &bname, out)?;
@@ -286,13 +267,7 @@ pub(super) fn node(
 fn alias(pl: &mut Planner, x: &str, out: &str, shape: Option<Vec<usize>>) -> Result<(), String> {
     match pl.get(x)?.clone() {
         Val::Const { shape: s, data } => {
-            pl.vals.insert(
-                out.into(),
-                Val::Const {
-                    shape: shape.unwrap_or(s),
-                    data,
-                },
-            );
+            pl.define_const(out, shape.unwrap_or(s), data);
         }
         Val::Dev { buf, shape: s } => pl.define_dev(out, buf, shape.unwrap_or(s)),
     }
@@ -397,13 +372,7 @@ fn binary(pl: &mut Planner, op: u32, x: &str, y: &str, out: &str) -> Result<(), 
                     .collect(),
             )
         };
-        pl.vals.insert(
-            out.into(),
-            Val::Const {
-                shape: oshape,
-                data,
-            },
-        );
+        pl.define_const(out, oshape, data);
         return Ok(());
     }
     let (ba, _) = pl.dev(x)?;
@@ -454,13 +423,7 @@ fn concat(pl: &mut Planner, n: &NodeProto, out: &str, ax: i64) -> Result<(), Str
         } else {
             Data::F(parts.iter().flat_map(|d| d.floats()).collect())
         };
-        pl.vals.insert(
-            out.into(),
-            Val::Const {
-                shape: oshape,
-                data,
-            },
-        );
+        pl.define_const(out, oshape, data);
         return Ok(());
     }
     let o = pl.alloc(numel(&oshape));
@@ -481,7 +444,7 @@ fn slice(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
     let x = n.input.first().map(|s| s.as_str()).unwrap_or("");
     let shape = pl.get(x)?.shape().to_vec();
     let r = shape.len();
-    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let inp = |i: usize| input(n, i);
     let get = |pl: &Planner, i: usize, attr: &str| -> Result<Option<Vec<i64>>, String> {
         match inp(i) {
             Some(name) => Ok(Some(pl.konst(name)?.1.ints())),
@@ -532,13 +495,7 @@ fn slice(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
             Data::F(v) => Data::F((0..m).map(|i| v[idx(i)]).collect()),
             Data::I(v) => Data::I((0..m).map(|i| v[idx(i)]).collect()),
         };
-        pl.vals.insert(
-            out.into(),
-            Val::Const {
-                shape: oshape,
-                data,
-            },
-        );
+        pl.define_const(out, oshape, data);
         return Ok(());
     }
     let (b, _) = pl.dev(x)?;
@@ -554,7 +511,7 @@ fn pad(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
     if mode != "constant" {
         return Err(pl.err(format!("Pad mode {mode:?} (constant runs on the GPU)")));
     }
-    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let inp = |i: usize| input(n, i);
     let x = inp(0).unwrap_or("");
     let pads = match inp(1) {
         Some(p) => pl.konst(p)?.1.ints(),
@@ -813,7 +770,7 @@ fn pool(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
 
 fn gemm(pl: &mut Planner, n: &NodeProto, out: &str, act: Act) -> Result<(), String> {
     let a = Attrs(&n.attribute);
-    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let inp = |i: usize| input(n, i);
     let (ba, sa) = pl.dev(inp(0).unwrap_or(""))?;
     let (bb, sb) = pl.dev(inp(1).unwrap_or(""))?;
     let gemm = n.op_type == "Gemm";
@@ -870,7 +827,7 @@ fn gemm(pl: &mut Planner, n: &NodeProto, out: &str, act: Act) -> Result<(), Stri
 
 fn resize(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
     let a = Attrs(&n.attribute);
-    let inp = |i: usize| n.input.get(i).map(|s| s.as_str()).filter(|s| !s.is_empty());
+    let inp = |i: usize| input(n, i);
     let (b, shape) = pl.dev(inp(0).unwrap_or(""))?;
     if shape.len() != 4 {
         return Err(pl.err(format!("Resize of {shape:?} (NCHW)")));
