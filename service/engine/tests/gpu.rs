@@ -323,3 +323,33 @@ fn the_fourier_field_at_100k_points_matches_the_cpu_for_every_committed_model() 
         }
     }
 }
+
+#[test]
+fn the_adapter_counts_its_work_and_times_it_where_it_can() {
+    let Some(gpu) = gpu() else { return };
+    let net = volcap_engine::gpu::net::GpuNet::load(
+        gpu.clone(),
+        &models_dir().join("color.encoder.onnx"),
+    )
+    .unwrap();
+    let s = INPUT_SIZE;
+    let x = values(4 * s * s, 3);
+    let before = gpu.counters();
+    let out = net.run(&[(&[1, 4, s, s], &x)]).unwrap();
+    let after = gpu.counters();
+    assert_eq!(after.net_runs, before.net_runs + 1);
+    assert_eq!(after.bytes_up - before.bytes_up, (x.len() * 4) as u64);
+    assert_eq!(after.bytes_down - before.bytes_down, (out.len() * 4) as u64);
+    let planned = net.dispatches(&[vec![1, 4, s, s]]).unwrap() as u64;
+    assert_eq!(after.dispatches - before.dispatches, planned);
+    println!(
+        "colour encoder: {planned} dispatches, timestamps {}: {:.2} ms on the adapter",
+        gpu.has_timestamps(),
+        (after.gpu_ns - before.gpu_ns) as f64 / 1e6
+    );
+    if gpu.has_timestamps() {
+        assert!(after.gpu_ns > before.gpu_ns, "a timed pass took no time");
+    } else {
+        assert_eq!(after.gpu_ns, before.gpu_ns);
+    }
+}

@@ -39,13 +39,14 @@ fn gpu(_adapter: &str) -> anyhow::Result<Runtime> {
     ))
 }
 
-/// Host <-> adapter traffic and dispatches so far (zeros off the GPU).
-pub fn adapter_work(rt: &Runtime) -> [u64; 3] {
+/// Host <-> adapter traffic, dispatches and the networks' nanoseconds on the adapter so far
+/// (zeros off the GPU; the last 0 where the adapter has no timestamps).
+pub fn adapter_work(rt: &Runtime) -> [u64; 4] {
     #[cfg(feature = "wgpu")]
     if let Some(g) = rt.gpu() {
         let c = g.counters();
-        return [c.bytes_up, c.bytes_down, c.dispatches];
+        return [c.bytes_up, c.bytes_down, c.dispatches, c.gpu_ns];
     }
     let _ = rt;
-    [0; 3]
+    [0; 4]
 }

@@ -73,6 +73,7 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
     // (network, file) -> ms per runtime, in first-seen order.
     let mut rows: Vec<(String, String, Vec<Option<f64>>)> = Vec::new();
     let mut profile = String::new();
+    let mut adapter = String::new();
     for (ri, rt) in runtimes.iter().enumerate() {
         for m in &a.models {
             let (name, prec) = match m.split_once('@') {
@@ -116,10 +117,21 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
                 net.run(&args)
                     .map_err(anyhow::Error::msg)
                     .with_context(|| format!("{file} on {}", rt.label()))?;
+                let before = crate::backend::adapter_work(rt)[3];
                 let ms = crate::mlp_bench::timed(a.runs, || {
                     let _ = net.run(&args);
                 }) * 1e3;
                 rows[row].2[ri] = Some(ms);
+                // The GPU backend's own time for the pass (timestamps), beside the wall time.
+                let gpu_ns = crate::backend::adapter_work(rt)[3] - before;
+                if gpu_ns > 0 {
+                    let _ = writeln!(
+                        adapter,
+                        "| {file} | {} | {:.2} |",
+                        rt.label(),
+                        gpu_ns as f64 / 1e6 / (a.runs.max(1) + 1) as f64
+                    );
+                }
                 if a.profile && matches!(rt, Runtime::Tract) {
                     let nodes = net.profile(&args, a.runs).map_err(anyhow::Error::msg)?;
                     profile.push_str(&profile_md(&file, &nodes, a.top));
@@ -152,6 +164,13 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
         if a.profile { " --profile" } else { "" },
         a.runs
     );
+    if !adapter.is_empty() {
+        md.push_str(&format!(
+            "\nOn the adapter (timestamps around the network's compute pass, mean over the runs \
+             and the warm-up run; the wall time above adds the upload, submission and read-back):\n\n\
+             | file | adapter | ms on the adapter |\n|---|---|---|\n{adapter}"
+        ));
+    }
     md.push_str(&filter);
     if a.profile {
         md.push_str("\n## Where tract spends the time (optimized plan, per node)\n");

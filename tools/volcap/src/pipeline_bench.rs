@@ -56,6 +56,8 @@ pub struct Row {
     pub bytes_up_per_frame: f64,
     pub bytes_down_per_frame: f64,
     pub dispatches_per_frame: f64,
+    /// The networks' milliseconds on the adapter per frame (timestamp queries; 0 without).
+    pub adapter_ms_per_frame: f64,
     /// Why the run produced no frames, if it did not.
     pub error: Option<String>,
 }
@@ -178,6 +180,7 @@ fn measure(
         bytes_up_per_frame: (work1[0] - work0[0]) as f64 / published.max(1) as f64,
         bytes_down_per_frame: (work1[1] - work0[1]) as f64 / published.max(1) as f64,
         dispatches_per_frame: (work1[2] - work0[2]) as f64 / published.max(1) as f64,
+        adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         error,
     }
 }
@@ -406,10 +409,15 @@ fn table(rows: &[Row]) -> String {
                 (Some(e), _) => e.clone(),
                 // The GPU backend's traffic: what crosses between host and adapter per frame.
                 (None, true) => format!(
-                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches",
+                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches{}",
                     r.bytes_up_per_frame / 1e6,
                     r.bytes_down_per_frame / 1e6,
-                    r.dispatches_per_frame
+                    r.dispatches_per_frame,
+                    if r.adapter_ms_per_frame > 0.0 {
+                        format!(", networks {:.1} ms on the adapter", r.adapter_ms_per_frame)
+                    } else {
+                        String::new()
+                    }
                 ),
                 (None, false) => String::new(),
             },

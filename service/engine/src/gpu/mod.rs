@@ -3,8 +3,9 @@
 //!
 //! Adapters are Vulkan's (`WGPU_BACKEND` may narrow the search, as wgpu reads it): a board's
 //! GPU, or Mesa's lavapipe, Vulkan on the CPU, which runs the same shaders here and in CI
-//! for the parity tests (its times say nothing about a GPU). Only default limits and no
-//! optional features are asked for, so any Vulkan 1.1 adapter opens.
+//! for the parity tests (its times say nothing about a GPU). Only default limits are asked
+//! for, and one optional feature where the adapter has it: timestamp queries (the networks'
+//! time on the adapter, `Counters::gpu_ns`); without it nothing is timed there.
 //!
 //! What runs here: [`net::GpuNet`], the ONNX networks (`model::runtime::Runtime::Wgpu`), and
 //! [`fourier::GpuFourier`], the Fourier field at points.
@@ -96,6 +97,9 @@ pub struct Counters {
     pub bytes_up: AtomicU64,
     /// Bytes read back to the host.
     pub bytes_down: AtomicU64,
+    /// Nanoseconds the networks' compute passes took on the adapter (timestamp queries; 0
+    /// where the adapter has none).
+    pub gpu_ns: AtomicU64,
 }
 
 /// A snapshot of [`Counters`].
@@ -106,6 +110,7 @@ pub struct CounterValues {
     pub dispatches: u64,
     pub bytes_up: u64,
     pub bytes_down: u64,
+    pub gpu_ns: u64,
 }
 
 /// An opened adapter: device, queue, compiled kernels, counters.
@@ -113,6 +118,8 @@ pub struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub adapter: AdapterSummary,
+    /// Nanoseconds per timestamp tick, where the adapter has timestamp queries.
+    timestamp_period: Option<f32>,
     counters: Counters,
     pipelines: Mutex<HashMap<&'static str, Arc<wgpu::ComputePipeline>>>,
 }
@@ -166,19 +173,24 @@ impl Gpu {
             }
         };
         let adapter = AdapterSummary::of(&picked.get_info());
+        // Timestamps where the adapter has them (the only optional feature; without it the
+        // adapter's time is not measured, nothing else changes).
+        let timestamps = picked.features() & wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = pollster::block_on(picked.request_device(&wgpu::DeviceDescriptor {
             label: Some("volcap"),
-            required_features: wgpu::Features::empty(),
+            required_features: timestamps,
             required_limits: wgpu::Limits::default(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         }))
         .map_err(|e| format!("{}: cannot open the device: {e}", adapter.label()))?;
+        let timestamp_period = (!timestamps.is_empty()).then(|| queue.get_timestamp_period());
         Ok(Arc::new(Gpu {
             device,
             queue,
             adapter,
+            timestamp_period,
             counters: Counters::default(),
             pipelines: Mutex::new(HashMap::new()),
         }))
@@ -227,7 +239,61 @@ impl Gpu {
             dispatches: c.dispatches.load(Ordering::Relaxed),
             bytes_up: c.bytes_up.load(Ordering::Relaxed),
             bytes_down: c.bytes_down.load(Ordering::Relaxed),
+            gpu_ns: c.gpu_ns.load(Ordering::Relaxed),
         }
+    }
+
+    /// Whether the adapter's time is measured (timestamp queries).
+    pub fn has_timestamps(&self) -> bool {
+        self.timestamp_period.is_some()
+    }
+
+    /// A timer for one compute pass, where the adapter has timestamp queries.
+    pub(crate) fn timer(&self) -> Option<Timer> {
+        self.timestamp_period?;
+        let buf = |label, usage| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 16,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        Some(Timer {
+            queries: self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("pass time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            }),
+            resolved: buf("pass time", U::QUERY_RESOLVE | U::COPY_SRC),
+            staging: buf("pass time read-back", U::MAP_READ | U::COPY_DST),
+        })
+    }
+
+    /// The pass's time once its work is done (after [`Gpu::submit_and_read`]), added to
+    /// [`Counters::gpu_ns`].
+    pub(crate) fn read_timer(&self, t: &Timer) -> Option<f64> {
+        let period = self.timestamp_period?;
+        let (tx, rx) = std::sync::mpsc::channel();
+        t.staging.map_async(wgpu::MapMode::Read, 0..16, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).ok()?;
+        rx.recv().ok()?.ok()?;
+        let ticks = {
+            let v = t.staging.get_mapped_range(0..16).ok()?;
+            let at = |i: usize| {
+                v.get(i..i + 8)
+                    .and_then(|b| b.try_into().ok())
+                    .map(u64::from_le_bytes)
+            };
+            at(8)?.saturating_sub(at(0)?)
+        };
+        t.staging.unmap();
+        let ns = ticks as f64 * period as f64;
+        self.counters.gpu_ns.fetch_add(ns as u64, Ordering::Relaxed);
+        Some(ns)
     }
 
     pub(crate) fn count(&self) -> &Counters {
@@ -269,6 +335,29 @@ impl Gpu {
         staging.unmap();
         self.counters.bytes_down.fetch_add(bytes, Ordering::Relaxed);
         Ok(out)
+    }
+}
+
+/// Timestamps at the start and end of one compute pass ([`Gpu::timer`]).
+pub(crate) struct Timer {
+    queries: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    staging: wgpu::Buffer,
+}
+
+impl Timer {
+    pub(crate) fn writes(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        }
+    }
+
+    /// After the pass: the two timestamps into the read-back buffer.
+    pub(crate) fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+        enc.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
+        enc.copy_buffer_to_buffer(&self.resolved, 0, &self.staging, 0, 16);
     }
 }
 

@@ -42,6 +42,7 @@ struct Realized {
     buffers: Vec<wgpu::Buffer>,
     steps: Vec<(Arc<wgpu::ComputePipeline>, wgpu::BindGroup, (u32, u32))>,
     staging: wgpu::Buffer,
+    timer: Option<super::Timer>,
 }
 
 /// One network on one adapter.
@@ -144,6 +145,7 @@ impl GpuNet {
             buffers,
             steps,
             staging,
+            timer: self.gpu.timer(),
         })
     }
 
@@ -175,12 +177,18 @@ impl GpuNet {
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: r.timer.as_ref().map(|t| t.writes()),
+            });
             for (pipeline, bg, (x, y)) in &r.steps {
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, bg, &[]);
                 pass.dispatch_workgroups(*x, *y, 1);
             }
+        }
+        if let Some(t) = &r.timer {
+            t.resolve(&mut enc);
         }
         let c = self.gpu.count();
         c.dispatches
@@ -200,8 +208,13 @@ impl GpuNet {
         let enc = self.record(r, inputs)?;
         let (ob, oshape) = &r.plan.output;
         let len = oshape.iter().product::<usize>();
-        self.gpu
-            .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)
+        let out = self
+            .gpu
+            .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)?;
+        if let Some(t) = &r.timer {
+            self.gpu.read_timer(t);
+        }
+        Ok(out)
     }
 
     /// Run with every buffer kept and read back each tensor computed on the device (name,
