@@ -141,7 +141,22 @@ fn model_fields(a: &LocalizeArgs) -> anyhow::Result<NamedFields> {
     let assets =
         std::sync::Arc::new(volcap_sim::HumanAssets::embedded().map_err(anyhow::Error::msg)?);
     let (mut names, mut fields): NamedFields = (vec![], vec![]);
-    for m in &a.models {
+    // Each backend's runtime, opened once (the GPU's adapter is shared by its models).
+    let backends = a
+        .backends
+        .iter()
+        .map(|b| {
+            Ok((
+                b.trim().to_string(),
+                crate::backend::open(b, "tract", &a.adapter)?.0,
+            ))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    for (m, (backend, runtime)) in a
+        .models
+        .iter()
+        .flat_map(|m| backends.iter().map(move |b| (m, b)))
+    {
         let (name, prec) = match m.split_once('@') {
             Some((n, p)) => (
                 n,
@@ -151,7 +166,7 @@ fn model_fields(a: &LocalizeArgs) -> anyhow::Result<NamedFields> {
             ),
             None => (m.as_str(), Precision::F32),
         };
-        let models = Models::load(&a.models_dir, name, prec)?;
+        let models = Models::load_on(&a.models_dir, name, prec, runtime)?;
         for sc in &scenes {
             let path = if sc.ends_with(".toml") {
                 PathBuf::from(sc)
@@ -165,7 +180,11 @@ fn model_fields(a: &LocalizeArgs) -> anyhow::Result<NamedFields> {
             let (field, _) = models
                 .frame(&f.rgb, f.width, f.height, ModelView::default())
                 .with_context(|| format!("{} on {}", m, path.display()))?;
-            names.push(format!("{sc}/{name}-{}", prec.name()));
+            // The CPU rows keep their names; the GPU's say so.
+            names.push(match backend.as_str() {
+                "cpu" => format!("{sc}/{name}-{}", prec.name()),
+                b => format!("{sc}/{name}-{}-{b}", prec.name()),
+            });
             fields.push(Box::new(field));
         }
     }

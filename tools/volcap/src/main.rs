@@ -192,6 +192,15 @@ pub struct LocalizeArgs {
     /// evaluated points do not change).
     #[arg(long, default_value_t = 1)]
     pub threads: usize,
+    /// With --model: where the networks and the Fourier series run (comma-separated: a row
+    /// set each), cpu (tract) or wgpu (the
+    /// GPU backend: every field evaluation of the localization one dispatch on the adapter;
+    /// the localization's own bookkeeping stays on the CPU). Build with `--features wgpu`.
+    #[arg(long = "backend", value_delimiter = ',', default_value = "cpu")]
+    pub backends: Vec<String>,
+    /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
+    #[arg(long, default_value = "auto")]
+    pub adapter: String,
 }
 
 /// The `--coarse-level` help, from the engine's constants (so it cannot drift from them).

@@ -35,14 +35,17 @@ fn gpu_runtime() -> Option<Runtime> {
 
 struct Frame {
     mask: Vec<f32>,
+    grid: Grid,
+    evaluations: u64,
     vertices: Vec<DVec3>,
     render: Vec<u8>,
 }
 
-/// The surface of `field` on a grid of `spec` (the paper's hierarchical method).
-fn localize(field: &volcap_engine::model::ModelField, spec: GridSpec) -> Grid {
+/// The surface of `field` on a grid of `spec` (the paper's hierarchical method) and the
+/// number of field evaluations it took.
+fn localize(field: &volcap_engine::model::ModelField, spec: GridSpec) -> (Grid, u64) {
     let mut grid = Grid::new(spec);
-    Localizer::new()
+    let stats = Localizer::new()
         .run(
             Method::Hierarchical,
             field,
@@ -51,7 +54,7 @@ fn localize(field: &volcap_engine::model::ModelField, spec: GridSpec) -> Grid {
             &mut grid,
         )
         .unwrap();
-    grid
+    (grid, stats.evaluations)
 }
 
 fn frame(models: &Models, rgb: &[u8], w: usize, h: usize, spec: GridSpec) -> Frame {
@@ -60,7 +63,8 @@ fn frame(models: &Models, rgb: &[u8], w: usize, h: usize, spec: GridSpec) -> Fra
     let field = models
         .encode(&img, &mask, crop, ModelView::default())
         .unwrap();
-    let mesh = marching_cubes(&localize(&field, spec));
+    let (grid, evaluations) = localize(&field, spec);
+    let mesh = marching_cubes(&grid);
     let mut r = Renderer::new();
     let opts = RenderOptions {
         background: [0.0; 4],
@@ -70,6 +74,8 @@ fn frame(models: &Models, rgb: &[u8], w: usize, h: usize, spec: GridSpec) -> Fra
     r.render(&field, &field, spec, &opts).unwrap();
     Frame {
         mask,
+        grid,
+        evaluations,
         vertices: mesh.vertices.iter().map(|v| v.as_dvec3()).collect(),
         render: r.rgba().to_vec(),
     }
@@ -112,7 +118,19 @@ fn real_photos_give_the_cpu_paths_mask_surface_and_render() {
             b.vertices.len(),
             close * 100.0
         );
+        // Localization on the GPU's field: the same points evaluated, the same inside set
+        // (a point within float rounding of the level could flip; none did on these photos).
+        let grid_iou = volcap_engine::metrics::iou(&a.grid, &b.grid);
+        println!(
+            "{photo}: {} / {} evaluations, grid IoU {grid_iou:.6}",
+            a.evaluations, b.evaluations
+        );
         assert!(iou >= 0.999, "{photo}: mask IoU {iou}");
+        assert_eq!(
+            a.evaluations, b.evaluations,
+            "{photo}: the evaluated point sets differ"
+        );
+        assert!(grid_iou >= 0.9999, "{photo}: grid IoU {grid_iou}");
         assert!(d <= 1e-3, "{photo}: Chamfer {d} m");
         assert!(close >= 0.999, "{photo}: renders agree on {close}");
     }
@@ -162,7 +180,8 @@ fn hard_frames_stay_finite_on_the_gpu() {
                 let field = models
                     .encode(&img, &mask, crop, ModelView::default())
                     .unwrap();
-                localize(&field, spec);
+                let (grid, _) = localize(&field, spec);
+                assert!(grid.values.iter().all(|v| v.is_finite()), "{name}");
                 println!(
                     "{name}: a person found ({:.3} of the frame), localized",
                     info.mask_fraction
