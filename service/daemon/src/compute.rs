@@ -58,6 +58,31 @@ impl ComputeStatus {
         })
     }
 
+    /// Prometheus lines: the backend in use, and the adapter's work counters
+    /// (`volcap_adapter_*_total`, the GPU's seconds from its timestamps).
+    pub fn metrics(&self) -> String {
+        let mut s = format!(
+            "# HELP volcap_compute_backend the compute backend in use (1)
+# TYPE volcap_compute_backend gauge
+volcap_compute_backend{{backend=\"{}\"}} 1
+",
+            self.backend
+        );
+        if let Some(serde_json::Value::Object(c)) = self.counters.as_ref().map(|c| c()) {
+            for (k, v) in &c {
+                let v = v.as_u64().unwrap_or(0);
+                let (name, value) = match k.as_str() {
+                    "gpu_ns" => ("gpu_seconds".to_string(), v as f64 / 1e9),
+                    other => (other.to_string(), v as f64),
+                };
+                s.push_str(&format!(
+                    "# TYPE volcap_adapter_{name}_total counter\nvolcap_adapter_{name}_total {value}\n"
+                ));
+            }
+        }
+        s
+    }
+
     /// D-Bus `Compute`: `cpu`, `cpu (wgpu fell back: ...)` or
     /// `wgpu: ADAPTER; on the adapter: ...; on the CPU: ...`.
     pub fn summary(&self) -> String {

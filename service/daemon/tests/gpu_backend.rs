@@ -78,6 +78,13 @@ fn an_adapter_that_is_not_there_fails_start_up_or_falls_back_when_asked() {
             .contains("no-such-gpu"),
         "{s}"
     );
+    let (_, _, body) = common::request(&d.addr, "GET", "/metrics", "");
+    let m = String::from_utf8_lossy(&body);
+    assert!(
+        m.contains("volcap_compute_backend{backend=\"cpu\"} 1"),
+        "{m}"
+    );
+    assert!(!m.contains("volcap_adapter_"), "{m}");
 }
 
 #[cfg(feature = "wgpu")]
@@ -120,5 +127,19 @@ fn model_mode_runs_its_networks_on_the_adapter() {
     // The Fourier series at the localization's and the render's points ran there too.
     assert!(c["adapter_work"]["field_runs"].as_u64().unwrap() > 0, "{s}");
     assert!(s["field"].as_str().unwrap().contains("wgpu"), "{s}");
+    // The same counters for Prometheus.
+    let (st, _, body) = common::request(&d.addr, "GET", "/metrics", "");
+    let m = String::from_utf8_lossy(&body);
+    assert_eq!(st, 200);
+    assert!(
+        m.contains("volcap_compute_backend{backend=\"wgpu\"} 1"),
+        "{m}"
+    );
+    let runs: f64 = m
+        .lines()
+        .find_map(|l| l.strip_prefix("volcap_adapter_net_runs_total "))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.0);
+    assert!(runs >= 6.0, "{m}");
     assert_eq!(s["people"], 1, "{s}");
 }

@@ -149,5 +149,6 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
         app.clients.load(Ordering::SeqCst)
     ));
     s.push_str(&app.rtsp.metrics());
+    s.push_str(&sh.compute.metrics());
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()
 }
