@@ -91,11 +91,11 @@ fn main() -> ExitCode {
             config::Precision::Int8 => volcap_engine::model::Precision::Int8,
         };
         let lib = cfg.compute.onnxruntime_lib.as_ref().map(|p| cfg.resolve(p));
-        let opened = match gpu_runtime.map(|runtime| volcap_engine::model::runtime::Opened {
-            runtime,
-            fallback: None,
-        }) {
-            Some(o) => Ok(o),
+        let opened = match gpu_runtime {
+            Some(runtime) => Ok(volcap_engine::model::runtime::Opened {
+                runtime,
+                fallback: None,
+            }),
             None => volcap_engine::model::Runtime::open(cfg.compute.runtime, lib.as_deref()),
         };
         let opened = match opened {

@@ -130,17 +130,16 @@ fn measure(
     let factory: volcapd::capture::CameraFactory =
         Box::new(move || Ok(Box::new(ReplayCamera::new(stills, fps)) as Box<dyn Camera>));
     let runtime = models.runtime.label();
-    let work = |m: &Models| crate::backend::adapter_work(&m.runtime);
-    let models_ref = models.clone();
+    let rt = models.runtime.clone();
     let threads = pipeline::start(cfg, factory, shared.clone(), Some(models));
     std::thread::sleep(Duration::from_secs_f64(warmup));
     let t0 = Instant::now();
     let published0 = shared.e2e.frames.load(Ordering::Relaxed);
     let rendered0 = shared.stats[stage::RENDER].frames.load(Ordering::Relaxed);
     let evals0 = shared.evaluations.load(Ordering::Relaxed);
-    let work0 = work(&models_ref);
+    let work0 = crate::backend::adapter_work(&rt);
     std::thread::sleep(Duration::from_secs_f64(seconds));
-    let work1 = work(&models_ref);
+    let work1 = crate::backend::adapter_work(&rt);
     let wall = t0.elapsed().as_secs_f64();
     let published = shared.e2e.frames.load(Ordering::Relaxed) - published0;
     let rendered = shared.stats[stage::RENDER].frames.load(Ordering::Relaxed) - rendered0;

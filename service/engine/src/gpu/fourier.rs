@@ -1,14 +1,17 @@
-//! The Fourier field on the GPU: a frame's coefficient maps uploaded once, then the
-//! occupancy of any batch of crop-NDC points in one dispatch (`fourier.wgsl`: taps, basis
-//! recurrence, level offset, clamp), equal to [`FourierMaps::occupancy`] within float
+//! The Fourier field on the GPU: a frame's coefficient maps written to the adapter once,
+//! then the occupancy of any batch of crop-NDC points in one dispatch (`fourier.wgsl`: taps,
+//! basis recurrence, level offset, clamp), equal to [`FourierMaps::occupancy`] within float
 //! rounding (tests/gpu.rs: 100k points per committed model within 1e-4).
+//!
+//! A frame's buffers (maps, points, occupancy, read-back, parameters and their bind group)
+//! come from the adapter's pool ([`Gpu::field_pool`]) and go back to it when the frame's
+//! field is dropped: a frame writes into them instead of creating them.
 
 use super::{Gpu, groups};
 use crate::model::fourier::{Basis, FourierMaps};
 use glam::Vec3;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
-use wgpu::util::DeviceExt;
 
 const SOURCE: &str = include_str!("fourier.wgsl");
 
@@ -16,26 +19,89 @@ const SOURCE: &str = include_str!("fourier.wgsl");
 /// larger).
 const MIN_POINTS: usize = 1 << 14;
 
-struct Buffers {
+/// Frames' buffers kept for reuse: the fields alive at once (the render stage's and the
+/// field stage's) and one spare.
+const POOL: usize = 3;
+
+/// One frame's buffers on the adapter.
+pub(crate) struct FieldBuffers {
+    /// Floats the maps buffer holds, points the point buffers hold.
+    maps_cap: usize,
     cap: usize,
+    maps: wgpu::Buffer,
     pts: wgpu::Buffer,
     occ: wgpu::Buffer,
     staging: wgpu::Buffer,
     params: wgpu::Buffer,
     bind: wgpu::BindGroup,
+    /// The points as the kernel reads them, reused from batch to batch.
+    flat: Vec<f32>,
+}
+
+impl FieldBuffers {
+    /// Buffers for `maps_cap` map floats (reusing `maps` when given) and `cap` points.
+    fn new(
+        gpu: &Gpu,
+        pipeline: &wgpu::ComputePipeline,
+        maps: Option<wgpu::Buffer>,
+        maps_cap: usize,
+        cap: usize,
+    ) -> Self {
+        use wgpu::BufferUsages as U;
+        let buf = |label, bytes: usize, usage| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes as u64,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let maps =
+            maps.unwrap_or_else(|| buf("fourier maps", maps_cap * 4, U::STORAGE | U::COPY_DST));
+        let pts = buf("points", cap * 12, U::STORAGE | U::COPY_DST);
+        let occ = buf("occupancy", cap * 4, U::STORAGE | U::COPY_SRC);
+        let staging = buf("occupancy read-back", cap * 4, U::MAP_READ | U::COPY_DST);
+        let params = buf("fourier params", 24, U::STORAGE | U::COPY_DST);
+        fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: b.as_entire_binding(),
+            }
+        }
+        let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                entry(0, &params),
+                entry(1, &maps),
+                entry(2, &pts),
+                entry(3, &occ),
+            ],
+        });
+        FieldBuffers {
+            maps_cap,
+            cap,
+            maps,
+            pts,
+            occ,
+            staging,
+            params,
+            bind,
+            flat: Vec::with_capacity(cap * 3),
+        }
+    }
 }
 
 /// One frame's maps on the adapter.
 pub struct GpuFourier {
     gpu: Arc<Gpu>,
     pipeline: Arc<wgpu::ComputePipeline>,
-    maps: wgpu::Buffer,
     head: [u32; 5],
-    buffers: Mutex<Option<Buffers>>,
+    buffers: Mutex<Option<FieldBuffers>>,
 }
 
 impl GpuFourier {
-    /// Upload `maps` (its coefficients, basis and surface level).
+    /// Write `maps` (its coefficients, basis and surface level) to the adapter.
     pub fn new(gpu: Arc<Gpu>, maps: &FourierMaps) -> Result<Self, String> {
         let pipeline = gpu.pipeline("fourier", SOURCE)?;
         let data = maps.coefficients();
@@ -46,13 +112,15 @@ impl GpuFourier {
                 "maps of {bytes} bytes exceed the adapter's {limit} per binding"
             ));
         }
-        let buf = gpu
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("fourier maps"),
-                contents: bytemuck::cast_slice(data),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
+        let pooled = {
+            let mut pool = gpu.field_pool.lock().unwrap_or_else(|p| p.into_inner());
+            let i = pool.iter().position(|b| b.maps_cap >= data.len());
+            i.map(|i| pool.swap_remove(i))
+        };
+        let b = pooled
+            .unwrap_or_else(|| FieldBuffers::new(&gpu, &pipeline, None, data.len(), MIN_POINTS));
+        gpu.queue
+            .write_buffer(&b.maps, 0, bytemuck::cast_slice(data));
         gpu.count()
             .bytes_up
             .fetch_add(bytes as u64, Ordering::Relaxed);
@@ -66,58 +134,9 @@ impl GpuFourier {
         Ok(GpuFourier {
             gpu,
             pipeline,
-            maps: buf,
             head,
-            buffers: Mutex::new(None),
+            buffers: Mutex::new(Some(b)),
         })
-    }
-
-    fn buffers(&self, n: usize) -> Buffers {
-        let cap = n.max(MIN_POINTS).next_power_of_two();
-        let dev = &self.gpu.device;
-        let storage = |label, bytes: usize, usage| {
-            dev.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: bytes as u64,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        use wgpu::BufferUsages as U;
-        let pts = storage("points", cap * 12, U::STORAGE | U::COPY_DST);
-        let occ = storage("occupancy", cap * 4, U::STORAGE | U::COPY_SRC);
-        let staging = storage("occupancy read-back", cap * 4, U::MAP_READ | U::COPY_DST);
-        let params = storage("fourier params", 24, U::STORAGE | U::COPY_DST);
-        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &self.pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.maps.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: pts.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: occ.as_entire_binding(),
-                },
-            ],
-        });
-        Buffers {
-            cap,
-            pts,
-            occ,
-            staging,
-            params,
-            bind,
-        }
     }
 
     /// Occupancy in [0, 1] at crop-NDC `points` into `out` (as [`FourierMaps::occupancy`]).
@@ -127,20 +146,34 @@ impl GpuFourier {
             return Ok(());
         }
         let mut slot = self.buffers.lock().unwrap_or_else(|p| p.into_inner());
-        if slot.as_ref().is_none_or(|b| b.cap < n) {
-            *slot = Some(self.buffers(n));
+        let mut b = slot.take().ok_or("the field's buffers are gone")?;
+        if b.cap < n {
+            // A larger batch: new point buffers, the maps kept.
+            let cap = n.next_power_of_two();
+            b = FieldBuffers::new(&self.gpu, &self.pipeline, Some(b.maps), b.maps_cap, cap);
         }
-        let b = slot.as_ref().ok_or("no buffers")?;
+        let result = self.dispatch(&mut b, &points[..n], &mut out[..n]);
+        *slot = Some(b);
+        result
+    }
+
+    fn dispatch(
+        &self,
+        b: &mut FieldBuffers,
+        points: &[Vec3],
+        out: &mut [f32],
+    ) -> Result<(), String> {
+        let n = points.len();
         let q = &self.gpu.queue;
-        let mut params = vec![n as u32];
-        params.extend(self.head);
+        let mut params = [0u32; 6];
+        params[0] = n as u32;
+        params[1..].copy_from_slice(&self.head);
         q.write_buffer(&b.params, 0, bytemuck::cast_slice(&params));
-        let flat: Vec<f32> = points[..n].iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-        q.write_buffer(&b.pts, 0, bytemuck::cast_slice(&flat));
-        self.gpu
-            .count()
-            .bytes_up
-            .fetch_add((n * 12) as u64, Ordering::Relaxed);
+        b.flat.clear();
+        b.flat.extend(points.iter().flat_map(|p| [p.x, p.y, p.z]));
+        q.write_buffer(&b.pts, 0, bytemuck::cast_slice(&b.flat));
+        let c = self.gpu.count();
+        c.bytes_up.fetch_add((n * 12) as u64, Ordering::Relaxed);
         let mut enc = self
             .gpu
             .device
@@ -152,10 +185,29 @@ impl GpuFourier {
             let (x, y) = groups(n as u32);
             pass.dispatch_workgroups(x, y, 1);
         }
-        self.gpu.count().dispatches.fetch_add(1, Ordering::Relaxed);
-        self.gpu.count().field_runs.fetch_add(1, Ordering::Relaxed);
-        let v = self.gpu.submit_and_read(enc, &b.occ, &b.staging, n)?;
-        out[..n].copy_from_slice(&v);
-        Ok(())
+        c.dispatches.fetch_add(1, Ordering::Relaxed);
+        c.field_runs.fetch_add(1, Ordering::Relaxed);
+        self.gpu.submit_and_read_into(enc, &b.occ, &b.staging, out)
+    }
+}
+
+impl Drop for GpuFourier {
+    /// The frame's buffers back to the adapter's pool for the next frame.
+    fn drop(&mut self) {
+        let b = self
+            .buffers
+            .get_mut()
+            .unwrap_or_else(|p| p.into_inner())
+            .take();
+        if let Some(b) = b {
+            let mut pool = self
+                .gpu
+                .field_pool
+                .lock()
+                .unwrap_or_else(|p| p.into_inner());
+            if pool.len() < POOL {
+                pool.push(b);
+            }
+        }
     }
 }

@@ -122,6 +122,8 @@ pub struct Gpu {
     timestamp_period: Option<f32>,
     counters: Counters,
     pipelines: Mutex<HashMap<&'static str, Arc<wgpu::ComputePipeline>>>,
+    /// Frames' Fourier field buffers kept for the next frames ([`fourier::GpuFourier`]).
+    pub(crate) field_pool: Mutex<Vec<fourier::FieldBuffers>>,
 }
 
 impl std::fmt::Debug for Gpu {
@@ -193,6 +195,7 @@ impl Gpu {
             timestamp_period,
             counters: Counters::default(),
             pipelines: Mutex::new(HashMap::new()),
+            field_pool: Mutex::new(Vec::new()),
         }))
     }
 
@@ -275,12 +278,7 @@ impl Gpu {
     /// [`Counters::gpu_ns`].
     pub(crate) fn read_timer(&self, t: &Timer) -> Option<f64> {
         let period = self.timestamp_period?;
-        let (tx, rx) = std::sync::mpsc::channel();
-        t.staging.map_async(wgpu::MapMode::Read, 0..16, move |r| {
-            let _ = tx.send(r);
-        });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).ok()?;
-        rx.recv().ok()?.ok()?;
+        self.map_read(&t.staging, 16).ok()?;
         let ticks = {
             let v = t.staging.get_mapped_range(0..16).ok()?;
             let at = |i: usize| {
@@ -300,41 +298,61 @@ impl Gpu {
         &self.counters
     }
 
-    /// Read `len` f32 from the start of `buf` (which must have COPY_SRC) back to the host,
-    /// through `staging` (MAP_READ | COPY_DST, at least as large), after `encoder`'s work.
-    pub(crate) fn submit_and_read(
-        &self,
-        mut encoder: wgpu::CommandEncoder,
-        buf: &wgpu::Buffer,
-        staging: &wgpu::Buffer,
-        len: usize,
-    ) -> Result<Vec<f32>, String> {
-        let bytes = (len * 4) as u64;
-        encoder.copy_buffer_to_buffer(buf, 0, staging, 0, bytes);
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        self.queue.submit([encoder.finish()]);
-        let (tx, rx) = std::sync::mpsc::channel();
+    /// Map the first `bytes` of `staging` (MAP_READ) for reading once the submitted work is
+    /// done. The callback answers once: a one-slot channel.
+    fn map_read(&self, staging: &wgpu::Buffer, bytes: u64) -> Result<(), String> {
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
         staging.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-            let _ = tx.send(r);
+            let _ = tx.try_send(r);
         });
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| format!("the adapter did not finish: {e}"))?;
+        rx.recv()
+            .map_err(|_| "the read-back was dropped".to_string())?
+            .map_err(|e| format!("cannot map the result: {e}"))
+    }
+
+    /// Read `len` f32 from the start of `buf` back to the host ([`Gpu::submit_and_read_into`]).
+    pub(crate) fn submit_and_read(
+        &self,
+        encoder: wgpu::CommandEncoder,
+        buf: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        len: usize,
+    ) -> Result<Vec<f32>, String> {
+        let mut out = vec![0.0f32; len];
+        self.submit_and_read_into(encoder, buf, staging, &mut out)?;
+        Ok(out)
+    }
+
+    /// Submit `encoder`'s work and read `out.len()` f32 from the start of `buf` (COPY_SRC)
+    /// into `out`, through `staging` (MAP_READ | COPY_DST, at least as large).
+    pub(crate) fn submit_and_read_into(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        buf: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        out: &mut [f32],
+    ) -> Result<(), String> {
+        let bytes = std::mem::size_of_val(out) as u64;
+        encoder.copy_buffer_to_buffer(buf, 0, staging, 0, bytes);
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        self.queue.submit([encoder.finish()]);
+        let mapped = self.map_read(staging, bytes);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("the adapter refused the work: {e}"));
         }
-        rx.recv()
-            .map_err(|_| "the read-back was dropped".to_string())?
-            .map_err(|e| format!("cannot map the result: {e}"))?;
-        let out = {
+        mapped?;
+        {
             let view = staging
                 .get_mapped_range(0..bytes)
                 .map_err(|e| format!("cannot read the result: {e}"))?;
-            bytemuck::cast_slice::<u8, f32>(&view).to_vec()
-        };
+            out.copy_from_slice(bytemuck::cast_slice::<u8, f32>(&view));
+        }
         staging.unmap();
         self.counters.bytes_down.fetch_add(bytes, Ordering::Relaxed);
-        Ok(out)
+        Ok(())
     }
 }
 

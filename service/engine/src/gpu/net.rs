@@ -199,9 +199,16 @@ impl GpuNet {
 
     /// Run on f32 inputs (shape, data) in the graph's input order; the first output.
     pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, String> {
-        let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
         let mut slot = self.realized.lock().unwrap_or_else(|p| p.into_inner());
-        if slot.as_ref().is_none_or(|r| r.shapes != shapes) {
+        // Planned again only when the input shapes change (not frame to frame).
+        let same = |r: &Realized| {
+            r.shapes
+                .iter()
+                .map(Vec::as_slice)
+                .eq(inputs.iter().map(|(s, _)| *s))
+        };
+        if !slot.as_ref().is_some_and(same) {
+            let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
             *slot = Some(self.realize(&shapes, false)?);
         }
         let r = slot.as_ref().ok_or("no plan")?;

@@ -106,6 +106,17 @@ impl ModelField {
         q
     }
 
+    /// The Fourier series at crop-NDC points: on the adapter when the maps are there
+    /// ([`Self::on_gpu`]), else on the CPU.
+    fn fourier(&self, maps: &FourierMaps, q: &[Vec3], occ: &mut [f32]) -> Result<(), FieldError> {
+        #[cfg(feature = "wgpu")]
+        if let Some(g) = &self.gpu_fourier {
+            return g.occupancy(q, occ).map_err(FieldError::Backend);
+        }
+        maps.occupancy(q, occ, &mut Vec::new());
+        Ok(())
+    }
+
     fn field_err(e: ModelError) -> FieldError {
         FieldError::Backend(e.to_string())
     }
@@ -147,13 +158,7 @@ impl OccupancyField for ModelField {
         let mut occ = vec![0.0f32; q.len()];
         match &self.shape {
             ShapeState::Mlp { nets, feat } => nets.query(feat, &q, &mut occ)?,
-            #[cfg(feature = "wgpu")]
-            ShapeState::Fourier(_) if self.gpu_fourier.is_some() => {
-                if let Some(g) = &self.gpu_fourier {
-                    g.occupancy(&q, &mut occ).map_err(FieldError::Backend)?;
-                }
-            }
-            ShapeState::Fourier(maps) => maps.occupancy(&q, &mut occ, &mut Vec::new()),
+            ShapeState::Fourier(maps) => self.fourier(maps, &q, &mut occ)?,
         }
         for (k, &i) in idx.iter().enumerate() {
             out[i] = occ[k];

@@ -1,0 +1,368 @@
+//! The layers with weights or windows: convolution (batch-norm folded in), pooling, Gemm /
+//! MatMul, resize; and batch-norm's per-channel affine.
+
+use super::{Act, broadcast, input};
+use crate::gpu::net::plan::{Attrs, Kernel, Planner, numel};
+use tract_onnx::pb::NodeProto;
+
+/// Batch-norm's per-channel (scale, shift): y = x scale + shift.
+pub(super) fn bn_affine(pl: &Planner, n: &NodeProto) -> Result<(Vec<f32>, Vec<f32>), String> {
+    let eps = Attrs(&n.attribute).float("epsilon", 1e-5);
+    let get = |i: usize| -> Result<Vec<f32>, String> {
+        Ok(pl
+            .konst(n.input.get(i).map(|s| s.as_str()).unwrap_or(""))?
+            .1
+            .floats())
+    };
+    let (g, b, m, v) = (get(1)?, get(2)?, get(3)?, get(4)?);
+    let scale: Vec<f32> = g
+        .iter()
+        .zip(&v)
+        .map(|(g, v)| g / (v + eps).sqrt())
+        .collect();
+    let shift: Vec<f32> = b
+        .iter()
+        .zip(&m)
+        .zip(&scale)
+        .map(|((b, m), s)| b - m * s)
+        .collect();
+    Ok((scale, shift))
+}
+
+/// (pad_top, pad_left) and the output side for one spatial axis.
+fn conv_pads(
+    a: &Attrs,
+    shape_in: [usize; 2],
+    k: [usize; 2],
+    s: [usize; 2],
+    d: [usize; 2],
+    transpose: bool,
+) -> Result<([usize; 2], [usize; 2]), String> {
+    let auto = a.string("auto_pad", "NOTSET");
+    let pads = a.ints("pads").unwrap_or_else(|| vec![0; 4]);
+    if pads.len() != 4 || pads.iter().any(|&p| p < 0) {
+        return Err(format!("pads {pads:?}"));
+    }
+    if !matches!(auto.as_str(), "NOTSET" | "VALID")
+        || (auto == "VALID" && pads.iter().any(|&p| p != 0))
+    {
+        return Err(format!("auto_pad {auto:?} (NOTSET or VALID)"));
+    }
+    let outp = a.ints("output_padding").unwrap_or_else(|| vec![0, 0]);
+    if transpose && a.get("output_shape").is_some() {
+        return Err("ConvTranspose with output_shape (give pads)".into());
+    }
+    let mut o = [0usize; 2];
+    for i in 0..2 {
+        let span = d[i] * (k[i] - 1) + 1;
+        let (b, e) = (pads[i] as usize, pads[i + 2] as usize);
+        o[i] = if transpose {
+            ((shape_in[i] - 1) * s[i] + span + *outp.get(i).unwrap_or(&0) as usize)
+                .checked_sub(b + e)
+                .ok_or("negative output")?
+        } else {
+            let full = shape_in[i] + b + e;
+            if full < span {
+                return Err(format!("kernel {k:?} larger than the padded input"));
+            }
+            (full - span) / s[i] + 1
+        };
+    }
+    Ok(([pads[0] as usize, pads[1] as usize], o))
+}
+
+pub(super) fn conv(
+    pl: &mut Planner,
+    n: &NodeProto,
+    out: &str,
+    act: Act,
+    bn: Option<&NodeProto>,
+) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let transpose = n.op_type == "ConvTranspose";
+    let x = n.input.first().map(|s| s.as_str()).unwrap_or("");
+    let (b, shape) = pl.dev(x)?;
+    let (wshape, w) = pl.konst(n.input.get(1).map(|s| s.as_str()).unwrap_or(""))?;
+    if shape.len() != 4 || wshape.len() != 4 {
+        return Err(pl.err(format!(
+            "{} of input {shape:?}, weights {wshape:?} (2-D, NCHW)",
+            n.op_type
+        )));
+    }
+    let group = a.int("group", 1).max(1) as usize;
+    let (nb, c, h, wd) = (shape[0], shape[1], shape[2], shape[3]);
+    let m = if transpose {
+        wshape[1] * group
+    } else {
+        wshape[0]
+    };
+    let cin_w = if transpose {
+        wshape[0]
+    } else {
+        wshape[1] * group
+    };
+    if cin_w != c || c % group != 0 || m % group != 0 {
+        return Err(pl.err(format!(
+            "weights {wshape:?} for {c} input channels in {group} groups"
+        )));
+    }
+    let two = |name: &str| -> [usize; 2] {
+        let v = a.ints(name).unwrap_or_else(|| vec![1, 1]);
+        [
+            v.first().copied().unwrap_or(1).max(1) as usize,
+            v.get(1).copied().unwrap_or(1).max(1) as usize,
+        ]
+    };
+    let (s, d) = (two("strides"), two("dilations"));
+    let k = [wshape[2], wshape[3]];
+    let (pt, o) = conv_pads(&a, [h, wd], k, s, d, transpose).map_err(|e| pl.err(e))?;
+    let mut w = w.floats();
+    let mut bias = match n.input.get(2).filter(|s| !s.is_empty()) {
+        Some(name) => pl.konst(name)?.1.floats(),
+        None => vec![0.0; m],
+    };
+    if let Some(bn) = bn {
+        // Folded at load: W' = W scale[m], b' = b scale[m] + shift[m].
+        let (scale, shift) = bn_affine(pl, bn)?;
+        let per = w.len() / m;
+        for (i, v) in w.iter_mut().enumerate() {
+            *v *= scale[i / per];
+        }
+        for (j, v) in bias.iter_mut().enumerate() {
+            *v = *v * scale[j] + shift[j];
+        }
+    }
+    let wb = pl.upload(w);
+    let bb = pl.upload(bias);
+    let oshape = vec![nb, m, o[0], o[1]];
+    let ob = pl.alloc(numel(&oshape));
+    let dims = [
+        nb, c, h, wd, m, o[0], o[1], k[0], k[1], s[0], s[1], pt[0], pt[1], d[0], d[1], group,
+    ];
+    // Ungrouped with a multiple of 4 outputs: four channels per invocation.
+    let blocked = !transpose && group == 1 && m % 4 == 0;
+    let kernel = match (transpose, blocked) {
+        (true, _) => Kernel::ConvTranspose,
+        (false, true) => Kernel::Conv4,
+        (false, false) => Kernel::Conv,
+    };
+    let count = if blocked {
+        numel(&oshape) / 4
+    } else {
+        numel(&oshape)
+    };
+    let mut p = vec![count as u32];
+    p.extend(dims.iter().map(|&v| v as u32));
+    p.extend([act.0, act.1.to_bits(), act.2.to_bits()]);
+    pl.step(kernel, p, vec![b, wb, bb, ob]);
+    pl.define_dev(out, ob, oshape);
+    Ok(())
+}
+
+pub(super) fn pool(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let x = n.input.first().map(|s| s.as_str()).unwrap_or("");
+    let (b, shape) = pl.dev(x)?;
+    if shape.len() != 4 {
+        return Err(pl.err(format!("{} of {shape:?} (2-D, NCHW)", n.op_type)));
+    }
+    let (h, w) = (shape[2], shape[3]);
+    let global = n.op_type.starts_with("Global");
+    let max = n.op_type.ends_with("MaxPool");
+    let (k, s, pads) = if global {
+        ([h, w], [1, 1], vec![0; 4])
+    } else {
+        let ks = a
+            .ints("kernel_shape")
+            .ok_or_else(|| pl.err("pool without kernel_shape"))?;
+        let st = a.ints("strides").unwrap_or_else(|| vec![1, 1]);
+        if ks.len() != 2 || st.len() != 2 {
+            return Err(pl.err("pooling over other than 2 axes"));
+        }
+        if a.ints("dilations")
+            .is_some_and(|d| d.iter().any(|&v| v != 1))
+            || a.string("auto_pad", "NOTSET") != "NOTSET"
+        {
+            return Err(pl.err("dilated or auto-padded pooling"));
+        }
+        (
+            [ks[0] as usize, ks[1] as usize],
+            [st[0].max(1) as usize, st[1].max(1) as usize],
+            a.ints("pads").unwrap_or_else(|| vec![0; 4]),
+        )
+    };
+    let ceil = a.int("ceil_mode", 0) == 1;
+    let mut o = [0usize; 2];
+    for i in 0..2 {
+        let full = [h, w][i] + (pads[i] + pads[i + 2]).max(0) as usize;
+        if full < k[i] {
+            return Err(pl.err(format!("window {k:?} larger than the padded input")));
+        }
+        let q = full - k[i];
+        o[i] = if ceil { q.div_ceil(s[i]) } else { q / s[i] } + 1;
+    }
+    let oshape = vec![shape[0], shape[1], o[0], o[1]];
+    let ob = pl.alloc(numel(&oshape));
+    let p = [
+        numel(&oshape),
+        shape[0] * shape[1],
+        h,
+        w,
+        o[0],
+        o[1],
+        k[0],
+        k[1],
+        s[0],
+        s[1],
+        pads[0] as usize,
+        pads[1] as usize,
+        max as usize,
+        a.int("count_include_pad", 0) as usize,
+    ];
+    pl.step(
+        Kernel::Pool,
+        p.iter().map(|&v| v as u32).collect(),
+        vec![b, ob],
+    );
+    pl.define_dev(out, ob, oshape);
+    Ok(())
+}
+
+pub(super) fn gemm(pl: &mut Planner, n: &NodeProto, out: &str, act: Act) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let inp = |i: usize| input(n, i);
+    let (ba, sa) = pl.dev(inp(0).unwrap_or(""))?;
+    let (bb, sb) = pl.dev(inp(1).unwrap_or(""))?;
+    let gemm = n.op_type == "Gemm";
+    let (ta, tb) = if gemm {
+        (a.int("transA", 0) == 1, a.int("transB", 0) == 1)
+    } else {
+        (false, false)
+    };
+    if sa.len() != 2 || sb.len() != 2 {
+        return Err(pl.err(format!("{} of {sa:?} and {sb:?} (2-D only)", n.op_type)));
+    }
+    let (m, k) = if ta { (sa[1], sa[0]) } else { (sa[0], sa[1]) };
+    let (k2, nn) = if tb { (sb[1], sb[0]) } else { (sb[0], sb[1]) };
+    if k != k2 {
+        return Err(pl.err(format!("inner sizes {k} and {k2} differ")));
+    }
+    let (alpha, beta) = if gemm {
+        (a.float("alpha", 1.0), a.float("beta", 1.0))
+    } else {
+        (1.0, 0.0)
+    };
+    let (cb, crs, ccs, has_c) = match inp(2).filter(|_| gemm) {
+        Some(c) => {
+            let (cb, sc) = pl.dev(c)?;
+            // C's strides in the [M, N] output (0 on a broadcast axis).
+            let st = broadcast(&[m, nn], &sc)
+                .filter(|(o, _, _)| o[..] == [m, nn])
+                .map(|(_, _, s)| s)
+                .ok_or_else(|| pl.err(format!("C {sc:?} for [{m}, {nn}]")))?;
+            (cb, st[0] as u32, st[1] as u32, 1)
+        }
+        None => (ba, 0, 0, 0),
+    };
+    let ob = pl.alloc(m * nn);
+    let p = vec![
+        (m * nn) as u32,
+        m as u32,
+        nn as u32,
+        k as u32,
+        ta as u32,
+        tb as u32,
+        alpha.to_bits(),
+        beta.to_bits(),
+        crs,
+        ccs,
+        has_c,
+        act.0,
+        act.1.to_bits(),
+        act.2.to_bits(),
+    ];
+    pl.step(Kernel::Gemm, p, vec![ba, bb, cb, ob]);
+    pl.define_dev(out, ob, vec![m, nn]);
+    Ok(())
+}
+
+pub(super) fn resize(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
+    let a = Attrs(&n.attribute);
+    let inp = |i: usize| input(n, i);
+    let (b, shape) = pl.dev(inp(0).unwrap_or(""))?;
+    if shape.len() != 4 {
+        return Err(pl.err(format!("Resize of {shape:?} (NCHW)")));
+    }
+    let scales = match inp(2) {
+        Some(s) => pl.konst(s)?.1.floats(),
+        None => vec![],
+    };
+    let sizes = match inp(3) {
+        Some(s) => pl.konst(s)?.1.ints(),
+        None => vec![],
+    };
+    let (oh, ow, sh, sw) = if sizes.len() == 4 {
+        let (oh, ow) = (sizes[2] as usize, sizes[3] as usize);
+        if sizes[0] as usize != shape[0] || sizes[1] as usize != shape[1] {
+            return Err(pl.err("Resize of N or C"));
+        }
+        (
+            oh,
+            ow,
+            oh as f32 / shape[2] as f32,
+            ow as f32 / shape[3] as f32,
+        )
+    } else if scales.len() == 4 {
+        if scales[0] != 1.0 || scales[1] != 1.0 {
+            return Err(pl.err("Resize of N or C"));
+        }
+        (
+            (shape[2] as f32 * scales[2]).floor() as usize,
+            (shape[3] as f32 * scales[3]).floor() as usize,
+            scales[2],
+            scales[3],
+        )
+    } else {
+        return Err(pl.err("Resize without 4 scales or sizes"));
+    };
+    let mode = match a.string("mode", "nearest").as_str() {
+        "nearest" => 0,
+        "linear" => 1,
+        other => return Err(pl.err(format!("Resize mode {other:?}"))),
+    };
+    let ctm = match a
+        .string("coordinate_transformation_mode", "half_pixel")
+        .as_str()
+    {
+        "half_pixel" => 0,
+        "align_corners" => 1,
+        "asymmetric" => 2,
+        "pytorch_half_pixel" => 3,
+        other => return Err(pl.err(format!("Resize coordinate_transformation_mode {other:?}"))),
+    };
+    let near = match a.string("nearest_mode", "round_prefer_floor").as_str() {
+        "round_prefer_floor" => 0,
+        "round_prefer_ceil" => 1,
+        "floor" => 2,
+        "ceil" => 3,
+        other => return Err(pl.err(format!("Resize nearest_mode {other:?}"))),
+    };
+    let oshape = vec![shape[0], shape[1], oh, ow];
+    let ob = pl.alloc(numel(&oshape));
+    let p = vec![
+        numel(&oshape) as u32,
+        (shape[0] * shape[1]) as u32,
+        shape[2] as u32,
+        shape[3] as u32,
+        oh as u32,
+        ow as u32,
+        mode,
+        ctm,
+        near,
+        sh.to_bits(),
+        sw.to_bits(),
+    ];
+    pl.step(Kernel::Resize, p, vec![b, ob]);
+    pl.define_dev(out, ob, oshape);
+    Ok(())
+}
