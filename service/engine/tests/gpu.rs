@@ -353,3 +353,99 @@ fn the_adapter_counts_its_work_and_times_it_where_it_can() {
         assert_eq!(after.gpu_ns, before.gpu_ns);
     }
 }
+
+/// The hierarchical localization with its grid on the adapter against the CPU's, on every
+/// analytic scene (the field tabulated on the host, so both sides see the same values): the
+/// same value at every grid point, the same evaluated set, evaluations and conflict rounds,
+/// for the paper's method, its no-conflict variant and the tight one, from two coarse levels,
+/// and with lists too small at first (grown, the frame run again).
+#[test]
+fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
+    use glam::Vec3;
+    use volcap_engine::analytic::{AnalyticScene, SCENES};
+    use volcap_engine::field::OccupancyField;
+    use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
+    use volcap_engine::grid::{Grid, GridSpec};
+    use volcap_engine::localize::{HierarchicalMode, Localizer, Method};
+    let Some(gpu) = gpu() else { return };
+    let mut cpu_loc = Localizer::new();
+    let mut checked = 0;
+    for (res, cap) in [(33, 1 << 18), (129, 1 << 18), (65, 64)] {
+        let mut gl = GpuLocalizer::new(gpu.clone())
+            .unwrap()
+            .with_list_capacity(cap);
+        let spec = GridSpec::from_resolution(res).unwrap();
+        let pts: Vec<Vec3> = (0..spec.len())
+            .map(|q| spec.world(spec.unlinear(q)))
+            .collect();
+        for name in SCENES {
+            let scene = AnalyticScene::by_name(name).unwrap();
+            let mut table = vec![0.0f32; spec.len()];
+            scene.occupancy(&pts, &mut table).unwrap();
+            for (method, mode) in [
+                (Method::Hierarchical, HierarchicalMode::Paper),
+                (Method::HierarchicalNoConflict, HierarchicalMode::NoConflict),
+                (Method::HierarchicalTight, HierarchicalMode::Tight),
+            ] {
+                for coarse in [2, 3] {
+                    let mut cpu = Grid::new(spec);
+                    let want = cpu_loc.run(method, &scene, spec, coarse, &mut cpu).unwrap();
+                    let got = gl
+                        .run(&GpuField::Table(&table), spec, coarse, mode)
+                        .unwrap();
+                    let mut g = Grid::new(spec);
+                    gl.read_grid(&mut g).unwrap();
+                    let what = format!("{name} {res}^3 {} from level {coarse}", method.name());
+                    assert_eq!(got.evaluations, want.evaluations, "{what}: evaluations");
+                    assert_eq!(got.conflict_rounds, want.conflict_rounds, "{what}: rounds");
+                    assert_eq!(
+                        g.evaluated.count_ones(),
+                        cpu.evaluated.count_ones(),
+                        "{what}: evaluated points"
+                    );
+                    let set_differs =
+                        (0..spec.len()).find(|&q| g.evaluated.get(q) != cpu.evaluated.get(q));
+                    assert_eq!(set_differs, None, "{what}: evaluated sets differ");
+                    let value_differs =
+                        (0..spec.len()).find(|&q| g.values[q].to_bits() != cpu.values[q].to_bits());
+                    assert_eq!(
+                        value_differs.map(|q| (q, g.values[q], cpu.values[q])),
+                        None,
+                        "{what}: values differ"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+        if cap < 1 << 18 {
+            assert!(gl.list_capacity() > cap, "the small lists grew");
+        }
+    }
+    println!("{checked} runs equal to the CPU's");
+}
+
+/// A grid whose values do not fit one storage binding at default limits is refused with
+/// the sizes named (and nothing is allocated for it).
+#[test]
+fn a_grid_over_the_adapters_binding_limit_is_refused_with_its_size() {
+    use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
+    use volcap_engine::grid::GridSpec;
+    use volcap_engine::localize::HierarchicalMode;
+    let Some(gpu) = gpu() else { return };
+    let mut gl = GpuLocalizer::new(gpu).unwrap();
+    let spec = GridSpec::from_resolution(513).unwrap();
+    let e = gl
+        .run(&GpuField::Table(&[]), spec, 3, HierarchicalMode::Paper)
+        .unwrap_err();
+    assert!(e.contains("513^3") && e.contains("MiB"), "{e}");
+    let small = GridSpec::from_resolution(33).unwrap();
+    let e = gl
+        .run(
+            &GpuField::Table(&[0.0; 10]),
+            small,
+            3,
+            HierarchicalMode::Paper,
+        )
+        .unwrap_err();
+    assert!(e.contains("10 values"), "{e}");
+}

@@ -129,7 +129,108 @@ fn median(v: &mut [f64]) -> f64 {
 /// Network fields: for every `--model NAME[@int8]` and simulator scene (default
 /// `front-walk`), frame 0 through segmentation and the encoders; the field is the trained
 /// MLP on the input view's crop cube. Scene label `SCENE/NAME-PRECISION`.
-type NamedFields = (Vec<String>, Vec<Box<dyn OccupancyField>>);
+type NamedFields = (Vec<String>, Vec<BenchField>);
+
+/// A field to benchmark; a network field on the GPU backend can also be localized wholly on
+/// the adapter (`GpuLocalizer`: its rows say `@adapter`).
+enum BenchField {
+    Dyn(Box<dyn OccupancyField>),
+    Model(
+        Box<volcap_engine::model::ModelField>,
+        Option<std::sync::Arc<AdapterOf>>,
+    ),
+}
+
+#[cfg(feature = "wgpu")]
+type AdapterOf = volcap_engine::gpu::Gpu;
+#[cfg(not(feature = "wgpu"))]
+type AdapterOf = ();
+
+impl BenchField {
+    fn field(&self) -> &dyn OccupancyField {
+        match self {
+            BenchField::Dyn(f) => f.as_ref(),
+            BenchField::Model(f, _) => f.as_ref(),
+        }
+    }
+}
+
+/// The hierarchical methods localized wholly on the adapter of `field` (its grid, index
+/// lists and the field's series there), as rows beside the CPU's: median wall time with the
+/// values left on the adapter; IoU against dense from the values read back afterwards.
+#[cfg(feature = "wgpu")]
+#[allow(clippy::too_many_arguments)]
+fn adapter_rows(
+    field: &BenchField,
+    name: &str,
+    spec: GridSpec,
+    coarse: u32,
+    methods: &[Method],
+    dense: (&volcap_engine::grid::BitSet, &[Vec<u32>], u64, u64, f64),
+    a: &LocalizeArgs,
+    rows: &mut Vec<Row>,
+) -> anyhow::Result<()> {
+    use volcap_engine::gpu::localize::GpuLocalizer;
+    use volcap_engine::localize::HierarchicalMode;
+    let BenchField::Model(model, Some(gpu)) = field else {
+        return Ok(());
+    };
+    let Some(on_gpu) = model.gpu_field() else {
+        return Ok(());
+    };
+    let (dense_bits, comps, band, dense_evals, dense_ms) = dense;
+    let mut gl = GpuLocalizer::new(gpu.clone()).map_err(anyhow::Error::msg)?;
+    gl.check_size(spec).map_err(anyhow::Error::msg)?;
+    for &m in methods {
+        let mode = match m {
+            Method::Hierarchical => HierarchicalMode::Paper,
+            Method::HierarchicalNoConflict => HierarchicalMode::NoConflict,
+            Method::HierarchicalTight => HierarchicalMode::Tight,
+            _ => continue,
+        };
+        let mut times = Vec::new();
+        let mut stats = LocalizeStats::default();
+        let start = Instant::now();
+        // One warm-up run (kernels compiled, buffers made), not timed.
+        gl.run(&on_gpu, spec, coarse, mode)
+            .map_err(anyhow::Error::msg)?;
+        while times.len() < a.runs.max(1) {
+            let t = Instant::now();
+            stats = gl
+                .run(&on_gpu, spec, coarse, mode)
+                .map_err(anyhow::Error::msg)?;
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+            if start.elapsed().as_secs_f64() > a.time_budget {
+                break;
+            }
+        }
+        let mut grid = Grid::new(spec);
+        gl.read_grid(&mut grid).map_err(anyhow::Error::msg)?;
+        let bits = grid.binarized();
+        let runs = times.len();
+        let ms = median(&mut times);
+        rows.push(Row {
+            scene: name.to_string(),
+            resolution: spec.n(),
+            coarse_resolution: (1usize << coarse) + 1,
+            method: format!("{}@adapter", m.name()),
+            param: None,
+            evaluations: stats.evaluations,
+            dense_evaluations: dense_evals,
+            band_bound: band,
+            iou_vs_dense: iou_bits(dense_bits, &bits),
+            lost_components: lost_components(comps, &bits),
+            dense_components: comps.len(),
+            ms,
+            bookkeeping_ms: ms,
+            dense_ms,
+            runs,
+            conflict_rounds: stats.conflict_rounds,
+            empty: false,
+        });
+    }
+    Ok(())
+}
 
 fn model_fields(a: &LocalizeArgs) -> anyhow::Result<NamedFields> {
     use volcap_engine::model::{ModelView, Models, Precision};
@@ -185,7 +286,14 @@ fn model_fields(a: &LocalizeArgs) -> anyhow::Result<NamedFields> {
                 "cpu" => format!("{sc}/{name}-{}", prec.name()),
                 b => format!("{sc}/{name}-{}-{b}", prec.name()),
             });
-            fields.push(Box::new(field));
+            #[cfg(feature = "wgpu")]
+            let adapter = match runtime {
+                volcap_engine::model::Runtime::Wgpu(g) => Some(g.clone()),
+                _ => None,
+            };
+            #[cfg(not(feature = "wgpu"))]
+            let adapter = None;
+            fields.push(BenchField::Model(Box::new(field), adapter));
         }
     }
     Ok((names, fields))
@@ -200,7 +308,7 @@ pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
     let (scenes, fields) = if a.models.is_empty() {
         let fields = scenes
             .iter()
-            .map(|s| scene_field(s))
+            .map(|s| scene_field(s).map(BenchField::Dyn))
             .collect::<anyhow::Result<Vec<_>>>()?;
         (scenes, fields)
     } else {
@@ -250,7 +358,7 @@ pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
             let (dense_ms, dense_own, dense_runs, dstats) = timed(
                 &mut loc,
                 Method::Dense,
-                field.as_ref(),
+                field.field(),
                 spec,
                 coarse,
                 &mut dense,
@@ -266,7 +374,7 @@ pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
                     (dense_ms, dense_own, dense_runs, dstats, 1.0, 0)
                 } else {
                     let (ms, own, runs, st) =
-                        timed(&mut loc, m, field.as_ref(), spec, coarse, &mut grid, a)?;
+                        timed(&mut loc, m, field.field(), spec, coarse, &mut grid, a)?;
                     let bits = grid.binarized();
                     (
                         ms,
@@ -304,6 +412,12 @@ pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
                 }
                 rows.push(row);
                 pb.inc(1);
+            }
+            #[cfg(feature = "wgpu")]
+            {
+                pb.set_message(format!("{name} {}^3 on the adapter", spec.n()));
+                let dense = (&dense_bits, &comps[..], band, dstats.evaluations, dense_ms);
+                adapter_rows(field, name, spec, coarse, &methods, dense, a, &mut rows)?;
             }
         }
     }

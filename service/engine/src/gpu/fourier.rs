@@ -13,7 +13,7 @@ use glam::Vec3;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 
-const SOURCE: &str = include_str!("fourier.wgsl");
+const SOURCE: &str = concat!(include_str!("series.wgsl"), include_str!("fourier.wgsl"));
 
 /// Point buffers sized for this many points at least (grown by doubling when a batch is
 /// larger).

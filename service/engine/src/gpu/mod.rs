@@ -8,9 +8,11 @@
 //! time on the adapter, `Counters::gpu_ns`); without it nothing is timed there.
 //!
 //! What runs here: [`net::GpuNet`], the ONNX networks (`model::runtime::Runtime::Wgpu`), and
-//! [`fourier::GpuFourier`], the Fourier field at points.
+//! [`fourier::GpuFourier`], the Fourier field at points, and [`localize::GpuLocalizer`], the
+//! hierarchical localization with the grid on the adapter.
 
 pub mod fourier;
+pub mod localize;
 pub mod net;
 
 use std::collections::HashMap;
@@ -337,6 +339,18 @@ impl Gpu {
     ) -> Result<(), String> {
         let bytes = std::mem::size_of_val(out) as u64;
         encoder.copy_buffer_to_buffer(buf, 0, staging, 0, bytes);
+        self.submit_and_read_bytes(encoder, staging, bytemuck::cast_slice_mut(out))
+    }
+
+    /// Submit `encoder`'s work (which ends by copying into `staging`, MAP_READ | COPY_DST)
+    /// and read the first `out.len()` bytes of `staging` into `out`.
+    pub(crate) fn submit_and_read_bytes(
+        &self,
+        encoder: wgpu::CommandEncoder,
+        staging: &wgpu::Buffer,
+        out: &mut [u8],
+    ) -> Result<(), String> {
+        let bytes = out.len() as u64;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         self.queue.submit([encoder.finish()]);
         let mapped = self.map_read(staging, bytes);
@@ -348,7 +362,7 @@ impl Gpu {
             let view = staging
                 .get_mapped_range(0..bytes)
                 .map_err(|e| format!("cannot read the result: {e}"))?;
-            out.copy_from_slice(bytemuck::cast_slice::<u8, f32>(&view));
+            out.copy_from_slice(&view);
         }
         staging.unmap();
         self.counters.bytes_down.fetch_add(bytes, Ordering::Relaxed);

@@ -88,6 +88,21 @@ impl ModelField {
         Ok(self)
     }
 
+    /// The field as the GPU localizer evaluates it on the adapter (the Fourier family: its
+    /// maps, the person mask and the view's transform), or `None` for the point-MLP family.
+    #[cfg(feature = "wgpu")]
+    pub fn gpu_field(&self) -> Option<crate::gpu::localize::GpuField<'_>> {
+        match &self.shape {
+            ShapeState::Fourier(maps) => Some(crate::gpu::localize::GpuField::Fourier {
+                maps,
+                mask: &self.mask,
+                mask_size: INPUT_SIZE,
+                to_crop: self.to_crop,
+            }),
+            ShapeState::Mlp { .. } => None,
+        }
+    }
+
     /// Crop NDC of a render-view NDC point.
     pub fn to_crop(&self, p: Vec3) -> Vec3 {
         self.to_crop * p

@@ -1,0 +1,773 @@
+//! The paper's hierarchical localization on the adapter (and its no-conflict and tight
+//! variants): the grid's values, the "already handled" bits and the index lists live in
+//! the adapter's buffers; the field is evaluated there too (the Fourier head with the person
+//! mask, or a table of values the host computed, which the parity tests use for the analytic
+//! scenes). The steps are those of `localize/hierarchical.rs` (`localize.wgsl`): per level,
+//! upsample the binarized coarse field and list the fractional points, dilate them by the
+//! 1-ring (or not: tight), evaluate, then the conflict loop, one round per submission with the
+//! next list's length read back (32 bytes). Lists are appended with atomics: their order
+//! differs from the CPU's, their sets do not (a point is listed by whichever invocation claims
+//! its bit first, and what decides whether it is listed does not change during a round).
+//!
+//! The values stay on the adapter for the stages that read them there;
+//! [`GpuLocalizer::read_grid`] brings them (and the evaluated set) back into a CPU [`Grid`].
+//! The lists start at [`START_CAP`] entries and grow (the frame run again) when a level
+//! needs more. The whole grid is one storage buffer: grids over the adapter's binding limit
+//! (513^3 at default limits) are refused with the sizes named.
+
+use super::{Gpu, groups};
+use crate::grid::{Grid, GridSpec};
+use crate::localize::{HierarchicalMode, LocalizeStats, check_coarse};
+use crate::model::fourier::{Basis, FourierMaps};
+use glam::Mat3;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+const BOOK: &str = include_str!("localize.wgsl");
+const EVAL: &str = concat!(
+    include_str!("series.wgsl"),
+    include_str!("localize_eval.wgsl")
+);
+
+/// Entries each index list holds at first.
+pub const START_CAP: usize = 1 << 18;
+
+/// Counter slots (`localize.wgsl`; slot 0 counts the candidates).
+const LIST: [usize; 2] = [1, 2];
+const OVERFLOW: usize = 3;
+const EVALS: usize = 4;
+const COUNTS: usize = 8;
+
+/// A field the localizer evaluates on the adapter.
+pub enum GpuField<'a> {
+    /// One value per point of the run's grid (linear index order), evaluated by the host.
+    Table(&'a [f32]),
+    /// The Fourier head over the render view: `to_crop` maps render NDC to crop NDC, points
+    /// outside the crop or where the `mask_size` x `mask_size` mask is below 0.5 are 0, the
+    /// rest the series (`model/field.rs` `ModelField::occupancy`).
+    Fourier {
+        maps: &'a FourierMaps,
+        mask: &'a [f32],
+        mask_size: usize,
+        to_crop: Mat3,
+    },
+}
+
+struct Pipes {
+    layout0: wgpu::BindGroupLayout,
+    layout_args: wgpu::BindGroupLayout,
+    layout_field: wgpu::BindGroupLayout,
+    zero: wgpu::ComputePipeline,
+    prep_cand: wgpu::ComputePipeline,
+    prep_src: wgpu::ComputePipeline,
+    prep_eval: wgpu::ComputePipeline,
+    seed: wgpu::ComputePipeline,
+    upsample: wgpu::ComputePipeline,
+    dilate: wgpu::ComputePipeline,
+    conflict: wgpu::ComputePipeline,
+    eval_table: wgpu::ComputePipeline,
+    eval_fourier: wgpu::ComputePipeline,
+}
+
+/// The grid's buffers for one size and list capacity.
+struct Bufs {
+    spec: GridSpec,
+    cap: usize,
+    values: wgpu::Buffer,
+    queued: wgpu::Buffer,
+    counts: wgpu::Buffer,
+    counts_staging: wgpu::Buffer,
+    args: wgpu::Buffer,
+    args_bind: wgpu::BindGroup,
+    /// Per level and list orientation: parameters and bind group.
+    params: Vec<[wgpu::Buffer; 2]>,
+    binds: Vec<[wgpu::BindGroup; 2]>,
+    /// The values' and bits' read-back, made on first use.
+    staging: Option<wgpu::Buffer>,
+}
+
+/// The field's buffers (grown, never shrunk).
+struct FieldBufs {
+    params: wgpu::Buffer,
+    maps: wgpu::Buffer,
+    /// The grid's coordinates, then the mask.
+    aux: wgpu::Buffer,
+    maps_cap: usize,
+    aux_cap: usize,
+    bind: wgpu::BindGroup,
+}
+
+/// Reusable state of the hierarchical localizer on the adapter.
+pub struct GpuLocalizer {
+    gpu: Arc<Gpu>,
+    pipes: Pipes,
+    bufs: Option<Bufs>,
+    field: Option<FieldBufs>,
+    cap: usize,
+    /// Whether the last run completed (its values are in the buffers).
+    done: bool,
+}
+
+fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    layout_entry(binding, wgpu::BufferBindingType::Storage { read_only })
+}
+
+fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    layout_entry(binding, wgpu::BufferBindingType::Uniform)
+}
+
+fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: b.as_entire_binding(),
+    }
+}
+
+impl Pipes {
+    fn new(gpu: &Gpu) -> Result<Self, String> {
+        let d = &gpu.device;
+        let layout = |label, entries: &[wgpu::BindGroupLayoutEntry]| {
+            d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries,
+            })
+        };
+        // Six storage buffers here and two in the field's group: the default limit of eight
+        // per stage.
+        let mut e0 = vec![uniform_entry(0)];
+        e0.extend((1..7).map(|b| storage_entry(b, false)));
+        let layout0 = layout("localize", &e0);
+        let layout_args = layout("localize args", &[storage_entry(0, false)]);
+        let layout_field = layout(
+            "localize field",
+            &[
+                uniform_entry(0),
+                storage_entry(1, true),
+                storage_entry(2, true),
+            ],
+        );
+        let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = |label, src: &str| {
+            d.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(src.into()),
+            })
+        };
+        let book = module("localize", BOOK);
+        let eval = module("localize eval", EVAL);
+        let pl = |groups: &[&wgpu::BindGroupLayout]| {
+            let groups: Vec<Option<&wgpu::BindGroupLayout>> =
+                groups.iter().map(|g| Some(*g)).collect();
+            d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: None,
+                bind_group_layouts: &groups,
+                immediate_size: 0,
+            })
+        };
+        let plain = pl(&[&layout0]);
+        let with_args = pl(&[&layout0, &layout_args]);
+        let with_field = pl(&[&layout0, &layout_field]);
+        let pipe = |m: &wgpu::ShaderModule, layout: &wgpu::PipelineLayout, entry: &str| {
+            d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(layout),
+                module: m,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let p = Pipes {
+            zero: pipe(&book, &plain, "zero"),
+            prep_cand: pipe(&book, &with_args, "prep_cand"),
+            prep_src: pipe(&book, &with_args, "prep_src"),
+            prep_eval: pipe(&book, &with_args, "prep_eval"),
+            seed: pipe(&book, &plain, "seed"),
+            upsample: pipe(&book, &plain, "upsample"),
+            dilate: pipe(&book, &plain, "dilate"),
+            conflict: pipe(&book, &plain, "conflict"),
+            eval_table: pipe(&eval, &with_field, "table"),
+            eval_fourier: pipe(&eval, &with_field, "fourier"),
+            layout0,
+            layout_args,
+            layout_field,
+        };
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(format!("the localization kernels: {e}"));
+        }
+        Ok(p)
+    }
+}
+
+/// The buffer limit a grid of `spec` needs for its values.
+fn grid_bytes(spec: GridSpec) -> u64 {
+    spec.len() as u64 * 4
+}
+
+impl GpuLocalizer {
+    pub fn new(gpu: Arc<Gpu>) -> Result<Self, String> {
+        let pipes = Pipes::new(&gpu)?;
+        Ok(GpuLocalizer {
+            gpu,
+            pipes,
+            bufs: None,
+            field: None,
+            cap: START_CAP,
+            done: false,
+        })
+    }
+
+    /// Lists of `cap` entries at first (the tests make them small to exercise their growth).
+    pub fn with_list_capacity(mut self, cap: usize) -> Self {
+        self.cap = cap.max(1);
+        self.bufs = None;
+        self
+    }
+
+    /// Entries each index list holds now (grown by runs that needed more).
+    pub fn list_capacity(&self) -> usize {
+        self.cap
+    }
+
+    /// Whether a grid of `spec` fits the adapter's limits (one storage binding for its
+    /// values); the error names the sizes.
+    pub fn check_size(&self, spec: GridSpec) -> Result<(), String> {
+        let limits = self.gpu.device.limits();
+        let need = grid_bytes(spec);
+        let max = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        if need > max {
+            let n = spec.n();
+            return Err(format!(
+                "a {n}^3 grid needs {} MiB of values in one buffer, over the adapter's {} MiB \
+                 per binding (localize it on the CPU: tiling the grid is not built yet)",
+                need >> 20,
+                max >> 20
+            ));
+        }
+        Ok(())
+    }
+
+    fn buffers(&mut self, spec: GridSpec) -> &Bufs {
+        let cap = self.cap.min(spec.len());
+        let fits = self
+            .bufs
+            .as_ref()
+            .is_some_and(|b| b.spec == spec && b.cap == cap);
+        if !fits {
+            self.bufs = None;
+            let b = self.make_bufs(spec, cap);
+            self.bufs = Some(b);
+        }
+        self.bufs.as_ref().expect("made above")
+    }
+
+    fn make_bufs(&self, spec: GridSpec, cap: usize) -> Bufs {
+        use wgpu::BufferUsages as U;
+        let d = &self.gpu.device;
+        let buf = |label, bytes: u64, usage| {
+            d.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes.max(4),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let rw = U::STORAGE | U::COPY_DST | U::COPY_SRC;
+        let values = buf("grid values", grid_bytes(spec), rw);
+        let words = spec.len().div_ceil(32) as u64;
+        let queued = buf("grid handled bits", words * 4, rw);
+        let cand = buf("candidates", cap as u64 * 4, U::STORAGE);
+        // (point, value before evaluation) pairs.
+        let lists = [0, 1].map(|_| buf("index list", cap as u64 * 8, U::STORAGE));
+        let counts = buf("counts", COUNTS as u64 * 4, rw);
+        let counts_staging = buf(
+            "counts read-back",
+            COUNTS as u64 * 4,
+            U::MAP_READ | U::COPY_DST,
+        );
+        let args = buf("dispatch args", 12, U::STORAGE | U::INDIRECT);
+        let args_bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &self.pipes.layout_args,
+            entries: &[entry(0, &args)],
+        });
+        let mut params = Vec::new();
+        let mut binds = Vec::new();
+        for _ in 0..=spec.level() {
+            let ps = [0, 1].map(|_| buf("localize params", 32, U::UNIFORM | U::COPY_DST));
+            let bs = [0usize, 1].map(|o| {
+                let (src, dst) = (o, 1 - o);
+                d.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: None,
+                    layout: &self.pipes.layout0,
+                    entries: &[
+                        entry(0, &ps[o]),
+                        entry(1, &values),
+                        entry(2, &queued),
+                        entry(3, &cand),
+                        entry(4, &lists[src]),
+                        entry(5, &lists[dst]),
+                        entry(6, &counts),
+                    ],
+                })
+            });
+            params.push(ps);
+            binds.push(bs);
+        }
+        Bufs {
+            spec,
+            cap,
+            values,
+            queued,
+            counts,
+            counts_staging,
+            args,
+            args_bind,
+            params,
+            binds,
+            staging: None,
+        }
+    }
+
+    /// Write the field's data (grown buffers where needed) and its bind group.
+    fn upload_field(&mut self, field: &GpuField<'_>, spec: GridSpec) -> Result<(), String> {
+        let (data, mask, head, to_crop): (&[f32], &[f32], [u32; 6], Mat3) = match field {
+            GpuField::Table(t) => {
+                if t.len() != spec.len() {
+                    return Err(format!(
+                        "the table holds {} values for a grid of {}",
+                        t.len(),
+                        spec.len()
+                    ));
+                }
+                (t, &[0.0][..], [0; 6], Mat3::IDENTITY)
+            }
+            GpuField::Fourier {
+                maps,
+                mask,
+                mask_size,
+                to_crop,
+            } => {
+                if mask.len() != mask_size * mask_size || *mask_size < 2 {
+                    return Err(format!(
+                        "the mask holds {} values, not {mask_size}^2",
+                        mask.len()
+                    ));
+                }
+                let head = [
+                    maps.k() as u32,
+                    maps.size() as u32,
+                    (maps.basis() == Basis::Cosine) as u32,
+                    maps.zeta_scale().to_bits(),
+                    (0.5 - maps.iso_level()).to_bits(),
+                    *mask_size as u32,
+                ];
+                (maps.coefficients(), *mask, head, *to_crop)
+            }
+        };
+        let limit = self.gpu.device.limits().max_storage_buffer_binding_size as usize;
+        if std::mem::size_of_val(data) > limit {
+            return Err(format!(
+                "the field's data of {} bytes exceed the adapter's {limit} per binding",
+                std::mem::size_of_val(data)
+            ));
+        }
+        // The coordinates from the host (GridSpec::coord: the same floats as the CPU's
+        // points, whatever the adapter's division), then the mask.
+        let mut aux: Vec<f32> = (0..spec.n()).map(|i| spec.coord(i)).collect();
+        aux.extend_from_slice(mask);
+        let fits = self
+            .field
+            .as_ref()
+            .is_some_and(|f| f.maps_cap >= data.len() && f.aux_cap >= aux.len());
+        if !fits {
+            let old = self.field.take();
+            let maps_cap = old.as_ref().map_or(0, |f| f.maps_cap).max(data.len());
+            let aux_cap = old.as_ref().map_or(0, |f| f.aux_cap).max(aux.len());
+            use wgpu::BufferUsages as U;
+            let d = &self.gpu.device;
+            let buf = |label, floats: usize, usage| {
+                d.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: (floats.max(1) * 4) as u64,
+                    usage: usage | U::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            };
+            let params = buf("field params", 20, U::UNIFORM);
+            let maps_b = buf("field data", maps_cap, U::STORAGE);
+            let aux_b = buf("grid coords and mask", aux_cap, U::STORAGE);
+            let bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &self.pipes.layout_field,
+                entries: &[entry(0, &params), entry(1, &maps_b), entry(2, &aux_b)],
+            });
+            self.field = Some(FieldBufs {
+                params,
+                maps: maps_b,
+                aux: aux_b,
+                maps_cap,
+                aux_cap,
+                bind,
+            });
+        }
+        let f = self.field.as_ref().expect("made above");
+        let mut params = [0u32; 20];
+        params[..6].copy_from_slice(&head);
+        for (i, v) in to_crop.to_cols_array().iter().enumerate() {
+            params[8 + i] = v.to_bits();
+        }
+        let q = &self.gpu.queue;
+        q.write_buffer(&f.params, 0, bytemuck::cast_slice(&params));
+        q.write_buffer(&f.maps, 0, bytemuck::cast_slice(data));
+        q.write_buffer(&f.aux, 0, bytemuck::cast_slice(&aux));
+        let up = std::mem::size_of_val(data) + aux.len() * 4 + 80;
+        self.gpu
+            .count()
+            .bytes_up
+            .fetch_add(up as u64, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Localize `field`'s 0.5 level set on `spec` from level `coarse` with `mode`, the values
+    /// left on the adapter (read them with [`Self::read_grid`]). The stats count the field
+    /// evaluations exactly.
+    pub fn run(
+        &mut self,
+        field: &GpuField<'_>,
+        spec: GridSpec,
+        coarse: u32,
+        mode: HierarchicalMode,
+    ) -> Result<LocalizeStats, String> {
+        check_coarse(spec, coarse).map_err(|e| e.to_string())?;
+        self.check_size(spec)?;
+        self.done = false;
+        self.upload_field(field, spec)?;
+        let eval = match field {
+            GpuField::Table(_) => "table",
+            GpuField::Fourier { .. } => "fourier",
+        };
+        loop {
+            let (stats, overflow) = self.pass(spec, coarse, mode, eval)?;
+            if !overflow {
+                self.done = true;
+                return Ok(stats);
+            }
+            if self.cap >= spec.len() {
+                return Err("the index lists overflowed at the grid's size".into());
+            }
+            // A level listed more points than the lists hold: grow them, run the frame again.
+            self.cap = (self.cap * 4).min(spec.len());
+        }
+    }
+
+    /// One attempt at the frame: (stats, whether a list overflowed).
+    fn pass(
+        &mut self,
+        spec: GridSpec,
+        coarse: u32,
+        mode: HierarchicalMode,
+        eval: &str,
+    ) -> Result<(LocalizeStats, bool), String> {
+        let gpu = self.gpu.clone();
+        self.buffers(spec);
+        let b = self.bufs.as_ref().expect("made by buffers");
+        let f = self.field.as_ref().ok_or("no field uploaded")?;
+        let p = &self.pipes;
+        let eval_pipe = if eval == "table" {
+            &p.eval_table
+        } else {
+            &p.eval_fourier
+        };
+        let n = spec.n() as u32;
+        let big_l = spec.level();
+        let tight = mode == HierarchicalMode::Tight;
+        for l in 0..=big_l {
+            let s = spec.stride(l) as u32;
+            for o in 0..2usize {
+                let (src, dst) = (LIST[o], LIST[1 - o]);
+                let block = [
+                    n,
+                    s,
+                    (n - 1) / s + 1,
+                    b.cap as u32,
+                    src as u32,
+                    dst as u32,
+                    tight as u32,
+                    tight as u32,
+                ];
+                gpu.queue
+                    .write_buffer(&b.params[l as usize][o], 0, bytemuck::cast_slice(&block));
+            }
+        }
+        let level_points = |l: u32| {
+            let nl = (n - 1) / spec.stride(l) as u32 + 1;
+            nl * nl * nl
+        };
+        let c = gpu.count();
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&b.values, 0, None);
+        enc.clear_buffer(&b.queued, 0, None);
+        enc.clear_buffer(&b.counts, 0, None);
+        let mut dispatches = 0u64;
+        // Orientation o reads list o and writes list 1 - o.
+        let step = |pass: &mut wgpu::ComputePass<'_>,
+                    pipe: &wgpu::ComputePipeline,
+                    l: u32,
+                    o: usize,
+                    how: Dispatch,
+                    dispatches: &mut u64| {
+            pass.set_pipeline(pipe);
+            pass.set_bind_group(0, &b.binds[l as usize][o], &[]);
+            match how {
+                Dispatch::One => pass.dispatch_workgroups(1, 1, 1),
+                Dispatch::Prep => {
+                    pass.set_bind_group(1, &b.args_bind, &[]);
+                    pass.dispatch_workgroups(1, 1, 1)
+                }
+                Dispatch::Points(count) => {
+                    let (x, y) = groups(count);
+                    pass.dispatch_workgroups(x, y, 1)
+                }
+                Dispatch::Indirect => pass.dispatch_workgroups_indirect(&b.args, 0),
+                Dispatch::Eval => {
+                    pass.set_bind_group(1, &f.bind, &[]);
+                    pass.dispatch_workgroups_indirect(&b.args, 0)
+                }
+            }
+            *dispatches += 1;
+        };
+        // The coarsest level: every point, evaluated.
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            step(
+                &mut pass,
+                &p.zero,
+                coarse,
+                1,
+                Dispatch::One,
+                &mut dispatches,
+            );
+            let pts = level_points(coarse);
+            step(
+                &mut pass,
+                &p.seed,
+                coarse,
+                1,
+                Dispatch::Points(pts),
+                &mut dispatches,
+            );
+            step(
+                &mut pass,
+                &p.prep_eval,
+                coarse,
+                0,
+                Dispatch::Prep,
+                &mut dispatches,
+            );
+            step(
+                &mut pass,
+                eval_pipe,
+                coarse,
+                0,
+                Dispatch::Eval,
+                &mut dispatches,
+            );
+        }
+        let mut rounds = 0u32;
+        for l in coarse + 1..=big_l {
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                step(&mut pass, &p.zero, l, 1, Dispatch::One, &mut dispatches);
+                let pts = level_points(l);
+                step(
+                    &mut pass,
+                    &p.upsample,
+                    l,
+                    1,
+                    Dispatch::Points(pts),
+                    &mut dispatches,
+                );
+                step(
+                    &mut pass,
+                    &p.prep_cand,
+                    l,
+                    1,
+                    Dispatch::Prep,
+                    &mut dispatches,
+                );
+                step(
+                    &mut pass,
+                    &p.dilate,
+                    l,
+                    1,
+                    Dispatch::Indirect,
+                    &mut dispatches,
+                );
+                step(
+                    &mut pass,
+                    &p.prep_eval,
+                    l,
+                    0,
+                    Dispatch::Prep,
+                    &mut dispatches,
+                );
+                step(&mut pass, eval_pipe, l, 0, Dispatch::Eval, &mut dispatches);
+                if mode != HierarchicalMode::NoConflict {
+                    step(&mut pass, &p.zero, l, 0, Dispatch::One, &mut dispatches);
+                    step(
+                        &mut pass,
+                        &p.prep_src,
+                        l,
+                        0,
+                        Dispatch::Prep,
+                        &mut dispatches,
+                    );
+                    step(
+                        &mut pass,
+                        &p.conflict,
+                        l,
+                        0,
+                        Dispatch::Indirect,
+                        &mut dispatches,
+                    );
+                }
+            }
+            if mode == HierarchicalMode::NoConflict {
+                continue;
+            }
+            // The conflict loop: the list just written (o = 1 reads list 1) is evaluated and
+            // scanned until a round lists nothing.
+            let mut o = 1usize;
+            loop {
+                let done = std::mem::replace(
+                    &mut enc,
+                    gpu.device.create_command_encoder(&Default::default()),
+                );
+                let counts = self.read_counts(done)?;
+                if counts[OVERFLOW] != 0 {
+                    c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
+                    return Ok((LocalizeStats::default(), true));
+                }
+                if counts[LIST[o]] == 0 {
+                    break;
+                }
+                rounds += 1;
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                step(
+                    &mut pass,
+                    &p.prep_eval,
+                    l,
+                    o,
+                    Dispatch::Prep,
+                    &mut dispatches,
+                );
+                step(&mut pass, eval_pipe, l, o, Dispatch::Eval, &mut dispatches);
+                step(&mut pass, &p.zero, l, o, Dispatch::One, &mut dispatches);
+                step(
+                    &mut pass,
+                    &p.prep_src,
+                    l,
+                    o,
+                    Dispatch::Prep,
+                    &mut dispatches,
+                );
+                step(
+                    &mut pass,
+                    &p.conflict,
+                    l,
+                    o,
+                    Dispatch::Indirect,
+                    &mut dispatches,
+                );
+                drop(pass);
+                o = 1 - o;
+            }
+        }
+        let counts = self.read_counts(enc)?;
+        c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
+        c.field_runs.fetch_add(1, Ordering::Relaxed);
+        let stats = LocalizeStats {
+            evaluations: counts[EVALS] as u64,
+            conflict_rounds: rounds,
+            empty: false,
+        };
+        Ok((stats, counts[OVERFLOW] != 0))
+    }
+
+    /// Submit `enc` with a copy of the counters and read them.
+    fn read_counts(&self, mut enc: wgpu::CommandEncoder) -> Result<[u32; COUNTS], String> {
+        let b = self.bufs.as_ref().ok_or("no buffers")?;
+        enc.copy_buffer_to_buffer(&b.counts, 0, &b.counts_staging, 0, (COUNTS * 4) as u64);
+        let mut out = [0u32; COUNTS];
+        self.gpu.submit_and_read_bytes(
+            enc,
+            &b.counts_staging,
+            bytemuck::cast_slice_mut(&mut out),
+        )?;
+        Ok(out)
+    }
+
+    /// The last run's values and evaluated set into `grid` (re-targeted to the run's grid).
+    pub fn read_grid(&mut self, grid: &mut Grid) -> Result<(), String> {
+        if !self.done {
+            return Err("no completed localization to read".into());
+        }
+        let gpu = self.gpu.clone();
+        let b = self.bufs.as_mut().ok_or("no buffers")?;
+        let spec = b.spec;
+        let bytes = grid_bytes(spec);
+        let words = spec.len().div_ceil(32);
+        let staging = b.staging.get_or_insert_with(|| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("grid read-back"),
+                size: bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        grid.reset(spec);
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(&b.values, 0, staging, 0, bytes);
+        gpu.submit_and_read_bytes(enc, staging, bytemuck::cast_slice_mut(&mut grid.values))?;
+        let mut bits = vec![0u32; words];
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(&b.queued, 0, staging, 0, (words * 4) as u64);
+        gpu.submit_and_read_bytes(enc, staging, bytemuck::cast_slice_mut(&mut bits))?;
+        for (w, &word) in bits.iter().enumerate() {
+            let mut m = word;
+            while m != 0 {
+                let i = w * 32 + m.trailing_zeros() as usize;
+                if i < spec.len() {
+                    grid.evaluated.set(i);
+                }
+                m &= m - 1;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Dispatch {
+    One,
+    Prep,
+    Points(u32),
+    Indirect,
+    Eval,
+}

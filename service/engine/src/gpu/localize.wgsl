@@ -1,0 +1,221 @@
+// The hierarchical localization's bookkeeping on the adapter (gpu/localize.rs): the same
+// steps as localize/hierarchical.rs, per level of the finest grid's integer indices, with the
+// index lists built by atomic appends (their order differs from the CPU's; their sets do not)
+// and the "already handled" bit claimed by atomicOr, so a point enters a list once.
+//
+// p (one block per level and list orientation):
+//   [n, s (the level's stride), nl (the level's points per axis), cap (list capacity),
+//    src (counts index of the list read), dst (counts index of the list written),
+//    closure (tight: the sign-change closure), tight (no dilation)]
+// counts: [cand, list A, list B, overflow, evaluations, -, -, -]
+// args: indirect dispatch arguments [x, y, z] of the next list-driven kernel.
+
+// The lists hold pairs (point, its value before evaluation as bits). Eight storage buffers
+// per stage is the default limit: the evaluation kernels add two to these six.
+@group(0) @binding(0) var<uniform> p: array<vec4<u32>, 2>;
+@group(0) @binding(1) var<storage, read_write> values: array<f32>;
+@group(0) @binding(2) var<storage, read_write> queued: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> cand: array<u32>;
+@group(0) @binding(4) var<storage, read_write> src_list: array<u32>;
+@group(0) @binding(5) var<storage, read_write> dst_list: array<u32>;
+@group(0) @binding(6) var<storage, read_write> counts: array<atomic<u32>>;
+// Only the prep kernels bind it (a group of its own: the indirect dispatches read it).
+@group(1) @binding(0) var<storage, read_write> args: array<u32>;
+
+const CAND: u32 = 0u;
+
+fn pp(i: u32) -> u32 {
+    return p[i / 4u][i % 4u];
+}
+const OVERFLOW: u32 = 3u;
+const EVALS: u32 = 4u;
+
+fn index(wg: vec3<u32>, nwg: vec3<u32>, lid: vec3<u32>) -> u32 {
+    return (wg.y * nwg.x + wg.x) * 64u + lid.x;
+}
+
+// Inside iff occupancy > 0.5 (grid.rs `is_inside`), as 0.0 / 1.0.
+fn bin(v: f32) -> f32 {
+    return select(0.0, 1.0, v > 0.5);
+}
+
+fn linear(i: u32, j: u32, k: u32) -> u32 {
+    let n = pp(0u);
+    return i + n * (j + n * k);
+}
+
+// Claim point q: true for the one invocation that set its bit.
+fn claim(q: u32) -> bool {
+    let bit = 1u << (q & 31u);
+    let old = atomicOr(&queued[q >> 5u], bit);
+    return (old & bit) == 0u;
+}
+
+fn is_queued(q: u32) -> bool {
+    return (atomicLoad(&queued[q >> 5u]) & (1u << (q & 31u))) != 0u;
+}
+
+// Append (q, pre) to the written list; past its capacity the overflow flag is raised (the
+// host grows the lists and runs the frame again).
+fn push(q: u32, pre: f32) {
+    let at = atomicAdd(&counts[pp(5u)], 1u);
+    if at < pp(3u) {
+        dst_list[2u * at] = q;
+        dst_list[2u * at + 1u] = bitcast<u32>(pre);
+    } else {
+        atomicStore(&counts[OVERFLOW], 1u);
+    }
+}
+
+fn list_len(c: u32) -> u32 {
+    return min(atomicLoad(&counts[c]), pp(3u));
+}
+
+// Indirect arguments for `count` invocations of a 64-wide kernel (gpu/mod.rs `groups`).
+fn set_args(count: u32) {
+    let g = max((count + 63u) / 64u, 1u);
+    if g <= 65535u {
+        args[0] = g;
+        args[1] = 1u;
+    } else {
+        let y = (g + 65534u) / 65535u;
+        args[0] = (g + y - 1u) / y;
+        args[1] = y;
+    }
+    args[2] = 1u;
+}
+
+// The written list and the candidates emptied.
+@compute @workgroup_size(1)
+fn zero() {
+    atomicStore(&counts[pp(5u)], 0u);
+    atomicStore(&counts[CAND], 0u);
+}
+
+// Arguments over the candidates.
+@compute @workgroup_size(1)
+fn prep_cand() {
+    set_args(min(atomicLoad(&counts[CAND]), pp(3u)));
+}
+
+// Arguments over the read list.
+@compute @workgroup_size(1)
+fn prep_src() {
+    set_args(list_len(pp(4u)));
+}
+
+// Arguments over the read list, about to be evaluated: counted.
+@compute @workgroup_size(1)
+fn prep_eval() {
+    let c = list_len(pp(4u));
+    set_args(c);
+    atomicAdd(&counts[EVALS], c);
+}
+
+// Every point of the level (the coarsest): claimed and listed for evaluation.
+@compute @workgroup_size(64)
+fn seed(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+        @builtin(local_invocation_id) lid: vec3<u32>) {
+    let t = index(wg, nwg, lid);
+    let nl = pp(2u);
+    if t >= nl * nl * nl { return; }
+    let s = pp(1u);
+    let q = linear((t % nl) * s, ((t / nl) % nl) * s, (t / (nl * nl)) * s);
+    if claim(q) { push(q, 0.0); }
+}
+
+// Step 1: every new point of the level gets the mean of its coarse parents' binarized
+// values (1/2, 1/4 or 1/8 of a sum: exact, whatever the order); a fractional mean makes it a
+// boundary candidate.
+@compute @workgroup_size(64)
+fn upsample(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+            @builtin(local_invocation_id) lid: vec3<u32>) {
+    let t = index(wg, nwg, lid);
+    let nl = pp(2u);
+    if t >= nl * nl * nl { return; }
+    let s = pp(1u);
+    let a = vec3<u32>(t % nl, (t / nl) % nl, t / (nl * nl));
+    let odd = a & vec3<u32>(1u);
+    if odd.x + odd.y + odd.z == 0u { return; }
+    // Parents: the even level coordinates on either side of each odd one.
+    let lo = (a - odd) * s;
+    let hi = (a + odd) * s;
+    var sum = 0.0;
+    for (var c = 0u; c < 8u; c = c + 1u) {
+        let b = vec3<u32>(c & 1u, (c >> 1u) & 1u, (c >> 2u) & 1u);
+        // Corners differing only along even axes are the same parent: count each once.
+        if any((b & (vec3<u32>(1u) - odd)) != vec3<u32>(0u)) { continue; }
+        let x = select(lo.x, hi.x, b.x == 1u);
+        let y = select(lo.y, hi.y, b.y == 1u);
+        let z = select(lo.z, hi.z, b.z == 1u);
+        sum = sum + bin(values[linear(x, y, z)]);
+    }
+    let m = sum / f32(1u << (odd.x + odd.y + odd.z));
+    let q = linear(a.x * s, a.y * s, a.z * s);
+    values[q] = m;
+    if m > 0.0 && m < 1.0 {
+        let at = atomicAdd(&counts[CAND], 1u);
+        if at < pp(3u) {
+            cand[at] = q;
+        } else {
+            atomicStore(&counts[OVERFLOW], 1u);
+        }
+    }
+}
+
+// Step 2: the candidates and (unless tight) their 1-ring at the level's stride, not yet
+// handled, listed with their value before evaluation.
+@compute @workgroup_size(64)
+fn dilate(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+          @builtin(local_invocation_id) lid: vec3<u32>) {
+    let t = index(wg, nwg, lid);
+    if t >= min(atomicLoad(&counts[CAND]), pp(3u)) { return; }
+    let c = cand[t];
+    if pp(7u) != 0u {
+        if claim(c) { push(c, values[c]); }
+        return;
+    }
+    let n = pp(0u);
+    let s = i32(pp(1u));
+    let ci = vec3<i32>(i32(c % n), i32((c / n) % n), i32(c / (n * n)));
+    for (var r = 0u; r < 27u; r = r + 1u) {
+        let o = vec3<i32>(i32(r % 3u) - 1, i32((r / 3u) % 3u) - 1, i32(r / 9u) - 1) * s;
+        let qi = ci + o;
+        if any(qi < vec3<i32>(0)) || any(qi >= vec3<i32>(i32(n))) { continue; }
+        let q = linear(u32(qi.x), u32(qi.y), u32(qi.z));
+        if claim(q) { push(q, values[q]); }
+    }
+}
+
+// Step 3, one round of the conflict loop over the points just evaluated (the read list, with
+// their interpolated values): a point whose interpolated and evaluated values lie on opposite
+// sides of 0.5 lists every unhandled 26-neighbour; with the closure, a point also lists each
+// unhandled neighbour whose assumed side differs from its own. Unhandled points keep their
+// values during the round, so the listed set does not depend on the order.
+@compute @workgroup_size(64)
+fn conflict(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+            @builtin(local_invocation_id) lid: vec3<u32>) {
+    let t = index(wg, nwg, lid);
+    if t >= list_len(pp(4u)) { return; }
+    let q0 = src_list[2u * t];
+    let v = values[q0];
+    let interp = bitcast<f32>(src_list[2u * t + 1u]);
+    let conflict = (interp - 0.5) * (v - 0.5) < 0.0;
+    let closure = pp(6u) != 0u;
+    if !conflict && !closure { return; }
+    let n = pp(0u);
+    let s = i32(pp(1u));
+    let ci = vec3<i32>(i32(q0 % n), i32((q0 / n) % n), i32(q0 / (n * n)));
+    for (var r = 0u; r < 27u; r = r + 1u) {
+        if r == 13u { continue; }
+        let o = vec3<i32>(i32(r % 3u) - 1, i32((r / 3u) % 3u) - 1, i32(r / 9u) - 1) * s;
+        let qi = ci + o;
+        if any(qi < vec3<i32>(0)) || any(qi >= vec3<i32>(i32(n))) { continue; }
+        let q = linear(u32(qi.x), u32(qi.y), u32(qi.z));
+        if is_queued(q) { continue; }
+        let assumed = values[q];
+        if conflict || bin(assumed) != bin(v) {
+            if claim(q) { push(q, assumed); }
+        }
+    }
+}

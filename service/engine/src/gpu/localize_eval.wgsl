@@ -1,0 +1,75 @@
+// The field at the points of the read list (gpu/localize.rs), written into the grid: a table
+// of values (`table`: a field the host evaluated, the analytic scenes in the parity tests) or
+// the trained Fourier head (`fourier`: the person mask, then the series of series.wgsl,
+// prepended), as model/field.rs `ModelField::occupancy` computes them.
+//
+// f (field parameters): [k, size, basis (0 fourier, 1 cosine), zeta_scale, offset,
+//   mask size, -, -, to_crop (3 x 3, column-major: render NDC -> crop NDC)]
+// aux: the NDC coordinate of each grid index (GridSpec::coord, computed on the host), then
+// the mask [S, S]; maps: the table (one value per grid point) or the coefficient maps.
+
+@group(0) @binding(0) var<uniform> p: array<vec4<u32>, 2>;
+@group(0) @binding(1) var<storage, read_write> values: array<f32>;
+@group(0) @binding(4) var<storage, read_write> src_list: array<u32>;
+@group(0) @binding(6) var<storage, read_write> counts: array<atomic<u32>>;
+@group(1) @binding(0) var<uniform> f: array<vec4<u32>, 5>;
+@group(1) @binding(1) var<storage, read> maps: array<f32>;
+// The grid's coordinates (n values), then the mask.
+@group(1) @binding(2) var<storage, read> aux: array<f32>;
+
+fn pp(i: u32) -> u32 {
+    return p[i / 4u][i % 4u];
+}
+
+fn ff(i: u32) -> u32 {
+    return f[i / 4u][i % 4u];
+}
+
+fn point(wg: vec3<u32>, nwg: vec3<u32>, lid: vec3<u32>) -> u32 {
+    let t = (wg.y * nwg.x + wg.x) * 64u + lid.x;
+    if t >= min(atomicLoad(&counts[pp(4u)]), pp(3u)) { return 0xffffffffu; }
+    return src_list[2u * t];
+}
+
+@compute @workgroup_size(64)
+fn table(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+         @builtin(local_invocation_id) lid: vec3<u32>) {
+    let q = point(wg, nwg, lid);
+    if q == 0xffffffffu { return; }
+    values[q] = maps[q];
+}
+
+// Bilinear sample of the mask (model/sample.rs `bilinear`, one channel).
+fn mask_at(x: f32, y: f32, s: u32) -> f32 {
+    let o = pp(0u);
+    let px = to_px(x, s);
+    let py = to_px(y, s);
+    let x0 = min(u32(floor(px)), s - 1u);
+    let y0 = min(u32(floor(py)), s - 1u);
+    let x1 = min(x0 + 1u, s - 1u);
+    let y1 = min(y0 + 1u, s - 1u);
+    let fx = px - f32(x0);
+    let fy = py - f32(y0);
+    return aux[o + y0 * s + x0] * ((1.0 - fx) * (1.0 - fy)) + aux[o + y0 * s + x1] * (fx * (1.0 - fy))
+        + aux[o + y1 * s + x0] * ((1.0 - fx) * fy) + aux[o + y1 * s + x1] * (fx * fy);
+}
+
+@compute @workgroup_size(64)
+fn fourier(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+           @builtin(local_invocation_id) lid: vec3<u32>) {
+    let q = point(wg, nwg, lid);
+    if q == 0xffffffffu { return; }
+    let n = pp(0u);
+    let r = vec3<f32>(aux[q % n], aux[(q / n) % n], aux[q / (n * n)]);
+    let m = mat3x3<f32>(
+        bitcast<f32>(ff(8u)), bitcast<f32>(ff(9u)), bitcast<f32>(ff(10u)),
+        bitcast<f32>(ff(11u)), bitcast<f32>(ff(12u)), bitcast<f32>(ff(13u)),
+        bitcast<f32>(ff(14u)), bitcast<f32>(ff(15u)), bitcast<f32>(ff(16u)));
+    let u = m * r;
+    var v = 0.0;
+    let inside_cube = abs(u.x) <= 1.0 && abs(u.y) <= 1.0;
+    if inside_cube && mask_at(u.x, u.y, ff(5u)) >= 0.5 {
+        v = series(u.x, u.y, u.z, ff(0u), ff(1u), ff(2u) == 1u, bitcast<f32>(ff(3u)), bitcast<f32>(ff(4u)));
+    }
+    values[q] = v;
+}
