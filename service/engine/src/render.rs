@@ -84,6 +84,9 @@ pub struct Renderer {
     display_rgba: Vec<u8>,
     display_depth: Vec<f32>,
     display_size: usize,
+    /// The last frame was rendered on the adapter (no grid here: its display image is drawn
+    /// there too).
+    on_gpu: bool,
 }
 
 /// Per-column first inside node from the front, or -1, given a box `b` that holds every
@@ -249,15 +252,13 @@ impl Renderer {
         // 4. Surface by interpolation at the first hit (computed above).
         self.depth.clear();
         self.depth.resize(plane, -1.0);
-        self.pts.clear();
-        self.hit_pixels.clear();
         for c in 0..plane {
             let k = self.hit[c];
             if k < 0 {
                 continue;
             }
             let k = k as usize;
-            let z = if k + 1 < n {
+            self.depth[c] = if k + 1 < n {
                 crossing_depth(
                     spec,
                     k,
@@ -267,9 +268,98 @@ impl Renderer {
             } else {
                 1.0
             };
-            self.depth[c] = z;
+        }
+        self.on_gpu = false;
+        self.finish(field, colors, spec, opts, stats)
+    }
+
+    /// The frame on the GPU backend's adapter (`gpu::render::GpuRenderer`): localization and
+    /// the final level with culling there, from `gpu_field` (the same field as `field`, which
+    /// serves the shading normals' evaluations), then the surface placed, coloured and shaded
+    /// here by the same code as [`Self::render`]. Follow with [`Self::render_display_gpu`].
+    #[cfg(feature = "wgpu")]
+    pub fn render_gpu(
+        &mut self,
+        gpu: &mut crate::gpu::render::GpuRenderer,
+        gpu_field: &crate::gpu::localize::GpuField<'_>,
+        field: &dyn OccupancyField,
+        colors: &dyn ColorField,
+        spec: GridSpec,
+        opts: &RenderOptions,
+    ) -> Result<RenderStats, LocalizeError> {
+        let fine = spec
+            .coarser()
+            .ok_or(crate::grid::GridError::BadResolution(spec.n()))?;
+        let coarse = check_coarse(fine, opts.coarse_level)?;
+        let cols = gpu
+            .frame(gpu_field, spec, coarse)
+            .map_err(FieldError::Backend)?;
+        let n = spec.n();
+        let stats = RenderStats {
+            coarse_evaluations: cols.coarse_evaluations,
+            final_evaluations: cols.final_evaluations,
+            culled: cols.culled,
+            ..Default::default()
+        };
+        self.depth.clear();
+        self.depth
+            .extend(cols.hit.iter().enumerate().map(|(c, &k)| {
+                if k < 0 {
+                    -1.0
+                } else if (k as usize) + 1 < n {
+                    crossing_depth(spec, k as usize, cols.v_in[c], cols.v_out[c])
+                } else {
+                    1.0
+                }
+            }));
+        self.hit = cols.hit;
+        self.coarse_hit = cols.coarse_hit;
+        self.final_nodes.clear();
+        self.culled.clear();
+        self.on_gpu = true;
+        self.finish(field, colors, spec, opts, stats)
+    }
+
+    /// The last frame rendered by [`Self::render_gpu`] at display size, drawn on the adapter
+    /// from its values (the rule of [`Self::render_display`]).
+    #[cfg(feature = "wgpu")]
+    pub fn render_display_gpu(
+        &mut self,
+        gpu: &mut crate::gpu::render::GpuRenderer,
+        size: usize,
+        background: [f32; 4],
+    ) -> Result<&[u8], String> {
+        if !self.on_gpu {
+            return Err("the last frame was not rendered on the adapter".into());
+        }
+        let (rgba, depth) = gpu.display(size, background.map(to_u8), &self.depth, &self.col_of)?;
+        self.display_size = size.max(2);
+        self.display_rgba = rgba;
+        self.display_depth = depth;
+        Ok(&self.display_rgba)
+    }
+
+    /// Steps 4 and 5 from the hits and depths per column: the surface points, their colour,
+    /// the optional shading (normals from `field`) and the grid-size image.
+    fn finish(
+        &mut self,
+        field: &dyn OccupancyField,
+        colors: &dyn ColorField,
+        spec: GridSpec,
+        opts: &RenderOptions,
+        mut stats: RenderStats,
+    ) -> Result<RenderStats, LocalizeError> {
+        let n = spec.n();
+        let plane = n * n;
+        self.pts.clear();
+        self.hit_pixels.clear();
+        for c in 0..plane {
+            if self.hit[c] < 0 {
+                continue;
+            }
             let (i, j) = (c % n, c / n);
-            self.pts.push(Vec3::new(spec.coord(i), spec.coord(j), z));
+            self.pts
+                .push(Vec3::new(spec.coord(i), spec.coord(j), self.depth[c]));
             self.hit_pixels.push(c);
         }
         stats.hits = self.hit_pixels.len() as u64;
@@ -302,9 +392,9 @@ impl Renderer {
             }
             self.occ.clear();
             self.occ.resize(probe.len(), 0.0);
-            let before = ev.count();
+            let mut ev = Evaluator::new(field).with_threads(self.threads);
             ev.eval_points(&probe, &mut self.occ)?;
-            stats.normal_evaluations = ev.count() - before;
+            stats.normal_evaluations = ev.count();
             // Light from the upper left front (y is down, z toward the camera).
             let light = Vec3::new(-0.4, -0.6, 0.7).normalize();
             for (i, c) in self.cols.iter_mut().enumerate() {
@@ -365,7 +455,7 @@ impl Renderer {
         }
         self.display_depth.clear();
         self.display_depth.resize(size * size, -1.0);
-        let (Some(grid), n) = (self.grid.as_ref(), self.size) else {
+        let (Some(grid), n) = (self.grid.as_ref().filter(|_| !self.on_gpu), self.size) else {
             return &self.display_rgba;
         };
         if n < 2 || self.hit.len() != n * n {

@@ -33,10 +33,16 @@ const EVAL: &str = concat!(
 pub const START_CAP: usize = 1 << 18;
 
 /// Counter slots (`localize.wgsl`; slot 0 counts the candidates).
-const LIST: [usize; 2] = [1, 2];
-const OVERFLOW: usize = 3;
-const EVALS: usize = 4;
-const COUNTS: usize = 8;
+pub(super) const LIST: [usize; 2] = [1, 2];
+pub(super) const OVERFLOW: usize = 3;
+pub(super) const EVALS: usize = 4;
+/// The renderer's log of a round's evaluated points, and its two lists of culled points.
+pub(super) const LOG: usize = 5;
+pub(super) const CULLED: [usize; 2] = [6, 7];
+pub(super) const COUNTS: usize = 8;
+/// Parameter blocks per level: lists 0 and 1 read (the other written), the renderer's log
+/// read, its culled list 0 or 1 counted.
+const ORIENTATIONS: usize = 5;
 
 /// A field the localizer evaluates on the adapter.
 pub enum GpuField<'a> {
@@ -53,35 +59,39 @@ pub enum GpuField<'a> {
     },
 }
 
-struct Pipes {
-    layout0: wgpu::BindGroupLayout,
-    layout_args: wgpu::BindGroupLayout,
-    layout_field: wgpu::BindGroupLayout,
-    zero: wgpu::ComputePipeline,
-    prep_cand: wgpu::ComputePipeline,
-    prep_src: wgpu::ComputePipeline,
-    prep_eval: wgpu::ComputePipeline,
-    seed: wgpu::ComputePipeline,
-    upsample: wgpu::ComputePipeline,
-    dilate: wgpu::ComputePipeline,
-    conflict: wgpu::ComputePipeline,
-    eval_table: wgpu::ComputePipeline,
-    eval_fourier: wgpu::ComputePipeline,
+pub(super) struct Pipes {
+    pub(super) layout0: wgpu::BindGroupLayout,
+    pub(super) layout_args: wgpu::BindGroupLayout,
+    pub(super) layout_field: wgpu::BindGroupLayout,
+    pub(super) zero: wgpu::ComputePipeline,
+    pub(super) prep_cand: wgpu::ComputePipeline,
+    pub(super) prep_src: wgpu::ComputePipeline,
+    pub(super) prep_eval: wgpu::ComputePipeline,
+    pub(super) seed: wgpu::ComputePipeline,
+    pub(super) upsample: wgpu::ComputePipeline,
+    pub(super) dilate: wgpu::ComputePipeline,
+    pub(super) conflict: wgpu::ComputePipeline,
+    pub(super) eval_table: wgpu::ComputePipeline,
+    pub(super) eval_fourier: wgpu::ComputePipeline,
 }
 
 /// The grid's buffers for one size and list capacity.
-struct Bufs {
+pub(super) struct Bufs {
     spec: GridSpec,
-    cap: usize,
-    values: wgpu::Buffer,
+    pub(super) cap: usize,
+    pub(super) values: wgpu::Buffer,
     queued: wgpu::Buffer,
-    counts: wgpu::Buffer,
+    pub(super) counts: wgpu::Buffer,
+    /// The renderer's lists ([`LOG`], [`CULLED`]): three regions of `cap` pairs, made only
+    /// for rendering.
+    pub(super) extra: wgpu::Buffer,
+    render: bool,
     counts_staging: wgpu::Buffer,
     args: wgpu::Buffer,
     args_bind: wgpu::BindGroup,
     /// Per level and list orientation: parameters and bind group.
-    params: Vec<[wgpu::Buffer; 2]>,
-    binds: Vec<[wgpu::BindGroup; 2]>,
+    params: Vec<[wgpu::Buffer; ORIENTATIONS]>,
+    binds: Vec<[wgpu::BindGroup; ORIENTATIONS]>,
     /// The values' and bits' read-back, made on first use.
     staging: Option<wgpu::Buffer>,
 }
@@ -105,7 +115,14 @@ pub struct GpuLocalizer {
     field: Option<FieldBufs>,
     cap: usize,
     /// Whether the last run completed (its values are in the buffers).
-    done: bool,
+    pub(super) done: bool,
+    /// Whether the frame renders (the renderer's lists are needed).
+    render: bool,
+    /// Whether the field uploaded is the Fourier head (else a table).
+    eval_fourier: bool,
+    /// Incremented whenever the grid's buffers are remade (bind groups holding them are
+    /// stale then).
+    generation: u64,
 }
 
 fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
@@ -227,6 +244,9 @@ impl GpuLocalizer {
             field: None,
             cap: START_CAP,
             done: false,
+            render: false,
+            eval_fourier: false,
+            generation: 0,
         })
     }
 
@@ -264,19 +284,21 @@ impl GpuLocalizer {
 
     fn buffers(&mut self, spec: GridSpec) -> &Bufs {
         let cap = self.cap.min(spec.len());
+        let render = self.render;
         let fits = self
             .bufs
             .as_ref()
-            .is_some_and(|b| b.spec == spec && b.cap == cap);
+            .is_some_and(|b| b.spec == spec && b.cap == cap && (b.render || !render));
         if !fits {
             self.bufs = None;
-            let b = self.make_bufs(spec, cap);
+            let b = self.make_bufs(spec, cap, render);
+            self.generation += 1;
             self.bufs = Some(b);
         }
         self.bufs.as_ref().expect("made above")
     }
 
-    fn make_bufs(&self, spec: GridSpec, cap: usize) -> Bufs {
+    fn make_bufs(&self, spec: GridSpec, cap: usize, render: bool) -> Bufs {
         use wgpu::BufferUsages as U;
         let d = &self.gpu.device;
         let buf = |label, bytes: u64, usage| {
@@ -295,6 +317,8 @@ impl GpuLocalizer {
         // (point, value before evaluation) pairs.
         let lists = [0, 1].map(|_| buf("index list", cap as u64 * 8, U::STORAGE));
         let counts = buf("counts", COUNTS as u64 * 4, rw);
+        let extra_bytes = if render { cap as u64 * 24 } else { 8 };
+        let extra = buf("render lists", extra_bytes, U::STORAGE);
         let counts_staging = buf(
             "counts read-back",
             COUNTS as u64 * 4,
@@ -309,9 +333,14 @@ impl GpuLocalizer {
         let mut params = Vec::new();
         let mut binds = Vec::new();
         for _ in 0..=spec.level() {
-            let ps = [0, 1].map(|_| buf("localize params", 32, U::UNIFORM | U::COPY_DST));
-            let bs = [0usize, 1].map(|o| {
-                let (src, dst) = (o, 1 - o);
+            let ps =
+                [0; ORIENTATIONS].map(|_| buf("localize params", 32, U::UNIFORM | U::COPY_DST));
+            let bs: [wgpu::BindGroup; ORIENTATIONS] = std::array::from_fn(|o| {
+                let (src, dst) = match o {
+                    1 => (&lists[1], &lists[0]),
+                    2 => (&extra, &lists[0]),
+                    _ => (&lists[0], &lists[1]),
+                };
                 d.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: None,
                     layout: &self.pipes.layout0,
@@ -320,8 +349,8 @@ impl GpuLocalizer {
                         entry(1, &values),
                         entry(2, &queued),
                         entry(3, &cand),
-                        entry(4, &lists[src]),
-                        entry(5, &lists[dst]),
+                        entry(4, src),
+                        entry(5, dst),
                         entry(6, &counts),
                     ],
                 })
@@ -335,6 +364,8 @@ impl GpuLocalizer {
             values,
             queued,
             counts,
+            extra,
+            render,
             counts_staging,
             args,
             args_bind,
@@ -454,53 +485,82 @@ impl GpuLocalizer {
         coarse: u32,
         mode: HierarchicalMode,
     ) -> Result<LocalizeStats, String> {
-        check_coarse(spec, coarse).map_err(|e| e.to_string())?;
-        self.check_size(spec)?;
-        self.done = false;
-        self.upload_field(field, spec)?;
-        let eval = match field {
-            GpuField::Table(_) => "table",
-            GpuField::Fourier { .. } => "fourier",
-        };
+        self.prepare(field, spec, coarse, false)?;
         loop {
-            let (stats, overflow) = self.pass(spec, coarse, mode, eval)?;
+            let mut rec = self.recorder(spec, mode)?;
+            let (stats, overflow) = rec.levels(coarse, spec.level(), mode)?;
             if !overflow {
                 self.done = true;
                 return Ok(stats);
             }
-            if self.cap >= spec.len() {
-                return Err("the index lists overflowed at the grid's size".into());
-            }
-            // A level listed more points than the lists hold: grow them, run the frame again.
-            self.cap = (self.cap * 4).min(spec.len());
+            self.grow(spec)?;
         }
     }
 
-    /// One attempt at the frame: (stats, whether a list overflowed).
-    fn pass(
+    pub(super) fn pipes(&self) -> &Pipes {
+        &self.pipes
+    }
+
+    /// The buffers for `spec` made (for the renderer's bind groups).
+    pub(super) fn ensure_buffers(&mut self, spec: GridSpec) {
+        self.buffers(spec);
+    }
+
+    /// The buffers' generation, the renderer's lists and the grid's values, once made.
+    pub(super) fn render_buffers(&self) -> Option<(u64, &wgpu::Buffer, &wgpu::Buffer)> {
+        self.bufs
+            .as_ref()
+            .map(|b| (self.generation, &b.extra, &b.values))
+    }
+
+    /// Checks and the field's upload before a frame.
+    pub(super) fn prepare(
         &mut self,
+        field: &GpuField<'_>,
         spec: GridSpec,
         coarse: u32,
+        render: bool,
+    ) -> Result<(), String> {
+        check_coarse(spec, coarse).map_err(|e| e.to_string())?;
+        self.check_size(spec)?;
+        self.done = false;
+        self.render = render;
+        self.eval_fourier = matches!(field, GpuField::Fourier { .. });
+        self.upload_field(field, spec)
+    }
+
+    /// After a list overflowed: lists four times larger (up to the grid's size).
+    pub(super) fn grow(&mut self, spec: GridSpec) -> Result<(), String> {
+        if self.cap >= spec.len() {
+            return Err("the index lists overflowed at the grid's size".into());
+        }
+        self.cap = (self.cap * 4).min(spec.len());
+        Ok(())
+    }
+
+    /// A recorder of the frame's work on buffers sized for `spec` (its parameters written).
+    pub(super) fn recorder(
+        &mut self,
+        spec: GridSpec,
         mode: HierarchicalMode,
-        eval: &str,
-    ) -> Result<(LocalizeStats, bool), String> {
-        let gpu = self.gpu.clone();
+    ) -> Result<Rec<'_>, String> {
         self.buffers(spec);
         let b = self.bufs.as_ref().expect("made by buffers");
         let f = self.field.as_ref().ok_or("no field uploaded")?;
         let p = &self.pipes;
-        let eval_pipe = if eval == "table" {
-            &p.eval_table
-        } else {
-            &p.eval_fourier
-        };
         let n = spec.n() as u32;
-        let big_l = spec.level();
         let tight = mode == HierarchicalMode::Tight;
-        for l in 0..=big_l {
+        for l in 0..=spec.level() {
             let s = spec.stride(l) as u32;
-            for o in 0..2usize {
-                let (src, dst) = (LIST[o], LIST[1 - o]);
+            for o in 0..ORIENTATIONS {
+                // Orientation o < 2 reads list o and writes list 1 - o; 2 reads the renderer's
+                // log (its first region) and writes list 0; 3 and 4 count its culled lists
+                // (for the indirect arguments over them).
+                let (src, dst) = match o {
+                    0 | 1 => (LIST[o], LIST[1 - o]),
+                    2 => (LOG, LIST[0]),
+                    _ => (CULLED[o - 3], LIST[1]),
+                };
                 let block = [
                     n,
                     s,
@@ -511,216 +571,31 @@ impl GpuLocalizer {
                     tight as u32,
                     tight as u32,
                 ];
-                gpu.queue
-                    .write_buffer(&b.params[l as usize][o], 0, bytemuck::cast_slice(&block));
+                self.gpu.queue.write_buffer(
+                    &b.params[l as usize][o],
+                    0,
+                    bytemuck::cast_slice(&block),
+                );
             }
         }
-        let level_points = |l: u32| {
-            let nl = (n - 1) / spec.stride(l) as u32 + 1;
-            nl * nl * nl
-        };
-        let c = gpu.count();
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&b.values, 0, None);
         enc.clear_buffer(&b.queued, 0, None);
         enc.clear_buffer(&b.counts, 0, None);
-        let mut dispatches = 0u64;
-        // Orientation o reads list o and writes list 1 - o.
-        let step = |pass: &mut wgpu::ComputePass<'_>,
-                    pipe: &wgpu::ComputePipeline,
-                    l: u32,
-                    o: usize,
-                    how: Dispatch,
-                    dispatches: &mut u64| {
-            pass.set_pipeline(pipe);
-            pass.set_bind_group(0, &b.binds[l as usize][o], &[]);
-            match how {
-                Dispatch::One => pass.dispatch_workgroups(1, 1, 1),
-                Dispatch::Prep => {
-                    pass.set_bind_group(1, &b.args_bind, &[]);
-                    pass.dispatch_workgroups(1, 1, 1)
-                }
-                Dispatch::Points(count) => {
-                    let (x, y) = groups(count);
-                    pass.dispatch_workgroups(x, y, 1)
-                }
-                Dispatch::Indirect => pass.dispatch_workgroups_indirect(&b.args, 0),
-                Dispatch::Eval => {
-                    pass.set_bind_group(1, &f.bind, &[]);
-                    pass.dispatch_workgroups_indirect(&b.args, 0)
-                }
-            }
-            *dispatches += 1;
-        };
-        // The coarsest level: every point, evaluated.
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            step(
-                &mut pass,
-                &p.zero,
-                coarse,
-                1,
-                Dispatch::One,
-                &mut dispatches,
-            );
-            let pts = level_points(coarse);
-            step(
-                &mut pass,
-                &p.seed,
-                coarse,
-                1,
-                Dispatch::Points(pts),
-                &mut dispatches,
-            );
-            step(
-                &mut pass,
-                &p.prep_eval,
-                coarse,
-                0,
-                Dispatch::Prep,
-                &mut dispatches,
-            );
-            step(
-                &mut pass,
-                eval_pipe,
-                coarse,
-                0,
-                Dispatch::Eval,
-                &mut dispatches,
-            );
-        }
-        let mut rounds = 0u32;
-        for l in coarse + 1..=big_l {
-            {
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                step(&mut pass, &p.zero, l, 1, Dispatch::One, &mut dispatches);
-                let pts = level_points(l);
-                step(
-                    &mut pass,
-                    &p.upsample,
-                    l,
-                    1,
-                    Dispatch::Points(pts),
-                    &mut dispatches,
-                );
-                step(
-                    &mut pass,
-                    &p.prep_cand,
-                    l,
-                    1,
-                    Dispatch::Prep,
-                    &mut dispatches,
-                );
-                step(
-                    &mut pass,
-                    &p.dilate,
-                    l,
-                    1,
-                    Dispatch::Indirect,
-                    &mut dispatches,
-                );
-                step(
-                    &mut pass,
-                    &p.prep_eval,
-                    l,
-                    0,
-                    Dispatch::Prep,
-                    &mut dispatches,
-                );
-                step(&mut pass, eval_pipe, l, 0, Dispatch::Eval, &mut dispatches);
-                if mode != HierarchicalMode::NoConflict {
-                    step(&mut pass, &p.zero, l, 0, Dispatch::One, &mut dispatches);
-                    step(
-                        &mut pass,
-                        &p.prep_src,
-                        l,
-                        0,
-                        Dispatch::Prep,
-                        &mut dispatches,
-                    );
-                    step(
-                        &mut pass,
-                        &p.conflict,
-                        l,
-                        0,
-                        Dispatch::Indirect,
-                        &mut dispatches,
-                    );
-                }
-            }
-            if mode == HierarchicalMode::NoConflict {
-                continue;
-            }
-            // The conflict loop: the list just written (o = 1 reads list 1) is evaluated and
-            // scanned until a round lists nothing.
-            let mut o = 1usize;
-            loop {
-                let done = std::mem::replace(
-                    &mut enc,
-                    gpu.device.create_command_encoder(&Default::default()),
-                );
-                let counts = self.read_counts(done)?;
-                if counts[OVERFLOW] != 0 {
-                    c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
-                    return Ok((LocalizeStats::default(), true));
-                }
-                if counts[LIST[o]] == 0 {
-                    break;
-                }
-                rounds += 1;
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                step(
-                    &mut pass,
-                    &p.prep_eval,
-                    l,
-                    o,
-                    Dispatch::Prep,
-                    &mut dispatches,
-                );
-                step(&mut pass, eval_pipe, l, o, Dispatch::Eval, &mut dispatches);
-                step(&mut pass, &p.zero, l, o, Dispatch::One, &mut dispatches);
-                step(
-                    &mut pass,
-                    &p.prep_src,
-                    l,
-                    o,
-                    Dispatch::Prep,
-                    &mut dispatches,
-                );
-                step(
-                    &mut pass,
-                    &p.conflict,
-                    l,
-                    o,
-                    Dispatch::Indirect,
-                    &mut dispatches,
-                );
-                drop(pass);
-                o = 1 - o;
-            }
-        }
-        let counts = self.read_counts(enc)?;
-        c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
-        c.field_runs.fetch_add(1, Ordering::Relaxed);
-        let stats = LocalizeStats {
-            evaluations: counts[EVALS] as u64,
-            conflict_rounds: rounds,
-            empty: false,
-        };
-        Ok((stats, counts[OVERFLOW] != 0))
-    }
-
-    /// Submit `enc` with a copy of the counters and read them.
-    fn read_counts(&self, mut enc: wgpu::CommandEncoder) -> Result<[u32; COUNTS], String> {
-        let b = self.bufs.as_ref().ok_or("no buffers")?;
-        enc.copy_buffer_to_buffer(&b.counts, 0, &b.counts_staging, 0, (COUNTS * 4) as u64);
-        let mut out = [0u32; COUNTS];
-        self.gpu.submit_and_read_bytes(
-            enc,
-            &b.counts_staging,
-            bytemuck::cast_slice_mut(&mut out),
-        )?;
-        Ok(out)
+        Ok(Rec {
+            gpu: &self.gpu,
+            b,
+            f,
+            p,
+            eval: if self.eval_fourier {
+                &p.eval_fourier
+            } else {
+                &p.eval_table
+            },
+            spec,
+            enc: Some(enc),
+            dispatches: 0,
+        })
     }
 
     /// The last run's values and evaluated set into `grid` (re-targeted to the run's grid).
@@ -763,11 +638,173 @@ impl GpuLocalizer {
     }
 }
 
+/// Records a frame's work: compute passes on one encoder, submitted where the host must read
+/// a count (the conflict loop's rounds, the frame's end).
+pub(super) struct Rec<'a> {
+    pub(super) gpu: &'a Arc<Gpu>,
+    pub(super) b: &'a Bufs,
+    f: &'a FieldBufs,
+    pub(super) p: &'a Pipes,
+    eval: &'a wgpu::ComputePipeline,
+    pub(super) spec: GridSpec,
+    enc: Option<wgpu::CommandEncoder>,
+    pub(super) dispatches: u64,
+}
+
+impl<'a> Rec<'a> {
+    /// Record one compute pass of `steps` (pipeline, level, orientation, how).
+    pub(super) fn pass(&mut self, steps: &[(&wgpu::ComputePipeline, u32, usize, Dispatch<'_>)]) {
+        let enc = self
+            .enc
+            .get_or_insert_with(|| self.gpu.device.create_command_encoder(&Default::default()));
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        for (pipe, l, o, how) in steps {
+            pass.set_pipeline(pipe);
+            pass.set_bind_group(0, &self.b.binds[*l as usize][*o], &[]);
+            match how {
+                Dispatch::One => pass.dispatch_workgroups(1, 1, 1),
+                Dispatch::Prep => {
+                    pass.set_bind_group(1, &self.b.args_bind, &[]);
+                    pass.dispatch_workgroups(1, 1, 1)
+                }
+                Dispatch::Points(count) => {
+                    let (x, y) = groups(*count);
+                    pass.dispatch_workgroups(x, y, 1)
+                }
+                Dispatch::Indirect => pass.dispatch_workgroups_indirect(&self.b.args, 0),
+                Dispatch::Eval => {
+                    pass.set_bind_group(1, &self.f.bind, &[]);
+                    pass.dispatch_workgroups_indirect(&self.b.args, 0)
+                }
+                Dispatch::With(g, count) => {
+                    pass.set_bind_group(1, *g, &[]);
+                    match count {
+                        Some(c) => {
+                            let (x, y) = groups(*c);
+                            pass.dispatch_workgroups(x, y, 1)
+                        }
+                        None => pass.dispatch_workgroups_indirect(&self.b.args, 0),
+                    }
+                }
+            }
+            self.dispatches += 1;
+        }
+    }
+
+    /// The evaluation kernel of the field uploaded.
+    pub(super) fn eval_pipe(&self) -> &'a wgpu::ComputePipeline {
+        self.eval
+    }
+
+    /// Points of level `l` (all, not only the new ones).
+    pub(super) fn level_points(&self, l: u32) -> u32 {
+        let n = self.spec.n() as u32;
+        let nl = (n - 1) / self.spec.stride(l) as u32 + 1;
+        nl * nl * nl
+    }
+
+    /// Submit what was recorded with a copy of the counters and read them.
+    pub(super) fn counts(&mut self) -> Result<[u32; COUNTS], String> {
+        let mut enc = self
+            .enc
+            .take()
+            .unwrap_or_else(|| self.gpu.device.create_command_encoder(&Default::default()));
+        let b = self.b;
+        enc.copy_buffer_to_buffer(&b.counts, 0, &b.counts_staging, 0, (COUNTS * 4) as u64);
+        let mut out = [0u32; COUNTS];
+        self.gpu.submit_and_read_bytes(
+            enc,
+            &b.counts_staging,
+            bytemuck::cast_slice_mut(&mut out),
+        )?;
+        Ok(out)
+    }
+
+    /// Levels `coarse..=last` (the coarsest evaluated whole): (stats, whether a list
+    /// overflowed). With the conflict loop, each round is one submission.
+    pub(super) fn levels(
+        &mut self,
+        coarse: u32,
+        last: u32,
+        mode: HierarchicalMode,
+    ) -> Result<(LocalizeStats, bool), String> {
+        let p = self.p;
+        let ev = self.eval;
+        let pts = self.level_points(coarse);
+        self.pass(&[
+            (&p.zero, coarse, 1, Dispatch::One),
+            (&p.seed, coarse, 1, Dispatch::Points(pts)),
+            (&p.prep_eval, coarse, 0, Dispatch::Prep),
+            (ev, coarse, 0, Dispatch::Eval),
+        ]);
+        let mut rounds = 0u32;
+        for l in coarse + 1..=last {
+            let pts = self.level_points(l);
+            self.pass(&[
+                (&p.zero, l, 1, Dispatch::One),
+                (&p.upsample, l, 1, Dispatch::Points(pts)),
+                (&p.prep_cand, l, 1, Dispatch::Prep),
+                (&p.dilate, l, 1, Dispatch::Indirect),
+                (&p.prep_eval, l, 0, Dispatch::Prep),
+                (ev, l, 0, Dispatch::Eval),
+            ]);
+            if mode == HierarchicalMode::NoConflict {
+                continue;
+            }
+            self.pass(&[
+                (&p.zero, l, 0, Dispatch::One),
+                (&p.prep_src, l, 0, Dispatch::Prep),
+                (&p.conflict, l, 0, Dispatch::Indirect),
+            ]);
+            // The conflict loop: the list just written (o = 1 reads list 1) is evaluated and
+            // scanned until a round lists nothing.
+            let mut o = 1usize;
+            loop {
+                let counts = self.counts()?;
+                if counts[OVERFLOW] != 0 {
+                    return Ok((LocalizeStats::default(), true));
+                }
+                if counts[LIST[o]] == 0 {
+                    break;
+                }
+                rounds += 1;
+                self.pass(&[
+                    (&p.prep_eval, l, o, Dispatch::Prep),
+                    (ev, l, o, Dispatch::Eval),
+                    (&p.zero, l, o, Dispatch::One),
+                    (&p.prep_src, l, o, Dispatch::Prep),
+                    (&p.conflict, l, o, Dispatch::Indirect),
+                ]);
+                o = 1 - o;
+            }
+        }
+        let counts = self.counts()?;
+        let c = self.gpu.count();
+        c.dispatches
+            .fetch_add(std::mem::take(&mut self.dispatches), Ordering::Relaxed);
+        c.field_runs.fetch_add(1, Ordering::Relaxed);
+        let stats = LocalizeStats {
+            evaluations: counts[EVALS] as u64,
+            conflict_rounds: rounds,
+            empty: false,
+        };
+        Ok((stats, counts[OVERFLOW] != 0))
+    }
+}
+
+/// How a step dispatches.
 #[derive(Clone, Copy)]
-enum Dispatch {
+pub(super) enum Dispatch<'g> {
+    /// One invocation.
     One,
+    /// One invocation writing the indirect arguments.
     Prep,
+    /// One invocation per point of a count known to the host.
     Points(u32),
+    /// The indirect arguments.
     Indirect,
+    /// The field's evaluation, over the indirect arguments.
     Eval,
+    /// With a second bind group: over a count, or the indirect arguments.
+    With(&'g wgpu::BindGroup, Option<u32>),
 }

@@ -14,6 +14,7 @@
 pub mod fourier;
 pub mod localize;
 pub mod net;
+pub mod render;
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};

@@ -1,0 +1,547 @@
+//! The mesh-free renderer on the adapter: the grid localized there ([`GpuLocalizer`], levels
+//! up to `L - 1`), then the final level with the renderer's culling (`render.wgsl`: the
+//! coarse hit per column, the dilated candidates split into those in front of it and the
+//! shadow nodes, the conflict loop that evaluates nothing behind a column's current hit, the
+//! hits raised and refuted after each round, the culled nodes released in front of a new
+//! hit, until none is), and the frame at display size (`display.wgsl`). What comes back is
+//! per column: the hit, the coarse hit and the two values around the surface (four numbers
+//! a pixel); the host places the surface, queries the colour field there and shades, as
+//! `render.rs` does (the same code), and the display image comes back whole. The grid's
+//! values stay on the adapter.
+//!
+//! The evaluated set is the CPU renderer's (tests/gpu.rs: equal hits, depths and images on
+//! the analytic scenes from a host-evaluated table; the real photos' fields through the
+//! Fourier kernel in tools/volcap/tests/gpu_frames.rs).
+
+use super::localize::{
+    COUNTS, CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, OVERFLOW,
+};
+use super::{Gpu, groups};
+use crate::grid::GridSpec;
+use crate::localize::HierarchicalMode;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+const RENDER: &str = concat!(include_str!("localize.wgsl"), include_str!("render.wgsl"));
+const DISPLAY: &str = include_str!("display.wgsl");
+
+/// What the final level left per column (indices `i + n j`).
+#[derive(Debug, Default, Clone)]
+pub struct Columns {
+    /// The first inside node from the front, or -1.
+    pub hit: Vec<i32>,
+    /// The first hit after upsampling level `L - 1` (before the final level), or -1.
+    pub coarse_hit: Vec<i32>,
+    /// The values at the hit node and at the node in front of it (0 past the grid).
+    pub v_in: Vec<f32>,
+    pub v_out: Vec<f32>,
+    /// Evaluations of the levels up to `L - 1`, and of the final level.
+    pub coarse_evaluations: u64,
+    pub final_evaluations: u64,
+    /// Candidates never evaluated: behind a confirmed hit.
+    pub culled: u64,
+}
+
+struct RenderPipes {
+    layout: wgpu::BindGroupLayout,
+    first_hits: wgpu::ComputePipeline,
+    split: wgpu::ComputePipeline,
+    log_append: wgpu::ComputePipeline,
+    conflict_keep: wgpu::ComputePipeline,
+    raise: wgpu::ComputePipeline,
+    refute: wgpu::ComputePipeline,
+    reset_release: wgpu::ComputePipeline,
+    release: wgpu::ComputePipeline,
+    surface: wgpu::ComputePipeline,
+    display_layout: wgpu::BindGroupLayout,
+    display: wgpu::ComputePipeline,
+}
+
+/// Buffers per grid size: the columns, their read-back, the two parameter blocks (culled
+/// list 0 or 1 read) and their bind groups. Rebuilt when the localizer's buffers are.
+struct ColumnBufs {
+    spec: GridSpec,
+    /// The localizer's buffer generation the bind groups hold.
+    generation: u64,
+    cols: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    binds: [wgpu::BindGroup; 2],
+}
+
+struct DisplayBufs {
+    size: usize,
+    n: usize,
+    params: wgpu::Buffer,
+    cols: wgpu::Buffer,
+    out: wgpu::Buffer,
+    staging: wgpu::Buffer,
+}
+
+/// The renderer's state on the adapter, reused frame to frame.
+pub struct GpuRenderer {
+    gpu: Arc<Gpu>,
+    loc: GpuLocalizer,
+    pipes: RenderPipes,
+    columns: Option<ColumnBufs>,
+    display: Option<DisplayBufs>,
+}
+
+fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: b.as_entire_binding(),
+    }
+}
+
+impl RenderPipes {
+    fn new(gpu: &Gpu, layout0: &wgpu::BindGroupLayout) -> Result<Self, String> {
+        use wgpu::BufferBindingType as T;
+        let d = &gpu.device;
+        let layout = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("render"),
+            entries: &[
+                layout_entry(1, T::Uniform),
+                layout_entry(2, T::Storage { read_only: false }),
+                layout_entry(3, T::Storage { read_only: false }),
+            ],
+        });
+        let display_layout = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("display"),
+            entries: &[
+                layout_entry(0, T::Uniform),
+                layout_entry(1, T::Storage { read_only: true }),
+                layout_entry(2, T::Storage { read_only: true }),
+                layout_entry(3, T::Storage { read_only: true }),
+                layout_entry(4, T::Storage { read_only: false }),
+            ],
+        });
+        let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = |label, src: &str| {
+            d.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(src.into()),
+            })
+        };
+        let render = module("render", RENDER);
+        let display = module("display", DISPLAY);
+        let pl = |groups: &[&wgpu::BindGroupLayout]| {
+            let groups: Vec<Option<&wgpu::BindGroupLayout>> =
+                groups.iter().map(|g| Some(*g)).collect();
+            d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: None,
+                bind_group_layouts: &groups,
+                immediate_size: 0,
+            })
+        };
+        let with_render = pl(&[layout0, &layout]);
+        let display_pl = pl(&[&display_layout]);
+        let pipe = |m: &wgpu::ShaderModule, layout: &wgpu::PipelineLayout, entry: &str| {
+            d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(layout),
+                module: m,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let p = RenderPipes {
+            first_hits: pipe(&render, &with_render, "first_hits"),
+            split: pipe(&render, &with_render, "split"),
+            log_append: pipe(&render, &with_render, "log_append"),
+            conflict_keep: pipe(&render, &with_render, "conflict_keep"),
+            raise: pipe(&render, &with_render, "raise"),
+            refute: pipe(&render, &with_render, "refute"),
+            reset_release: pipe(&render, &with_render, "reset_release"),
+            release: pipe(&render, &with_render, "release"),
+            surface: pipe(&render, &with_render, "surface"),
+            display: pipe(&display, &display_pl, "main"),
+            layout,
+            display_layout,
+        };
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(format!("the render kernels: {e}"));
+        }
+        Ok(p)
+    }
+}
+
+impl GpuRenderer {
+    pub fn new(gpu: Arc<Gpu>) -> Result<Self, String> {
+        let loc = GpuLocalizer::new(gpu.clone())?;
+        let pipes = RenderPipes::new(&gpu, &loc.pipes().layout0)?;
+        Ok(GpuRenderer {
+            gpu,
+            loc,
+            pipes,
+            columns: None,
+            display: None,
+        })
+    }
+
+    /// Lists of `cap` entries at first (tests make them small to exercise their growth).
+    pub fn with_list_capacity(mut self, cap: usize) -> Self {
+        self.loc = self.loc.with_list_capacity(cap);
+        self
+    }
+
+    /// Whether a grid of `spec` fits the adapter (see [`GpuLocalizer::check_size`]).
+    pub fn check_size(&self, spec: GridSpec) -> Result<(), String> {
+        self.loc.check_size(spec)
+    }
+
+    fn column_bufs(&mut self, spec: GridSpec) -> Result<(), String> {
+        self.loc.ensure_buffers(spec);
+        let (generation, extra, _) = self.loc.render_buffers().ok_or("no grid buffers")?;
+        let fits = self
+            .columns
+            .as_ref()
+            .is_some_and(|c| c.spec == spec && c.generation == generation);
+        if fits {
+            return Ok(());
+        }
+        use wgpu::BufferUsages as U;
+        let d = &self.gpu.device;
+        let plane = (spec.n() * spec.n()) as u64;
+        let cols = d.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("columns"),
+            size: plane * 16,
+            usage: U::STORAGE | U::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let staging = d.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("columns read-back"),
+            size: plane * 16,
+            usage: U::MAP_READ | U::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let binds = [0u32, 1].map(|x| {
+            let params = d.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("render params"),
+                size: 16,
+                usage: U::UNIFORM | U::COPY_DST,
+                mapped_at_creation: false,
+            });
+            self.gpu
+                .queue
+                .write_buffer(&params, 0, bytemuck::cast_slice(&[plane as u32, x, 0, 0]));
+            d.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &self.pipes.layout,
+                entries: &[entry(1, &params), entry(2, &cols), entry(3, extra)],
+            })
+        });
+        self.columns = Some(ColumnBufs {
+            spec,
+            generation,
+            cols,
+            staging,
+            binds,
+        });
+        Ok(())
+    }
+
+    /// Localize `field` up to level `L - 1` from `coarse` (the paper's method), then the final
+    /// level with culling; the columns come back.
+    pub fn frame(
+        &mut self,
+        field: &GpuField<'_>,
+        spec: GridSpec,
+        coarse: u32,
+    ) -> Result<Columns, String> {
+        let fine = spec
+            .level()
+            .checked_sub(1)
+            .filter(|l| *l >= 1)
+            .ok_or_else(|| format!("a {}^3 grid is too small to render", spec.n()))?;
+        if coarse == 0 || coarse > fine {
+            return Err(format!(
+                "coarse level {coarse} must lie in 1..={fine} to render a {}^3 grid",
+                spec.n()
+            ));
+        }
+        self.loc.prepare(field, spec, coarse, true)?;
+        loop {
+            match self.attempt(spec, coarse, fine)? {
+                Some(c) => {
+                    self.loc.done = true;
+                    return Ok(c);
+                }
+                None => self.loc.grow(spec)?,
+            }
+        }
+    }
+
+    /// One attempt; `None` when a list overflowed.
+    fn attempt(
+        &mut self,
+        spec: GridSpec,
+        coarse: u32,
+        fine: u32,
+    ) -> Result<Option<Columns>, String> {
+        // The localizer's buffers first (the column bind groups hold its lists).
+        self.column_bufs(spec)?;
+        let cb = self.columns.as_ref().expect("made above");
+        let rp = &self.pipes;
+        let mut rec = self.loc.recorder(spec, HierarchicalMode::Paper)?;
+        let (stats, overflow) = rec.levels(coarse, fine, HierarchicalMode::Paper)?;
+        if overflow {
+            return Ok(None);
+        }
+        let big_l = spec.level();
+        let plane = (spec.n() * spec.n()) as u32;
+        let p = rec.p;
+        let ev = rec.eval_pipe();
+        let r0 = &cb.binds[0];
+        let pts = rec.level_points(big_l);
+        // Upsample to L, coarse hits, dilate, split into the front (list 1) and culled 0.
+        rec.pass(&[
+            (&p.zero, big_l, 1, Dispatch::One),
+            (&p.upsample, big_l, 1, Dispatch::Points(pts)),
+            (&rp.first_hits, big_l, 0, Dispatch::With(r0, Some(plane))),
+            (&p.prep_cand, big_l, 1, Dispatch::Prep),
+            (&p.dilate, big_l, 1, Dispatch::Indirect),
+            (&p.zero, big_l, 0, Dispatch::One),
+            (&p.prep_src, big_l, 0, Dispatch::Prep),
+            (&rp.split, big_l, 0, Dispatch::With(r0, None)),
+        ]);
+        // The front (list 1) evaluated and logged first; orientation 2 reads the log (the
+        // released points) in later rounds. The batch the conflict loop scans first is the
+        // whole dilated list (list 0, as render.rs: its culled points, unevaluated, show no
+        // conflict until they are released and evaluated).
+        let mut batch = 0usize;
+        let mut x = 0usize;
+        let mut first = true;
+        loop {
+            if first {
+                rec.pass(&[
+                    (&p.prep_eval, big_l, 1, Dispatch::Prep),
+                    (ev, big_l, 1, Dispatch::Eval),
+                    (&p.prep_src, big_l, 1, Dispatch::Prep),
+                    (&rp.log_append, big_l, 1, Dispatch::With(r0, None)),
+                ]);
+            } else {
+                // The released points are the log's first entries: evaluated from there.
+                rec.pass(&[
+                    (&p.prep_eval, big_l, 2, Dispatch::Prep),
+                    (ev, big_l, 2, Dispatch::Eval),
+                ]);
+            }
+            // The conflict loop under the culling of the hits as they stand: the last batch
+            // scanned (render.rs: the hierarchical localizer's batch), each round evaluated
+            // and logged.
+            loop {
+                let o = batch;
+                rec.pass(&[
+                    (&p.zero, big_l, o, Dispatch::One),
+                    (&p.prep_src, big_l, o, Dispatch::Prep),
+                    (&rp.conflict_keep, big_l, o, Dispatch::With(r0, None)),
+                ]);
+                let counts = rec.counts()?;
+                if counts[OVERFLOW] != 0 {
+                    return Ok(None);
+                }
+                if counts[LIST[1 - o]] == 0 {
+                    break;
+                }
+                batch = 1 - o;
+                rec.pass(&[
+                    (&p.prep_eval, big_l, batch, Dispatch::Prep),
+                    (ev, big_l, batch, Dispatch::Eval),
+                    (&p.prep_src, big_l, batch, Dispatch::Prep),
+                    (&rp.log_append, big_l, batch, Dispatch::With(r0, None)),
+                ]);
+            }
+            // Hits from the round's log, then the release of culled points in front of them.
+            let rx = &cb.binds[x];
+            rec.pass(&[
+                (&p.prep_src, big_l, 2, Dispatch::Prep),
+                (&rp.raise, big_l, 2, Dispatch::With(rx, None)),
+                (&rp.refute, big_l, 2, Dispatch::With(rx, None)),
+                (&rp.reset_release, big_l, 0, Dispatch::With(rx, Some(1))),
+                (&p.prep_src, big_l, 3 + x, Dispatch::Prep),
+                (&rp.release, big_l, 0, Dispatch::With(rx, None)),
+            ]);
+            x = 1 - x;
+            let counts = rec.counts()?;
+            if counts[OVERFLOW] != 0 {
+                return Ok(None);
+            }
+            first = false;
+            if counts[LOG] == 0 {
+                break;
+            }
+        }
+        rec.pass(&[(&rp.surface, big_l, 0, Dispatch::With(r0, Some(plane)))]);
+        let counts = rec.counts()?;
+        let dispatches = std::mem::take(&mut rec.dispatches);
+        drop(rec);
+        let c = self.gpu.count();
+        c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
+        let n2 = plane as usize;
+        let mut raw = vec![0u32; 4 * n2];
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(&cb.cols, 0, &cb.staging, 0, (raw.len() * 4) as u64);
+        self.gpu
+            .submit_and_read_bytes(enc, &cb.staging, bytemuck::cast_slice_mut(&mut raw))?;
+        let hit = |h: u32| h as i32 - 1;
+        Ok(Some(Columns {
+            hit: raw[..n2].iter().map(|&h| hit(h)).collect(),
+            coarse_hit: raw[n2..2 * n2].iter().map(|&h| hit(h)).collect(),
+            v_in: raw[2 * n2..3 * n2]
+                .iter()
+                .map(|&b| f32::from_bits(b))
+                .collect(),
+            v_out: raw[3 * n2..].iter().map(|&b| f32::from_bits(b)).collect(),
+            coarse_evaluations: stats.evaluations,
+            final_evaluations: (counts[EVALS] as u64).saturating_sub(stats.evaluations),
+            culled: counts[CULLED[x]] as u64,
+        }))
+    }
+
+    /// The last frame at `size x size` pixels (`render.rs` `render_display`'s rule, from the
+    /// values on the adapter): RGBA8 and depth. `hit`, `depth` and `color` are the frame's
+    /// per column (depth and colour as the host placed and coloured them).
+    pub fn display(
+        &mut self,
+        size: usize,
+        background: [u8; 4],
+        depth: &[f32],
+        color: &[[f32; 3]],
+    ) -> Result<(Vec<u8>, Vec<f32>), String> {
+        if !self.loc.done {
+            return Err("no frame rendered on the adapter".into());
+        }
+        let size = size.max(2);
+        let cb = self
+            .columns
+            .as_ref()
+            .ok_or("no frame rendered on the adapter")?;
+        let spec = cb.spec;
+        let (n, plane) = (spec.n(), spec.n() * spec.n());
+        if depth.len() != plane || color.len() != plane {
+            return Err(format!(
+                "{} depths and {} colours for {plane} columns",
+                depth.len(),
+                color.len()
+            ));
+        }
+        let fits = self
+            .display
+            .as_ref()
+            .is_some_and(|d| d.size == size && d.n == n);
+        if !fits {
+            use wgpu::BufferUsages as U;
+            let d = &self.gpu.device;
+            let buf = |label, bytes: usize, usage| {
+                d.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: bytes as u64,
+                    usage,
+                    mapped_at_creation: false,
+                })
+            };
+            let params = buf("display params", 32, U::UNIFORM | U::COPY_DST);
+            let cols = buf(
+                "column colours",
+                (4 * plane + n) * 4,
+                U::STORAGE | U::COPY_DST,
+            );
+            let out = buf(
+                "display image",
+                2 * size * size * 4,
+                U::STORAGE | U::COPY_SRC,
+            );
+            let staging = buf(
+                "display read-back",
+                2 * size * size * 4,
+                U::MAP_READ | U::COPY_DST,
+            );
+            self.display = Some(DisplayBufs {
+                size,
+                n,
+                params,
+                cols,
+                out,
+                staging,
+            });
+        }
+        let db = self.display.as_ref().expect("made above");
+        // Bound each frame: the grid's buffers are remade when its lists grow.
+        let (_, _, values) = self.loc.render_buffers().ok_or("no grid buffers")?;
+        let bind = self
+            .gpu
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &self.pipes.display_layout,
+                entries: &[
+                    entry(0, &db.params),
+                    entry(1, values),
+                    entry(2, &cb.cols),
+                    entry(3, &db.cols),
+                    entry(4, &db.out),
+                ],
+            });
+        let bg = u32::from_le_bytes(background);
+        let params = [
+            n as u32,
+            size as u32,
+            plane as u32,
+            bg,
+            spec.spacing().to_bits(),
+            0,
+            0,
+            0,
+        ];
+        let mut cols = Vec::with_capacity(4 * plane + n);
+        for (z, c) in depth.iter().zip(color) {
+            cols.extend_from_slice(&[*z, c[0], c[1], c[2]]);
+        }
+        cols.extend((0..n).map(|k| spec.coord(k)));
+        let q = &self.gpu.queue;
+        q.write_buffer(&db.params, 0, bytemuck::cast_slice(&params));
+        q.write_buffer(&db.cols, 0, bytemuck::cast_slice(&cols));
+        let c = self.gpu.count();
+        c.bytes_up
+            .fetch_add((cols.len() * 4 + 32) as u64, Ordering::Relaxed);
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.pipes.display);
+            pass.set_bind_group(0, &bind, &[]);
+            let (x, y) = groups((size * size) as u32);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        c.dispatches.fetch_add(1, Ordering::Relaxed);
+        enc.copy_buffer_to_buffer(&db.out, 0, &db.staging, 0, (2 * size * size * 4) as u64);
+        let mut raw = vec![0u32; 2 * size * size];
+        self.gpu
+            .submit_and_read_bytes(enc, &db.staging, bytemuck::cast_slice_mut(&mut raw))?;
+        let rgba = raw[..size * size]
+            .iter()
+            .flat_map(|p| p.to_le_bytes())
+            .collect();
+        let z = raw[size * size..]
+            .iter()
+            .map(|&b| f32::from_bits(b))
+            .collect();
+        Ok((rgba, z))
+    }
+}
+
+/// The counter slots the renderer reads (kept in step with `render.wgsl`).
+const _: () = assert!(LOG < COUNTS && CULLED[1] < COUNTS);
