@@ -9,13 +9,13 @@ use volcap_engine::model::Runtime;
 pub const ON_ADAPTER: &[&str] = &[
     "segment",
     "field: networks",
-    "Fourier series at the localization's and the render's points",
+    "localization: the grid, its bookkeeping and the Fourier series",
+    "render: first hits, culling, display image",
 ];
 /// What stays on the CPU with `backend = "wgpu"`.
 pub const ON_CPU: &[&str] = &[
-    "localization's bookkeeping",
-    "render's rays and shading",
-    "colour queries",
+    "the surface's colour queries (the colour net runs on the adapter) and shading",
+    "the temporal filter",
     "encode",
 ];
 

@@ -396,6 +396,123 @@ fn render_field(
     Some(rgba)
 }
 
+/// The render stage's renderer on the GPU backend's adapter (`volcap_engine::gpu::render`):
+/// the model's frames are localized, culled and drawn there, their colour and shading
+/// queried from the host as on the CPU. A frame it cannot take (a grid over the adapter's
+/// buffer limit, a field of the point-MLP family) is rendered on the CPU, and said once.
+#[cfg(feature = "wgpu")]
+pub(crate) struct AdapterRenderer {
+    gpu: volcap_engine::gpu::render::GpuRenderer,
+    /// The reason the last frame was drawn on the CPU, logged when it changes.
+    cpu_because: Option<String>,
+}
+
+#[cfg(feature = "wgpu")]
+impl AdapterRenderer {
+    pub(crate) fn open(
+        models: Option<&volcap_engine::model::Models>,
+        mode: FieldMode,
+    ) -> Option<Self> {
+        let volcap_engine::model::Runtime::Wgpu(g) = &models?.runtime else {
+            return None;
+        };
+        if mode != FieldMode::Model {
+            return None;
+        }
+        match volcap_engine::gpu::render::GpuRenderer::new(g.clone()) {
+            Ok(gpu) => Some(AdapterRenderer {
+                gpu,
+                cpu_because: None,
+            }),
+            Err(e) => {
+                tracing::warn!("the renderer stays on the CPU: {e}");
+                None
+            }
+        }
+    }
+
+    pub(crate) fn render(
+        &mut self,
+        renderer: &mut Renderer,
+        sh: &Shared,
+        field: &volcap_engine::model::ModelField,
+        live: &Live,
+    ) -> Option<Vec<u8>> {
+        let spec = GridSpec::from_resolution(live.resolution).ok()?;
+        let why = match field.gpu_field() {
+            None => Some("the shape model is not a Fourier head".to_string()),
+            Some(_) => self.gpu.check_size(spec).err(),
+        };
+        if why != self.cpu_because {
+            if let Some(w) = &why {
+                tracing::warn!("rendering on the CPU: {w}");
+            } else if self.cpu_because.is_some() {
+                tracing::info!("rendering on the adapter again");
+            }
+            self.cpu_because = why.clone();
+        }
+        let Some(on_gpu) = field.gpu_field().filter(|_| why.is_none()) else {
+            return render_field(renderer, sh, field, field, live);
+        };
+        let t = Instant::now();
+        let opts = RenderOptions {
+            coarse_level: live.coarse_level,
+            background: live.background,
+            shade: false,
+        };
+        match renderer.render_gpu(&mut self.gpu, &on_gpu, field, field, spec, &opts) {
+            Ok(st) => {
+                let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
+                sh.evaluations.fetch_add(n, Ordering::Relaxed);
+            }
+            Err(e) => {
+                sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
+                sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
+                return None;
+            }
+        }
+        let size = live.out_size();
+        let rgba = if size == live.resolution {
+            renderer.rgba().to_vec()
+        } else {
+            match renderer.render_display_gpu(&mut self.gpu, size, live.background) {
+                Ok(px) => px.to_vec(),
+                Err(e) => {
+                    sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
+                    sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
+                    return None;
+                }
+            }
+        };
+        sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
+        Some(rgba)
+    }
+}
+
+/// Without the `wgpu` feature nothing renders on an adapter.
+#[cfg(not(feature = "wgpu"))]
+pub(crate) struct AdapterRenderer;
+
+#[cfg(not(feature = "wgpu"))]
+impl AdapterRenderer {
+    pub(crate) fn open(
+        _models: Option<&volcap_engine::model::Models>,
+        _mode: FieldMode,
+    ) -> Option<Self> {
+        None
+    }
+
+    pub(crate) fn render(
+        &mut self,
+        renderer: &mut Renderer,
+        sh: &Shared,
+        field: &volcap_engine::model::ModelField,
+        live: &Live,
+    ) -> Option<Vec<u8>> {
+        render_field(renderer, sh, field, field, live)
+    }
+}
+
 pub use field_stage::FieldOutcome;
 
 /// Start the pipeline threads.
@@ -456,6 +573,7 @@ pub fn start(
         cfg.render.oracle_voxel_m,
         cfg.field(),
         cfg.compute.threads,
+        models.clone(),
     ));
 
     // Encode + publish.

@@ -124,8 +124,24 @@ fn model_mode_runs_its_networks_on_the_adapter() {
         s["frames_published"]
     );
     assert!(c["adapter_work"]["bytes_down"].as_u64().unwrap() > 0, "{s}");
-    // The Fourier series at the localization's and the render's points ran there too.
-    assert!(c["adapter_work"]["field_runs"].as_u64().unwrap() > 0, "{s}");
+    // Localization and the render ran there too: a rendered frame each.
+    let rendered = c["adapter_work"]["render_runs"].as_u64().unwrap();
+    assert!(
+        rendered >= 2,
+        "{rendered} frames rendered on the adapter: {s}"
+    );
+    assert!(
+        c["adapter_work"]["localize_runs"].as_u64().unwrap() >= rendered,
+        "{s}"
+    );
+    assert!(
+        c["on_adapter"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|v| v.as_str().unwrap_or("").starts_with("render")),
+        "{s}"
+    );
     assert!(s["field"].as_str().unwrap().contains("wgpu"), "{s}");
     // The same counters for Prometheus.
     let (st, _, body) = common::request(&d.addr, "GET", "/metrics", "");
@@ -141,5 +157,6 @@ fn model_mode_runs_its_networks_on_the_adapter() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(0.0);
     assert!(runs >= 6.0, "{m}");
+    assert!(m.contains("volcap_adapter_render_runs_total "), "{m}");
     assert_eq!(s["people"], 1, "{s}");
 }

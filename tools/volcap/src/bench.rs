@@ -137,7 +137,7 @@ enum BenchField {
     Dyn(Box<dyn OccupancyField>),
     Model(
         Box<volcap_engine::model::ModelField>,
-        Option<std::sync::Arc<AdapterOf>>,
+        #[cfg_attr(not(feature = "wgpu"), allow(dead_code))] Option<std::sync::Arc<AdapterOf>>,
     ),
 }
 

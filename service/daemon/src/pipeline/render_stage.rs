@@ -4,6 +4,7 @@
 use super::*;
 
 /// Spawn the render thread: take the latest frame (and its field), render, put latest-wins.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn spawn(
     sh: Arc<Shared>,
     input: Arc<Slot<Frame>>,
@@ -12,12 +13,15 @@ pub(super) fn spawn(
     voxel: f32,
     mode: FieldMode,
     eval_threads: usize,
+    models: Option<Arc<volcap_engine::model::Models>>,
 ) -> std::thread::JoinHandle<()> {
     std::thread::Builder::new()
         .name("render".into())
         .spawn(move || {
             let mut renderer = Renderer::new();
             renderer.set_threads(eval_threads);
+            // On the GPU backend the model's frames are localized and drawn on the adapter.
+            let mut on_adapter = super::AdapterRenderer::open(models.as_deref(), mode);
             let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
                 let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
                 sh.set_state(PipelineState::Degraded(why));
@@ -77,9 +81,17 @@ pub(super) fn spawn(
                         let field = Arc::new(field);
                         *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
                             Some(field.clone());
-                        let Some(rgba) =
-                            render_field(&mut renderer, &sh, field.as_ref(), field.as_ref(), &live)
-                        else {
+                        let rgba = match on_adapter.as_mut() {
+                            Some(a) => a.render(&mut renderer, &sh, field.as_ref(), &live),
+                            None => render_field(
+                                &mut renderer,
+                                &sh,
+                                field.as_ref(),
+                                field.as_ref(),
+                                &live,
+                            ),
+                        };
+                        let Some(rgba) = rgba else {
                             continue;
                         };
                         rgba

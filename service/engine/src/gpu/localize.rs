@@ -782,7 +782,7 @@ impl<'a> Rec<'a> {
         let c = self.gpu.count();
         c.dispatches
             .fetch_add(std::mem::take(&mut self.dispatches), Ordering::Relaxed);
-        c.field_runs.fetch_add(1, Ordering::Relaxed);
+        c.localize_runs.fetch_add(1, Ordering::Relaxed);
         let stats = LocalizeStats {
             evaluations: counts[EVALS] as u64,
             conflict_rounds: rounds,

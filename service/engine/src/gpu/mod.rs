@@ -94,6 +94,10 @@ pub struct Counters {
     pub net_runs: AtomicU64,
     /// Fourier field batches evaluated on the adapter.
     pub field_runs: AtomicU64,
+    /// Localizations with the grid on the adapter (each of a rendered frame's too).
+    pub localize_runs: AtomicU64,
+    /// Frames rendered on the adapter (their final level and display image).
+    pub render_runs: AtomicU64,
     /// Compute dispatches recorded.
     pub dispatches: AtomicU64,
     /// Bytes written from the host to the adapter's buffers (inputs, not the weights).
@@ -110,6 +114,8 @@ pub struct Counters {
 pub struct CounterValues {
     pub net_runs: u64,
     pub field_runs: u64,
+    pub localize_runs: u64,
+    pub render_runs: u64,
     pub dispatches: u64,
     pub bytes_up: u64,
     pub bytes_down: u64,
@@ -242,6 +248,8 @@ impl Gpu {
         CounterValues {
             net_runs: c.net_runs.load(Ordering::Relaxed),
             field_runs: c.field_runs.load(Ordering::Relaxed),
+            localize_runs: c.localize_runs.load(Ordering::Relaxed),
+            render_runs: c.render_runs.load(Ordering::Relaxed),
             dispatches: c.dispatches.load(Ordering::Relaxed),
             bytes_up: c.bytes_up.load(Ordering::Relaxed),
             bytes_down: c.bytes_down.load(Ordering::Relaxed),

@@ -391,6 +391,7 @@ impl GpuRenderer {
         drop(rec);
         let c = self.gpu.count();
         c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
+        c.render_runs.fetch_add(1, Ordering::Relaxed);
         let n2 = plane as usize;
         let mut raw = vec![0u32; 4 * n2];
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
