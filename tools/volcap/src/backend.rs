@@ -50,3 +50,77 @@ pub fn adapter_work(rt: &Runtime) -> [u64; 4] {
     let _ = rt;
     [0; 4]
 }
+
+/// Localization and the mesh-free render of a frame's model field: with `--backend wgpu` on
+/// the adapter (`GpuLocalizer`, `GpuRenderer`: the grid kept there, the localization's grid
+/// read back for meshing), on the CPU otherwise or for a field the adapter cannot take (a
+/// point-MLP head, a grid over its buffer limit).
+pub struct Stages {
+    #[cfg(feature = "wgpu")]
+    gpu: Option<(
+        volcap_engine::gpu::localize::GpuLocalizer,
+        volcap_engine::gpu::render::GpuRenderer,
+    )>,
+}
+
+impl Stages {
+    pub fn new(rt: &Runtime) -> anyhow::Result<Self> {
+        #[cfg(feature = "wgpu")]
+        if let Some(g) = rt.gpu() {
+            use volcap_engine::gpu::{localize::GpuLocalizer, render::GpuRenderer};
+            let loc = GpuLocalizer::new(g.clone()).map_err(|e| anyhow!("--backend wgpu: {e}"))?;
+            let ren = GpuRenderer::new(g.clone()).map_err(|e| anyhow!("--backend wgpu: {e}"))?;
+            return Ok(Stages {
+                gpu: Some((loc, ren)),
+            });
+        }
+        let _ = rt;
+        Ok(Stages {
+            #[cfg(feature = "wgpu")]
+            gpu: None,
+        })
+    }
+
+    /// The paper's hierarchical localization of `field` on `spec` into `grid`.
+    pub fn localize(
+        &mut self,
+        field: &volcap_engine::model::ModelField,
+        spec: volcap_engine::grid::GridSpec,
+        grid: &mut volcap_engine::grid::Grid,
+    ) -> anyhow::Result<()> {
+        use volcap_engine::localize::{Localizer, Method, default_coarse};
+        let coarse = default_coarse(spec);
+        #[cfg(feature = "wgpu")]
+        if let (Some((loc, _)), Some(on_gpu)) = (self.gpu.as_mut(), field.gpu_field())
+            && loc.check_size(spec).is_ok()
+        {
+            use volcap_engine::localize::HierarchicalMode;
+            loc.run(&on_gpu, spec, coarse, HierarchicalMode::Paper)
+                .map_err(|e| anyhow!("localization on the adapter: {e}"))?;
+            return loc
+                .read_grid(grid)
+                .map_err(|e| anyhow!("localization on the adapter: {e}"));
+        }
+        Localizer::new().run(Method::Hierarchical, field, spec, coarse, grid)?;
+        Ok(())
+    }
+
+    /// Render `field` (its own colours) on `spec` into `r`.
+    pub fn render(
+        &mut self,
+        r: &mut volcap_engine::render::Renderer,
+        field: &volcap_engine::model::ModelField,
+        spec: volcap_engine::grid::GridSpec,
+        opts: &volcap_engine::render::RenderOptions,
+    ) -> anyhow::Result<()> {
+        #[cfg(feature = "wgpu")]
+        if let (Some((_, ren)), Some(on_gpu)) = (self.gpu.as_mut(), field.gpu_field())
+            && ren.check_size(spec).is_ok()
+        {
+            r.render_gpu(ren, &on_gpu, field, field, spec, opts)?;
+            return Ok(());
+        }
+        r.render(field, field, spec, opts)?;
+        Ok(())
+    }
+}

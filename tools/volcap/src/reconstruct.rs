@@ -19,7 +19,6 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use volcap_engine::grid::{Grid, GridSpec};
-use volcap_engine::localize::{Localizer, Method, default_coarse};
 use volcap_engine::mesh::marching_cubes;
 use volcap_engine::model::preprocess::unletterbox_mask;
 use volcap_engine::model::{FrameError, FrameInfo, ModelView, Models, Precision};
@@ -129,8 +128,10 @@ fn stem(path: &Path) -> String {
 /// One row of the contact sheet: photo, mask, renders (RGBA tiles of any size).
 type SheetRow = Vec<image::RgbaImage>;
 
+#[allow(clippy::too_many_arguments)]
 fn one(
     models: &Models,
+    stages: &mut crate::backend::Stages,
     path: &Path,
     a: &ReconstructArgs,
     spec: GridSpec,
@@ -189,13 +190,7 @@ fn one(
     rep.encode_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     let mut grid = Grid::new(spec);
-    Localizer::new().run(
-        Method::Hierarchical,
-        &field,
-        spec,
-        default_coarse(spec),
-        &mut grid,
-    )?;
+    stages.localize(&field, spec, &mut grid)?;
     rep.localize_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     let mut mesh = marching_cubes(&grid);
@@ -228,7 +223,7 @@ fn one(
             turned = models.encode(&img, &mask, crop, view)?;
             &turned
         };
-        r.render(field, field, spec, &opts)?;
+        stages.render(&mut r, field, spec, &opts)?;
         let tile = image::RgbaImage::from_raw(n, n, r.rgba().to_vec())
             .ok_or_else(|| anyhow!("render buffer size"))?;
         let file = format!("{name}.yaw{:03}.png", yaw as u32);
@@ -253,6 +248,8 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
     };
     let (runtime, _) = crate::backend::open(&a.backend, "tract", &a.adapter)?;
     let models = Models::load_on(&a.models_dir, name, precision, &runtime)?;
+    // Localization and the render where the networks run (the adapter with `--backend wgpu`).
+    let mut stages = crate::backend::Stages::new(&runtime)?;
     let models = match &a.close_range {
         Some(close) => models.with_close_range(&a.models_dir, close)?,
         None => models,
@@ -284,7 +281,7 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
                 stem(path)
             ))
         } else {
-            one(&models, path, a, spec, &mut rep, &mut row)
+            one(&models, &mut stages, path, a, spec, &mut rep, &mut row)
         };
         match r {
             Ok(()) => {

@@ -224,6 +224,50 @@ fn reconstruct_runs_on_the_gpu_backend() {
     let rep: serde_json::Value = serde_json::from_str(stdout.lines().next().unwrap()).unwrap();
     assert_eq!(rep["ok"], true, "{rep}");
     assert_eq!(rep["people"], 1, "{rep}");
+    // Localization (the mesh) and the turntable renders ran on the adapter: the CPU path's
+    // mesh size and images, within the networks' rounding.
+    let cpu_out = out.join("cpu");
+    let o = Command::new(env!("CARGO_BIN_EXE_volcap"))
+        .current_dir(repo())
+        .args([
+            "reconstruct",
+            "tests/data/real/camera.png",
+            "--res",
+            "65",
+            "--json",
+            "--out",
+        ])
+        .arg(&cpu_out)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let cpu: serde_json::Value =
+        serde_json::from_str(String::from_utf8_lossy(&o.stdout).lines().next().unwrap()).unwrap();
+    let (t_gpu, t_cpu) = (
+        rep["triangles"].as_f64().unwrap(),
+        cpu["triangles"].as_f64().unwrap(),
+    );
+    assert!(
+        t_cpu > 100.0 && (t_gpu - t_cpu).abs() <= 0.01 * t_cpu,
+        "{t_gpu} vs {t_cpu} triangles"
+    );
+    for yaw in ["000", "090"] {
+        let name = format!("camera.yaw{yaw}.png");
+        let a = image::open(out.join(&name)).unwrap().to_rgba8();
+        let b = image::open(cpu_out.join(&name)).unwrap().to_rgba8();
+        let close = a
+            .as_raw()
+            .iter()
+            .zip(b.as_raw())
+            .filter(|(x, y)| x.abs_diff(**y) <= 1)
+            .count() as f64
+            / a.as_raw().len() as f64;
+        println!(
+            "reconstruct {name}: adapter and CPU within 1/255 on {:.3} % of channels",
+            close * 100.0
+        );
+        assert!(close >= 0.99, "{name}: {close}");
+    }
     // An adapter that is not there: refused, naming the adapters found.
     let o = Command::new(env!("CARGO_BIN_EXE_volcap"))
         .current_dir(repo())
