@@ -375,22 +375,45 @@ fn render_field(
         shade: false,
     };
     let r = renderer.render(field, colors, spec, &opts);
+    let r = r.map_err(|e| e.to_string());
+    finish_render(sh, t, live, r, |size| {
+        Ok(if size == live.resolution {
+            renderer.rgba().to_vec()
+        } else {
+            renderer.render_display(size, live.background).to_vec()
+        })
+    })
+}
+
+/// A rendered frame's accounting: its evaluations and time, or the failure as the degraded
+/// state; the image at the live output size from `image`.
+fn finish_render(
+    sh: &Shared,
+    t: Instant,
+    live: &Live,
+    r: Result<volcap_engine::render::RenderStats, String>,
+    image: impl FnOnce(usize) -> Result<Vec<u8>, String>,
+) -> Option<Vec<u8>> {
+    let fail = |e: String| {
+        sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
+        sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
+    };
     match r {
         Ok(st) => {
             let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
             sh.evaluations.fetch_add(n, Ordering::Relaxed);
         }
         Err(e) => {
-            sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
-            sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
+            fail(e);
             return None;
         }
     }
-    let size = live.out_size();
-    let rgba = if size == live.resolution {
-        renderer.rgba().to_vec()
-    } else {
-        renderer.render_display(size, live.background).to_vec()
+    let rgba = match image(live.out_size()) {
+        Ok(px) => px,
+        Err(e) => {
+            fail(e);
+            return None;
+        }
     };
     sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
     Some(rgba)
@@ -460,32 +483,19 @@ impl AdapterRenderer {
             background: live.background,
             shade: false,
         };
-        match renderer.render_gpu(&mut self.gpu, &on_gpu, field, field, spec, &opts) {
-            Ok(st) => {
-                let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
-                sh.evaluations.fetch_add(n, Ordering::Relaxed);
+        let r = renderer
+            .render_gpu(&mut self.gpu, &on_gpu, field, field, spec, &opts)
+            .map_err(|e| e.to_string());
+        let gpu = &mut self.gpu;
+        finish_render(sh, t, live, r, |size| {
+            if size == live.resolution {
+                Ok(renderer.rgba().to_vec())
+            } else {
+                renderer
+                    .render_display_gpu(gpu, size, live.background)
+                    .map(|px| px.to_vec())
             }
-            Err(e) => {
-                sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
-                sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
-                return None;
-            }
-        }
-        let size = live.out_size();
-        let rgba = if size == live.resolution {
-            renderer.rgba().to_vec()
-        } else {
-            match renderer.render_display_gpu(&mut self.gpu, size, live.background) {
-                Ok(px) => px.to_vec(),
-                Err(e) => {
-                    sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
-                    sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
-                    return None;
-                }
-            }
-        };
-        sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
-        Some(rgba)
+        })
     }
 }
 

@@ -15,6 +15,7 @@
 //! needs more. The whole grid is one storage buffer: grids over the adapter's binding limit
 //! (513^3 at default limits) are refused with the sizes named.
 
+use super::kit::entry;
 use super::{Gpu, groups};
 use crate::grid::{Grid, GridSpec};
 use crate::localize::{HierarchicalMode, LocalizeStats, check_coarse};
@@ -125,88 +126,28 @@ pub struct GpuLocalizer {
     generation: u64,
 }
 
-fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    layout_entry(binding, wgpu::BufferBindingType::Storage { read_only })
-}
-
-fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    layout_entry(binding, wgpu::BufferBindingType::Uniform)
-}
-
-fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: b.as_entire_binding(),
-    }
-}
-
 impl Pipes {
     fn new(gpu: &Gpu) -> Result<Self, String> {
+        use super::kit::{bind_layout, module, pipeline_layout, storage, uniform};
         let d = &gpu.device;
-        let layout = |label, entries: &[wgpu::BindGroupLayoutEntry]| {
-            d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(label),
-                entries,
-            })
-        };
         // Six storage buffers here and two in the field's group: the default limit of eight
         // per stage.
-        let mut e0 = vec![uniform_entry(0)];
-        e0.extend((1..7).map(|b| storage_entry(b, false)));
-        let layout0 = layout("localize", &e0);
-        let layout_args = layout("localize args", &[storage_entry(0, false)]);
-        let layout_field = layout(
+        let mut e0 = vec![uniform(0)];
+        e0.extend((1..7).map(|b| storage(b, false)));
+        let layout0 = bind_layout(d, "localize", &e0);
+        let layout_args = bind_layout(d, "localize args", &[storage(0, false)]);
+        let layout_field = bind_layout(
+            d,
             "localize field",
-            &[
-                uniform_entry(0),
-                storage_entry(1, true),
-                storage_entry(2, true),
-            ],
+            &[uniform(0), storage(1, true), storage(2, true)],
         );
         let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = |label, src: &str| {
-            d.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(src.into()),
-            })
-        };
-        let book = module("localize", BOOK);
-        let eval = module("localize eval", EVAL);
-        let pl = |groups: &[&wgpu::BindGroupLayout]| {
-            let groups: Vec<Option<&wgpu::BindGroupLayout>> =
-                groups.iter().map(|g| Some(*g)).collect();
-            d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: None,
-                bind_group_layouts: &groups,
-                immediate_size: 0,
-            })
-        };
-        let plain = pl(&[&layout0]);
-        let with_args = pl(&[&layout0, &layout_args]);
-        let with_field = pl(&[&layout0, &layout_field]);
-        let pipe = |m: &wgpu::ShaderModule, layout: &wgpu::PipelineLayout, entry: &str| {
-            d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(layout),
-                module: m,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let book = module(d, "localize", BOOK);
+        let eval = module(d, "localize eval", EVAL);
+        let plain = pipeline_layout(d, &[&layout0]);
+        let with_args = pipeline_layout(d, &[&layout0, &layout_args]);
+        let with_field = pipeline_layout(d, &[&layout0, &layout_field]);
+        let pipe = |m, layout, entry| super::kit::pipeline(d, m, layout, entry);
         let p = Pipes {
             zero: pipe(&book, &plain, "zero"),
             prep_cand: pipe(&book, &with_args, "prep_cand"),

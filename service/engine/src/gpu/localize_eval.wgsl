@@ -39,19 +39,12 @@ fn table(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec
     values[q] = maps[q];
 }
 
-// Bilinear sample of the mask (model/sample.rs `bilinear`, one channel).
+// Bilinear sample of the mask (model/sample.rs `bilinear`, one channel; the sum in its order).
 fn mask_at(x: f32, y: f32, s: u32) -> f32 {
     let o = pp(0u);
-    let px = to_px(x, s);
-    let py = to_px(y, s);
-    let x0 = min(u32(floor(px)), s - 1u);
-    let y0 = min(u32(floor(py)), s - 1u);
-    let x1 = min(x0 + 1u, s - 1u);
-    let y1 = min(y0 + 1u, s - 1u);
-    let fx = px - f32(x0);
-    let fy = py - f32(y0);
-    return aux[o + y0 * s + x0] * ((1.0 - fx) * (1.0 - fy)) + aux[o + y0 * s + x1] * (fx * (1.0 - fy))
-        + aux[o + y1 * s + x0] * ((1.0 - fx) * fy) + aux[o + y1 * s + x1] * (fx * fy);
+    let t = taps(x, y, s);
+    return aux[o + t.i[0]] * t.w[0] + aux[o + t.i[1]] * t.w[1] + aux[o + t.i[2]] * t.w[2]
+        + aux[o + t.i[3]] * t.w[3];
 }
 
 @compute @workgroup_size(64)

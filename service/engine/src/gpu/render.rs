@@ -13,6 +13,7 @@
 //! the analytic scenes from a host-evaluated table; the real photos' fields through the
 //! Fourier kernel in tools/volcap/tests/gpu_frames.rs).
 
+use super::kit::entry;
 use super::localize::{
     COUNTS, CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, OVERFLOW,
 };
@@ -86,78 +87,32 @@ pub struct GpuRenderer {
     display: Option<DisplayBufs>,
 }
 
-fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: b.as_entire_binding(),
-    }
-}
-
 impl RenderPipes {
     fn new(gpu: &Gpu, layout0: &wgpu::BindGroupLayout) -> Result<Self, String> {
-        use wgpu::BufferBindingType as T;
+        use super::kit::{bind_layout, module, pipeline_layout, storage, uniform};
         let d = &gpu.device;
-        let layout = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("render"),
-            entries: &[
-                layout_entry(1, T::Uniform),
-                layout_entry(2, T::Storage { read_only: false }),
-                layout_entry(3, T::Storage { read_only: false }),
+        let layout = bind_layout(
+            d,
+            "render",
+            &[uniform(1), storage(2, false), storage(3, false)],
+        );
+        let display_layout = bind_layout(
+            d,
+            "display",
+            &[
+                uniform(0),
+                storage(1, true),
+                storage(2, true),
+                storage(3, true),
+                storage(4, false),
             ],
-        });
-        let display_layout = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("display"),
-            entries: &[
-                layout_entry(0, T::Uniform),
-                layout_entry(1, T::Storage { read_only: true }),
-                layout_entry(2, T::Storage { read_only: true }),
-                layout_entry(3, T::Storage { read_only: true }),
-                layout_entry(4, T::Storage { read_only: false }),
-            ],
-        });
+        );
         let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = |label, src: &str| {
-            d.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(label),
-                source: wgpu::ShaderSource::Wgsl(src.into()),
-            })
-        };
-        let render = module("render", RENDER);
-        let display = module("display", DISPLAY);
-        let pl = |groups: &[&wgpu::BindGroupLayout]| {
-            let groups: Vec<Option<&wgpu::BindGroupLayout>> =
-                groups.iter().map(|g| Some(*g)).collect();
-            d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: None,
-                bind_group_layouts: &groups,
-                immediate_size: 0,
-            })
-        };
-        let with_render = pl(&[layout0, &layout]);
-        let display_pl = pl(&[&display_layout]);
-        let pipe = |m: &wgpu::ShaderModule, layout: &wgpu::PipelineLayout, entry: &str| {
-            d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(layout),
-                module: m,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let render = module(d, "render", RENDER);
+        let display = module(d, "display", DISPLAY);
+        let with_render = pipeline_layout(d, &[layout0, &layout]);
+        let display_pl = pipeline_layout(d, &[&display_layout]);
+        let pipe = |m, layout, entry| super::kit::pipeline(d, m, layout, entry);
         let p = RenderPipes {
             first_hits: pipe(&render, &with_render, "first_hits"),
             split: pipe(&render, &with_render, "split"),

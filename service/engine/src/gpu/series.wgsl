@@ -10,6 +10,27 @@ fn to_px(n: f32, size: u32) -> f32 {
     return (v + 1.0) * 0.5 * f32(size - 1u);
 }
 
+// The four taps of the bilinear rule at NDC (x, y) on a size x size grid (model/sample.rs
+// `taps`): pixel indices, row-major, and their weights.
+struct Taps {
+    i: array<u32, 4>,
+    w: array<f32, 4>,
+}
+
+fn taps(x: f32, y: f32, size: u32) -> Taps {
+    let px = to_px(x, size);
+    let py = to_px(y, size);
+    let x0 = min(u32(floor(px)), size - 1u);
+    let y0 = min(u32(floor(py)), size - 1u);
+    let x1 = min(x0 + 1u, size - 1u);
+    let y1 = min(y0 + 1u, size - 1u);
+    let fx = px - f32(x0);
+    let fy = py - f32(y0);
+    return Taps(
+        array<u32, 4>(y0 * size + x0, y0 * size + x1, y1 * size + x0, y1 * size + x1),
+        array<f32, 4>((1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy));
+}
+
 // The Fourier (or half-range cosine) occupancy series at one crop-NDC point, over the
 // pixel-interleaved coefficient maps in the including module's `maps` binding: bilinear taps
 // (grid_sample align_corners=1, border: model/sample.rs `taps`), the basis by the
@@ -22,16 +43,9 @@ fn series(x: f32, y: f32, z: f32, k: u32, size: u32, cosine: bool, zeta_scale: f
     if !finite(zeta) || abs(zeta) > 1.0 || !finite(x) || !finite(y) {
         return 0.0;
     }
-    let px = to_px(x, size);
-    let py = to_px(y, size);
-    let x0 = min(u32(floor(px)), size - 1u);
-    let y0 = min(u32(floor(py)), size - 1u);
-    let x1 = min(x0 + 1u, size - 1u);
-    let y1 = min(y0 + 1u, size - 1u);
-    let fx = px - f32(x0);
-    let fy = py - f32(y0);
-    let base = array<u32, 4>((y0 * size + x0) * c, (y0 * size + x1) * c, (y1 * size + x0) * c, (y1 * size + x1) * c);
-    let w = array<f32, 4>((1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy);
+    let tp = taps(x, y, size);
+    let base = array<u32, 4>(tp.i[0] * c, tp.i[1] * c, tp.i[2] * c, tp.i[3] * c);
+    let w = tp.w;
     // The first harmonic: exact at the ends of the range (f32's pi is not pi).
     var s1 = 0.0;
     var c1 = -1.0;
