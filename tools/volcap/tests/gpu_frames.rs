@@ -290,6 +290,28 @@ fn reconstruct_runs_on_the_gpu_backend() {
     );
 }
 
+/// The real photos' fields through the CPU's networks, from the input view and turned 90
+/// degrees: (photo, yaw, field).
+fn photo_fields(cpu: &Models) -> Vec<(&'static str, f32, volcap_engine::model::ModelField)> {
+    let mut out = Vec::new();
+    for photo in ["astronaut.jpg", "camera.png"] {
+        let img = image::open(repo().join("tests/data/real").join(photo))
+            .unwrap()
+            .to_rgb8();
+        let (w, h) = (img.width() as usize, img.height() as usize);
+        let mut info = FrameInfo::default();
+        let (input, mask, crop) = cpu.prepare(img.as_raw(), w, h, &mut info).unwrap();
+        for yaw in [0.0, 90.0] {
+            let view = ModelView {
+                yaw_deg: yaw,
+                ..Default::default()
+            };
+            out.push((photo, yaw, cpu.encode(&input, &mask, crop, view).unwrap()));
+        }
+    }
+    out
+}
+
 /// The hierarchical localization with its grid, the person mask and the Fourier series all on
 /// the adapter (`GpuLocalizer`), against the CPU's localizer on the CPU's field, on the real
 /// photos' fields (the same maps: the CPU's networks), from the input view and turned 90
@@ -310,51 +332,38 @@ fn localization_on_the_adapter_finds_the_cpus_surface_on_real_photos() {
     let mut gl = GpuLocalizer::new(gpu.clone()).unwrap();
     let mut loc = Localizer::new();
     let before = gpu.counters();
-    for photo in ["astronaut.jpg", "camera.png"] {
-        let img = image::open(repo().join("tests/data/real").join(photo))
-            .unwrap()
-            .to_rgb8();
-        let (w, h) = (img.width() as usize, img.height() as usize);
-        let mut info = FrameInfo::default();
-        let (input, mask, crop) = cpu.prepare(img.as_raw(), w, h, &mut info).unwrap();
-        for yaw in [0.0, 90.0] {
-            let view = ModelView {
-                yaw_deg: yaw,
-                ..Default::default()
-            };
-            let field = cpu.encode(&input, &mask, crop, view).unwrap();
-            let on_gpu = field.gpu_field().expect("a Fourier head");
-            for res in [129, 257] {
-                let spec = GridSpec::from_resolution(res).unwrap();
-                for (method, mode) in [
-                    (Method::Hierarchical, HierarchicalMode::Paper),
-                    (Method::HierarchicalTight, HierarchicalMode::Tight),
-                ] {
-                    let coarse = default_coarse(spec);
-                    let mut a = Grid::new(spec);
-                    let want = loc.run(method, &field, spec, coarse, &mut a).unwrap();
-                    let got = gl.run(&on_gpu, spec, coarse, mode).unwrap();
-                    let mut b = Grid::new(spec);
-                    gl.read_grid(&mut b).unwrap();
-                    let differ = (0..spec.len())
-                        .filter(|&q| a.evaluated.get(q) != b.evaluated.get(q))
-                        .count();
-                    let grid_iou = volcap_engine::metrics::iou(&a, &b);
-                    println!(
-                        "{photo} yaw {yaw} {res}^3 {}: {} / {} evaluations, {differ} points \
-                         evaluated on one side only, grid IoU {grid_iou:.6}",
-                        method.name(),
-                        want.evaluations,
-                        got.evaluations
-                    );
-                    assert!(want.evaluations > 1000, "{photo}: a surface was found");
-                    assert!(
-                        differ as f64 <= 1e-3 * want.evaluations as f64,
-                        "{photo} yaw {yaw} {res}^3 {}: {differ} points differ",
-                        method.name()
-                    );
-                    assert!(grid_iou >= 0.999, "{photo}: grid IoU {grid_iou}");
-                }
+    for (photo, yaw, field) in photo_fields(&cpu) {
+        let on_gpu = field.gpu_field().expect("a Fourier head");
+        for res in [129, 257] {
+            let spec = GridSpec::from_resolution(res).unwrap();
+            for (method, mode) in [
+                (Method::Hierarchical, HierarchicalMode::Paper),
+                (Method::HierarchicalTight, HierarchicalMode::Tight),
+            ] {
+                let coarse = default_coarse(spec);
+                let mut a = Grid::new(spec);
+                let want = loc.run(method, &field, spec, coarse, &mut a).unwrap();
+                let got = gl.run(&on_gpu, spec, coarse, mode).unwrap();
+                let mut b = Grid::new(spec);
+                gl.read_grid(&mut b).unwrap();
+                let differ = (0..spec.len())
+                    .filter(|&q| a.evaluated.get(q) != b.evaluated.get(q))
+                    .count();
+                let grid_iou = volcap_engine::metrics::iou(&a, &b);
+                println!(
+                    "{photo} yaw {yaw} {res}^3 {}: {} / {} evaluations, {differ} points \
+                     evaluated on one side only, grid IoU {grid_iou:.6}",
+                    method.name(),
+                    want.evaluations,
+                    got.evaluations
+                );
+                assert!(want.evaluations > 1000, "{photo}: a surface was found");
+                assert!(
+                    differ as f64 <= 1e-3 * want.evaluations as f64,
+                    "{photo} yaw {yaw} {res}^3 {}: {differ} points differ",
+                    method.name()
+                );
+                assert!(grid_iou >= 0.999, "{photo}: grid IoU {grid_iou}");
             }
         }
     }
@@ -394,59 +403,46 @@ fn the_renderer_on_the_adapter_draws_the_cpus_frames_of_real_photos() {
             .count() as f64
             / x.len() as f64
     };
-    for photo in ["astronaut.jpg", "camera.png"] {
-        let img = image::open(repo().join("tests/data/real").join(photo))
-            .unwrap()
-            .to_rgb8();
-        let (w, h) = (img.width() as usize, img.height() as usize);
-        let mut info = FrameInfo::default();
-        let (input, mask, crop) = cpu.prepare(img.as_raw(), w, h, &mut info).unwrap();
-        for yaw in [0.0, 90.0] {
-            let view = ModelView {
-                yaw_deg: yaw,
-                ..Default::default()
-            };
-            let field = cpu.encode(&input, &mask, crop, view).unwrap();
-            let on_gpu = field.gpu_field().expect("a Fourier head");
-            for res in [129, 257] {
-                let spec = GridSpec::from_resolution(res).unwrap();
-                let want = a.render(&field, &field, spec, &opts).unwrap();
-                let got = b
-                    .render_gpu(&mut gr, &on_gpu, &field, &field, spec, &opts)
-                    .unwrap();
-                let same_hits = a
-                    .hits()
-                    .iter()
-                    .zip(b.hits())
-                    .filter(|(x, y)| x == y)
-                    .count() as f64
-                    / a.hits().len() as f64;
-                let image = agree(a.rgba(), b.rgba());
-                let da = a.render_display(512, opts.background).to_vec();
-                let db = b
-                    .render_display_gpu(&mut gr, 512, opts.background)
-                    .unwrap()
-                    .to_vec();
-                let display = agree(&da, &db);
-                println!(
-                    "{photo} yaw {yaw} {res}^3: {} + {} / {} + {} evaluations, {} / {} hits, \
-                     hits equal on {:.4} % of columns, image within 1/255 on {:.4} %, \
-                     display (512) on {:.4} % of channels",
-                    want.coarse_evaluations,
-                    want.final_evaluations,
-                    got.coarse_evaluations,
-                    got.final_evaluations,
-                    want.hits,
-                    got.hits,
-                    same_hits * 100.0,
-                    image * 100.0,
-                    display * 100.0
-                );
-                assert!(want.hits > 1000, "{photo}: a person drawn");
-                assert!(same_hits >= 0.999, "{photo} yaw {yaw} {res}^3: hits");
-                assert!(image >= 0.999, "{photo} yaw {yaw} {res}^3: image");
-                assert!(display >= 0.999, "{photo} yaw {yaw} {res}^3: display");
-            }
+    for (photo, yaw, field) in photo_fields(&cpu) {
+        let on_gpu = field.gpu_field().expect("a Fourier head");
+        for res in [129, 257] {
+            let spec = GridSpec::from_resolution(res).unwrap();
+            let want = a.render(&field, &field, spec, &opts).unwrap();
+            let got = b
+                .render_gpu(&mut gr, &on_gpu, &field, &field, spec, &opts)
+                .unwrap();
+            let same_hits = a
+                .hits()
+                .iter()
+                .zip(b.hits())
+                .filter(|(x, y)| x == y)
+                .count() as f64
+                / a.hits().len() as f64;
+            let image = agree(a.rgba(), b.rgba());
+            let da = a.render_display(512, opts.background).to_vec();
+            let db = b
+                .render_display_gpu(&mut gr, 512, opts.background)
+                .unwrap()
+                .to_vec();
+            let display = agree(&da, &db);
+            println!(
+                "{photo} yaw {yaw} {res}^3: {} + {} / {} + {} evaluations, {} / {} hits, \
+                 hits equal on {:.4} % of columns, image within 1/255 on {:.4} %, \
+                 display (512) on {:.4} % of channels",
+                want.coarse_evaluations,
+                want.final_evaluations,
+                got.coarse_evaluations,
+                got.final_evaluations,
+                want.hits,
+                got.hits,
+                same_hits * 100.0,
+                image * 100.0,
+                display * 100.0
+            );
+            assert!(want.hits > 1000, "{photo}: a person drawn");
+            assert!(same_hits >= 0.999, "{photo} yaw {yaw} {res}^3: hits");
+            assert!(image >= 0.999, "{photo} yaw {yaw} {res}^3: image");
+            assert!(display >= 0.999, "{photo} yaw {yaw} {res}^3: display");
         }
     }
 }
