@@ -56,6 +56,7 @@ pub fn adapter_work(rt: &Runtime) -> [u64; 4] {
 /// read back for meshing), on the CPU otherwise or for a field the adapter cannot take (a
 /// point-MLP head, a grid over its buffer limit).
 pub struct Stages {
+    cpu: volcap_engine::localize::Localizer,
     #[cfg(feature = "wgpu")]
     gpu: Option<(
         volcap_engine::gpu::localize::GpuLocalizer,
@@ -71,14 +72,21 @@ impl Stages {
             let loc = GpuLocalizer::new(g.clone()).map_err(|e| anyhow!("--backend wgpu: {e}"))?;
             let ren = GpuRenderer::new(g.clone()).map_err(|e| anyhow!("--backend wgpu: {e}"))?;
             return Ok(Stages {
+                cpu: Default::default(),
                 gpu: Some((loc, ren)),
             });
         }
         let _ = rt;
         Ok(Stages {
+            cpu: Default::default(),
             #[cfg(feature = "wgpu")]
             gpu: None,
         })
+    }
+
+    /// The CPU's localizer (reference fields such as the oracle run there).
+    pub fn cpu_localizer(&mut self) -> &mut volcap_engine::localize::Localizer {
+        &mut self.cpu
     }
 
     /// The paper's hierarchical localization of `field` on `spec` into `grid`.
@@ -87,22 +95,24 @@ impl Stages {
         field: &volcap_engine::model::ModelField,
         spec: volcap_engine::grid::GridSpec,
         grid: &mut volcap_engine::grid::Grid,
-    ) -> anyhow::Result<()> {
-        use volcap_engine::localize::{Localizer, Method, default_coarse};
+    ) -> anyhow::Result<volcap_engine::localize::LocalizeStats> {
+        use volcap_engine::localize::{Method, default_coarse};
         let coarse = default_coarse(spec);
         #[cfg(feature = "wgpu")]
         if let (Some((loc, _)), Some(on_gpu)) = (self.gpu.as_mut(), field.gpu_field())
             && loc.check_size(spec).is_ok()
         {
             use volcap_engine::localize::HierarchicalMode;
-            loc.run(&on_gpu, spec, coarse, HierarchicalMode::Paper)
+            let stats = loc
+                .run(&on_gpu, spec, coarse, HierarchicalMode::Paper)
                 .map_err(|e| anyhow!("localization on the adapter: {e}"))?;
-            return loc
-                .read_grid(grid)
-                .map_err(|e| anyhow!("localization on the adapter: {e}"));
+            loc.read_grid(grid)
+                .map_err(|e| anyhow!("localization on the adapter: {e}"))?;
+            return Ok(stats);
         }
-        Localizer::new().run(Method::Hierarchical, field, spec, coarse, grid)?;
-        Ok(())
+        Ok(self
+            .cpu
+            .run(Method::Hierarchical, field, spec, coarse, grid)?)
     }
 
     /// Render `field` (its own colours) on `spec` into `r`.

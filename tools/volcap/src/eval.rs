@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 use volcap_engine::grid::{Grid, GridSpec};
-use volcap_engine::localize::{Localizer, Method, default_coarse};
+use volcap_engine::localize::{Method, default_coarse};
 use volcap_engine::mesh::{Mesh, marching_cubes};
 use volcap_engine::metrics::{chamfer, iou_bits, point_to_surface, sample_surface};
 use volcap_engine::model::fourier::Basis;
@@ -232,7 +232,7 @@ fn run_case(
     label: &str,
     c: &Case,
     spec: GridSpec,
-    loc: &mut Localizer,
+    stages: &mut crate::backend::Stages,
     grid: &mut Grid,
     truth: &mut Grid,
     gt_mask: bool,
@@ -313,17 +313,12 @@ fn run_case(
     };
     row.encode_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
-    let stats = loc.run(
-        Method::Hierarchical,
-        &field,
-        spec,
-        default_coarse(spec),
-        grid,
-    )?;
+    // On the adapter with `--backend wgpu` (the same evaluated points: tested in gpu_frames).
+    let stats = stages.localize(&field, spec, grid)?;
     row.localize_ms = t.elapsed().as_secs_f64() * 1e3;
     row.evaluations = stats.evaluations;
     // IoU against the oracle on the same grid (dense oracle: cheap, it is a lookup).
-    loc.run(
+    stages.cpu_localizer().run(
         Method::Dense,
         &OracleInCrop {
             oracle: &c.oracle,
@@ -465,7 +460,8 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let (runtime, _) = crate::backend::open(&a.backend, &a.runtime, &a.adapter)?;
     let mut images = Vec::new();
     let mut summary = Vec::new();
-    let (mut loc, mut grid, mut truth) = (Localizer::new(), Grid::new(spec), Grid::new(spec));
+    let mut stages = crate::backend::Stages::new(&runtime)?;
+    let (mut grid, mut truth) = (Grid::new(spec), Grid::new(spec));
     for ((name, prec), level) in specs
         .iter()
         .flat_map(|s| levels.iter().map(move |l| (s, *l)))
@@ -529,7 +525,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 &label,
                 c,
                 spec,
-                &mut loc,
+                &mut stages,
                 &mut grid,
                 &mut truth,
                 a.gt_mask,
