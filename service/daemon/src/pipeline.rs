@@ -462,7 +462,8 @@ impl AdapterRenderer {
         live: &Live,
     ) -> Option<Vec<u8>> {
         let spec = GridSpec::from_resolution(live.resolution).ok()?;
-        let why = match field.gpu_field() {
+        let on_gpu = field.gpu_field();
+        let why = match &on_gpu {
             None => Some("the shape model is not a Fourier head".to_string()),
             Some(_) => self.gpu.check_size(spec).err(),
         };
@@ -472,9 +473,9 @@ impl AdapterRenderer {
             } else if self.cpu_because.is_some() {
                 tracing::info!("rendering on the adapter again");
             }
-            self.cpu_because = why.clone();
+            self.cpu_because.clone_from(&why);
         }
-        let Some(on_gpu) = field.gpu_field().filter(|_| why.is_none()) else {
+        let (Some(on_gpu), None) = (on_gpu, why) else {
             return render_field(renderer, sh, field, field, live);
         };
         let t = Instant::now();
@@ -499,9 +500,9 @@ impl AdapterRenderer {
     }
 }
 
-/// Without the `wgpu` feature nothing renders on an adapter.
+/// Without the `wgpu` feature nothing renders on an adapter: no value of this type exists.
 #[cfg(not(feature = "wgpu"))]
-pub(crate) struct AdapterRenderer;
+pub(crate) enum AdapterRenderer {}
 
 #[cfg(not(feature = "wgpu"))]
 impl AdapterRenderer {
@@ -514,12 +515,12 @@ impl AdapterRenderer {
 
     pub(crate) fn render(
         &mut self,
-        renderer: &mut Renderer,
-        sh: &Shared,
-        field: &volcap_engine::model::ModelField,
-        live: &Live,
+        _renderer: &mut Renderer,
+        _sh: &Shared,
+        _field: &volcap_engine::model::ModelField,
+        _live: &Live,
     ) -> Option<Vec<u8>> {
-        render_field(renderer, sh, field, field, live)
+        match *self {}
     }
 }
 

@@ -312,8 +312,8 @@ impl Renderer {
                     1.0
                 }
             }));
-        self.hit = cols.hit;
-        self.coarse_hit = cols.coarse_hit;
+        self.hit.clone_from(&cols.hit);
+        self.coarse_hit.clone_from(&cols.coarse_hit);
         self.final_nodes.clear();
         self.culled.clear();
         self.on_gpu = true;
@@ -332,10 +332,15 @@ impl Renderer {
         if !self.on_gpu {
             return Err("the last frame was not rendered on the adapter".into());
         }
-        let (rgba, depth) = gpu.display(size, background.map(to_u8), &self.depth, &self.col_of)?;
+        gpu.display(
+            size,
+            background.map(to_u8),
+            &self.depth,
+            &self.col_of,
+            &mut self.display_rgba,
+            &mut self.display_depth,
+        )?;
         self.display_size = size.max(2);
-        self.display_rgba = rgba;
-        self.display_depth = depth;
         Ok(&self.display_rgba)
     }
 

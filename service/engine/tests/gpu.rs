@@ -354,6 +354,30 @@ fn the_adapter_counts_its_work_and_times_it_where_it_can() {
     }
 }
 
+/// Every analytic scene with its values at every point of `spec`'s grid (evaluated on the
+/// host: the table field the adapter's localizer and renderer read).
+fn analytic_tables(
+    spec: volcap_engine::grid::GridSpec,
+) -> Vec<(
+    &'static str,
+    volcap_engine::analytic::AnalyticScene,
+    Vec<f32>,
+)> {
+    use volcap_engine::field::OccupancyField;
+    let pts: Vec<glam::Vec3> = (0..spec.len())
+        .map(|q| spec.world(spec.unlinear(q)))
+        .collect();
+    volcap_engine::analytic::SCENES
+        .iter()
+        .map(|&name| {
+            let scene = volcap_engine::analytic::AnalyticScene::by_name(name).unwrap();
+            let mut table = vec![0.0f32; spec.len()];
+            scene.occupancy(&pts, &mut table).unwrap();
+            (name, scene, table)
+        })
+        .collect()
+}
+
 /// The hierarchical localization with its grid on the adapter against the CPU's, on every
 /// analytic scene (the field tabulated on the host, so both sides see the same values): the
 /// same value at every grid point, the same evaluated set, evaluations and conflict rounds,
@@ -361,9 +385,6 @@ fn the_adapter_counts_its_work_and_times_it_where_it_can() {
 /// and with lists too small at first (grown, the frame run again).
 #[test]
 fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
-    use glam::Vec3;
-    use volcap_engine::analytic::{AnalyticScene, SCENES};
-    use volcap_engine::field::OccupancyField;
     use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
     use volcap_engine::grid::{Grid, GridSpec};
     use volcap_engine::localize::{HierarchicalMode, Localizer, Method};
@@ -375,13 +396,7 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
             .unwrap()
             .with_list_capacity(cap);
         let spec = GridSpec::from_resolution(res).unwrap();
-        let pts: Vec<Vec3> = (0..spec.len())
-            .map(|q| spec.world(spec.unlinear(q)))
-            .collect();
-        for name in SCENES {
-            let scene = AnalyticScene::by_name(name).unwrap();
-            let mut table = vec![0.0f32; spec.len()];
-            scene.occupancy(&pts, &mut table).unwrap();
+        for (name, scene, table) in analytic_tables(spec) {
             for (method, mode) in [
                 (Method::Hierarchical, HierarchicalMode::Paper),
                 (Method::HierarchicalNoConflict, HierarchicalMode::NoConflict),
@@ -458,9 +473,6 @@ fn a_grid_over_the_adapters_binding_limit_is_refused_with_its_size() {
 /// 99.9 % of pixels.
 #[test]
 fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
-    use glam::Vec3;
-    use volcap_engine::analytic::{AnalyticScene, SCENES};
-    use volcap_engine::field::OccupancyField;
     use volcap_engine::gpu::localize::GpuField;
     use volcap_engine::gpu::render::GpuRenderer;
     use volcap_engine::grid::GridSpec;
@@ -475,13 +487,7 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
             .unwrap()
             .with_list_capacity(cap);
         let spec = GridSpec::from_resolution(res).unwrap();
-        let pts: Vec<Vec3> = (0..spec.len())
-            .map(|q| spec.world(spec.unlinear(q)))
-            .collect();
-        for name in SCENES {
-            let scene = AnalyticScene::by_name(name).unwrap();
-            let mut table = vec![0.0f32; spec.len()];
-            scene.occupancy(&pts, &mut table).unwrap();
+        for (name, scene, table) in analytic_tables(spec) {
             for (shade, coarse) in [(false, 3), (true, 2)] {
                 let opts = RenderOptions {
                     coarse_level: coarse,

@@ -92,6 +92,18 @@ impl FieldBuffers {
     }
 }
 
+/// The series' parameters as `series.wgsl` takes them: K, map size, basis (1: cosine), the
+/// depth scale and the surface level's offset (the floats as bits).
+pub(super) fn series_head(maps: &FourierMaps) -> [u32; 5] {
+    [
+        maps.k() as u32,
+        maps.size() as u32,
+        (maps.basis() == Basis::Cosine) as u32,
+        maps.zeta_scale().to_bits(),
+        (0.5 - maps.iso_level()).to_bits(),
+    ]
+}
+
 /// One frame's maps on the adapter.
 pub struct GpuFourier {
     gpu: Arc<Gpu>,
@@ -124,13 +136,7 @@ impl GpuFourier {
         gpu.count()
             .bytes_up
             .fetch_add(bytes as u64, Ordering::Relaxed);
-        let head = [
-            maps.k() as u32,
-            maps.size() as u32,
-            (maps.basis() == Basis::Cosine) as u32,
-            maps.zeta_scale().to_bits(),
-            (0.5 - maps.iso_level()).to_bits(),
-        ];
+        let head = series_head(maps);
         Ok(GpuFourier {
             gpu,
             pipeline,

@@ -15,14 +15,17 @@
 //! needs more. The whole grid is one storage buffer: grids over the adapter's binding limit
 //! (513^3 at default limits) are refused with the sizes named.
 
+use super::Gpu;
 use super::kit::entry;
-use super::{Gpu, groups};
 use crate::grid::{Grid, GridSpec};
 use crate::localize::{HierarchicalMode, LocalizeStats, check_coarse};
-use crate::model::fourier::{Basis, FourierMaps};
+use crate::model::fourier::FourierMaps;
 use glam::Mat3;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
+
+mod record;
+pub(super) use record::{Dispatch, Rec};
 
 const BOOK: &str = include_str!("localize.wgsl");
 const EVAL: &str = concat!(
@@ -105,6 +108,8 @@ struct FieldBufs {
     aux: wgpu::Buffer,
     maps_cap: usize,
     aux_cap: usize,
+    /// Points per axis of the grid whose coordinates `aux` holds (0: none yet).
+    coords_n: usize,
     bind: wgpu::BindGroup,
 }
 
@@ -124,6 +129,8 @@ pub struct GpuLocalizer {
     /// Incremented whenever the grid's buffers are remade (bind groups holding them are
     /// stale then).
     generation: u64,
+    /// The buffers' generation and mode (tight or not) the parameter blocks hold.
+    params_for: Option<(u64, bool)>,
 }
 
 impl Pipes {
@@ -188,6 +195,7 @@ impl GpuLocalizer {
             render: false,
             eval_fourier: false,
             generation: 0,
+            params_for: None,
         })
     }
 
@@ -341,14 +349,8 @@ impl GpuLocalizer {
                         mask.len()
                     ));
                 }
-                let head = [
-                    maps.k() as u32,
-                    maps.size() as u32,
-                    (maps.basis() == Basis::Cosine) as u32,
-                    maps.zeta_scale().to_bits(),
-                    (0.5 - maps.iso_level()).to_bits(),
-                    *mask_size as u32,
-                ];
+                let s = super::fourier::series_head(maps);
+                let head = [s[0], s[1], s[2], s[3], s[4], *mask_size as u32];
                 (maps.coefficients(), *mask, head, *to_crop)
             }
         };
@@ -359,18 +361,16 @@ impl GpuLocalizer {
                 std::mem::size_of_val(data)
             ));
         }
-        // The coordinates from the host (GridSpec::coord: the same floats as the CPU's
-        // points, whatever the adapter's division), then the mask.
-        let mut aux: Vec<f32> = (0..spec.n()).map(|i| spec.coord(i)).collect();
-        aux.extend_from_slice(mask);
+        let n = spec.n();
+        let aux_len = n + mask.len();
         let fits = self
             .field
             .as_ref()
-            .is_some_and(|f| f.maps_cap >= data.len() && f.aux_cap >= aux.len());
+            .is_some_and(|f| f.maps_cap >= data.len() && f.aux_cap >= aux_len);
         if !fits {
             let old = self.field.take();
             let maps_cap = old.as_ref().map_or(0, |f| f.maps_cap).max(data.len());
-            let aux_cap = old.as_ref().map_or(0, |f| f.aux_cap).max(aux.len());
+            let aux_cap = old.as_ref().map_or(0, |f| f.aux_cap).max(aux_len);
             use wgpu::BufferUsages as U;
             let d = &self.gpu.device;
             let buf = |label, floats: usize, usage| {
@@ -395,10 +395,11 @@ impl GpuLocalizer {
                 aux: aux_b,
                 maps_cap,
                 aux_cap,
+                coords_n: 0,
                 bind,
             });
         }
-        let f = self.field.as_ref().expect("made above");
+        let f = self.field.as_mut().expect("made above");
         let mut params = [0u32; 20];
         params[..6].copy_from_slice(&head);
         for (i, v) in to_crop.to_cols_array().iter().enumerate() {
@@ -407,8 +408,17 @@ impl GpuLocalizer {
         let q = &self.gpu.queue;
         q.write_buffer(&f.params, 0, bytemuck::cast_slice(&params));
         q.write_buffer(&f.maps, 0, bytemuck::cast_slice(data));
-        q.write_buffer(&f.aux, 0, bytemuck::cast_slice(&aux));
-        let up = std::mem::size_of_val(data) + aux.len() * 4 + 80;
+        let mut up = std::mem::size_of_val(data) + std::mem::size_of_val(mask) + 80;
+        if f.coords_n != n {
+            // The coordinates from the host (GridSpec::coord: the same floats as the CPU's
+            // points, whatever the adapter's division), when the grid's size changes.
+            let coords: Vec<f32> = (0..n).map(|i| spec.coord(i)).collect();
+            q.write_buffer(&f.aux, 0, bytemuck::cast_slice(&coords));
+            f.coords_n = n;
+            up += n * 4;
+        }
+        // The mask after them.
+        q.write_buffer(&f.aux, (n * 4) as u64, bytemuck::cast_slice(mask));
         self.gpu
             .count()
             .bytes_up
@@ -491,7 +501,9 @@ impl GpuLocalizer {
         let p = &self.pipes;
         let n = spec.n() as u32;
         let tight = mode == HierarchicalMode::Tight;
-        for l in 0..=spec.level() {
+        // The blocks depend on the buffers (size, capacity) and the mode only.
+        let fresh = self.params_for == Some((self.generation, tight));
+        for l in (0..=spec.level()).filter(|_| !fresh) {
             let s = spec.stride(l) as u32;
             for o in 0..ORIENTATIONS {
                 // Orientation o < 2 reads list o and writes list 1 - o; 2 reads the renderer's
@@ -519,6 +531,7 @@ impl GpuLocalizer {
                 );
             }
         }
+        self.params_for = Some((self.generation, tight));
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&b.values, 0, None);
         enc.clear_buffer(&b.queued, 0, None);
@@ -577,175 +590,4 @@ impl GpuLocalizer {
         }
         Ok(())
     }
-}
-
-/// Records a frame's work: compute passes on one encoder, submitted where the host must read
-/// a count (the conflict loop's rounds, the frame's end).
-pub(super) struct Rec<'a> {
-    pub(super) gpu: &'a Arc<Gpu>,
-    pub(super) b: &'a Bufs,
-    f: &'a FieldBufs,
-    pub(super) p: &'a Pipes,
-    eval: &'a wgpu::ComputePipeline,
-    pub(super) spec: GridSpec,
-    enc: Option<wgpu::CommandEncoder>,
-    pub(super) dispatches: u64,
-}
-
-impl<'a> Rec<'a> {
-    /// Record one compute pass of `steps` (pipeline, level, orientation, how).
-    pub(super) fn pass(&mut self, steps: &[(&wgpu::ComputePipeline, u32, usize, Dispatch<'_>)]) {
-        let enc = self
-            .enc
-            .get_or_insert_with(|| self.gpu.device.create_command_encoder(&Default::default()));
-        let mut pass = enc.begin_compute_pass(&Default::default());
-        for (pipe, l, o, how) in steps {
-            pass.set_pipeline(pipe);
-            pass.set_bind_group(0, &self.b.binds[*l as usize][*o], &[]);
-            match how {
-                Dispatch::One => pass.dispatch_workgroups(1, 1, 1),
-                Dispatch::Prep => {
-                    pass.set_bind_group(1, &self.b.args_bind, &[]);
-                    pass.dispatch_workgroups(1, 1, 1)
-                }
-                Dispatch::Points(count) => {
-                    let (x, y) = groups(*count);
-                    pass.dispatch_workgroups(x, y, 1)
-                }
-                Dispatch::Indirect => pass.dispatch_workgroups_indirect(&self.b.args, 0),
-                Dispatch::Eval => {
-                    pass.set_bind_group(1, &self.f.bind, &[]);
-                    pass.dispatch_workgroups_indirect(&self.b.args, 0)
-                }
-                Dispatch::With(g, count) => {
-                    pass.set_bind_group(1, *g, &[]);
-                    match count {
-                        Some(c) => {
-                            let (x, y) = groups(*c);
-                            pass.dispatch_workgroups(x, y, 1)
-                        }
-                        None => pass.dispatch_workgroups_indirect(&self.b.args, 0),
-                    }
-                }
-            }
-            self.dispatches += 1;
-        }
-    }
-
-    /// The evaluation kernel of the field uploaded.
-    pub(super) fn eval_pipe(&self) -> &'a wgpu::ComputePipeline {
-        self.eval
-    }
-
-    /// Points of level `l` (all, not only the new ones).
-    pub(super) fn level_points(&self, l: u32) -> u32 {
-        let n = self.spec.n() as u32;
-        let nl = (n - 1) / self.spec.stride(l) as u32 + 1;
-        nl * nl * nl
-    }
-
-    /// Submit what was recorded with a copy of the counters and read them.
-    pub(super) fn counts(&mut self) -> Result<[u32; COUNTS], String> {
-        let mut enc = self
-            .enc
-            .take()
-            .unwrap_or_else(|| self.gpu.device.create_command_encoder(&Default::default()));
-        let b = self.b;
-        enc.copy_buffer_to_buffer(&b.counts, 0, &b.counts_staging, 0, (COUNTS * 4) as u64);
-        let mut out = [0u32; COUNTS];
-        self.gpu.submit_and_read_bytes(
-            enc,
-            &b.counts_staging,
-            bytemuck::cast_slice_mut(&mut out),
-        )?;
-        Ok(out)
-    }
-
-    /// Levels `coarse..=last` (the coarsest evaluated whole): (stats, whether a list
-    /// overflowed). With the conflict loop, each round is one submission.
-    pub(super) fn levels(
-        &mut self,
-        coarse: u32,
-        last: u32,
-        mode: HierarchicalMode,
-    ) -> Result<(LocalizeStats, bool), String> {
-        let p = self.p;
-        let ev = self.eval;
-        let pts = self.level_points(coarse);
-        self.pass(&[
-            (&p.zero, coarse, 1, Dispatch::One),
-            (&p.seed, coarse, 1, Dispatch::Points(pts)),
-            (&p.prep_eval, coarse, 0, Dispatch::Prep),
-            (ev, coarse, 0, Dispatch::Eval),
-        ]);
-        let mut rounds = 0u32;
-        for l in coarse + 1..=last {
-            let pts = self.level_points(l);
-            self.pass(&[
-                (&p.zero, l, 1, Dispatch::One),
-                (&p.upsample, l, 1, Dispatch::Points(pts)),
-                (&p.prep_cand, l, 1, Dispatch::Prep),
-                (&p.dilate, l, 1, Dispatch::Indirect),
-                (&p.prep_eval, l, 0, Dispatch::Prep),
-                (ev, l, 0, Dispatch::Eval),
-            ]);
-            if mode == HierarchicalMode::NoConflict {
-                continue;
-            }
-            self.pass(&[
-                (&p.zero, l, 0, Dispatch::One),
-                (&p.prep_src, l, 0, Dispatch::Prep),
-                (&p.conflict, l, 0, Dispatch::Indirect),
-            ]);
-            // The conflict loop: the list just written (o = 1 reads list 1) is evaluated and
-            // scanned until a round lists nothing.
-            let mut o = 1usize;
-            loop {
-                let counts = self.counts()?;
-                if counts[OVERFLOW] != 0 {
-                    return Ok((LocalizeStats::default(), true));
-                }
-                if counts[LIST[o]] == 0 {
-                    break;
-                }
-                rounds += 1;
-                self.pass(&[
-                    (&p.prep_eval, l, o, Dispatch::Prep),
-                    (ev, l, o, Dispatch::Eval),
-                    (&p.zero, l, o, Dispatch::One),
-                    (&p.prep_src, l, o, Dispatch::Prep),
-                    (&p.conflict, l, o, Dispatch::Indirect),
-                ]);
-                o = 1 - o;
-            }
-        }
-        let counts = self.counts()?;
-        let c = self.gpu.count();
-        c.dispatches
-            .fetch_add(std::mem::take(&mut self.dispatches), Ordering::Relaxed);
-        c.localize_runs.fetch_add(1, Ordering::Relaxed);
-        let stats = LocalizeStats {
-            evaluations: counts[EVALS] as u64,
-            conflict_rounds: rounds,
-            empty: false,
-        };
-        Ok((stats, counts[OVERFLOW] != 0))
-    }
-}
-
-/// How a step dispatches.
-#[derive(Clone, Copy)]
-pub(super) enum Dispatch<'g> {
-    /// One invocation.
-    One,
-    /// One invocation writing the indirect arguments.
-    Prep,
-    /// One invocation per point of a count known to the host.
-    Points(u32),
-    /// The indirect arguments.
-    Indirect,
-    /// The field's evaluation, over the indirect arguments.
-    Eval,
-    /// With a second bind group: over a count, or the indirect arguments.
-    With(&'g wgpu::BindGroup, Option<u32>),
 }

@@ -14,9 +14,7 @@
 //! Fourier kernel in tools/volcap/tests/gpu_frames.rs).
 
 use super::kit::entry;
-use super::localize::{
-    COUNTS, CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, OVERFLOW,
-};
+use super::localize::{CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, OVERFLOW};
 use super::{Gpu, groups};
 use crate::grid::GridSpec;
 use crate::localize::HierarchicalMode;
@@ -85,6 +83,11 @@ pub struct GpuRenderer {
     pipes: RenderPipes,
     columns: Option<ColumnBufs>,
     display: Option<DisplayBufs>,
+    /// The last frame's columns, and the host-side scratch of the read-backs and uploads,
+    /// kept from frame to frame.
+    out: Columns,
+    raw: Vec<u32>,
+    upload: Vec<f32>,
 }
 
 impl RenderPipes {
@@ -144,6 +147,9 @@ impl GpuRenderer {
             pipes,
             columns: None,
             display: None,
+            out: Columns::default(),
+            raw: Vec::new(),
+            upload: Vec::new(),
         })
     }
 
@@ -216,7 +222,7 @@ impl GpuRenderer {
         field: &GpuField<'_>,
         spec: GridSpec,
         coarse: u32,
-    ) -> Result<Columns, String> {
+    ) -> Result<&Columns, String> {
         let fine = spec
             .level()
             .checked_sub(1)
@@ -230,23 +236,16 @@ impl GpuRenderer {
         }
         self.loc.prepare(field, spec, coarse, true)?;
         loop {
-            match self.attempt(spec, coarse, fine)? {
-                Some(c) => {
-                    self.loc.done = true;
-                    return Ok(c);
-                }
-                None => self.loc.grow(spec)?,
+            if self.attempt(spec, coarse, fine)? {
+                self.loc.done = true;
+                return Ok(&self.out);
             }
+            self.loc.grow(spec)?;
         }
     }
 
-    /// One attempt; `None` when a list overflowed.
-    fn attempt(
-        &mut self,
-        spec: GridSpec,
-        coarse: u32,
-        fine: u32,
-    ) -> Result<Option<Columns>, String> {
+    /// One attempt into `self.out`; `false` when a list overflowed.
+    fn attempt(&mut self, spec: GridSpec, coarse: u32, fine: u32) -> Result<bool, String> {
         // The localizer's buffers first (the column bind groups hold its lists).
         self.column_bufs(spec)?;
         let cb = self.columns.as_ref().expect("made above");
@@ -254,7 +253,7 @@ impl GpuRenderer {
         let mut rec = self.loc.recorder(spec, HierarchicalMode::Paper)?;
         let (stats, overflow) = rec.levels(coarse, fine, HierarchicalMode::Paper)?;
         if overflow {
-            return Ok(None);
+            return Ok(false);
         }
         let big_l = spec.level();
         let plane = (spec.n() * spec.n()) as u32;
@@ -307,7 +306,7 @@ impl GpuRenderer {
                 ]);
                 let counts = rec.counts()?;
                 if counts[OVERFLOW] != 0 {
-                    return Ok(None);
+                    return Ok(false);
                 }
                 if counts[LIST[1 - o]] == 0 {
                     break;
@@ -333,7 +332,7 @@ impl GpuRenderer {
             x = 1 - x;
             let counts = rec.counts()?;
             if counts[OVERFLOW] != 0 {
-                return Ok(None);
+                return Ok(false);
             }
             first = false;
             if counts[LOG] == 0 {
@@ -348,36 +347,44 @@ impl GpuRenderer {
         c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
         c.render_runs.fetch_add(1, Ordering::Relaxed);
         let n2 = plane as usize;
-        let mut raw = vec![0u32; 4 * n2];
+        let raw = &mut self.raw;
+        raw.resize(4 * n2, 0);
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(&cb.cols, 0, &cb.staging, 0, (raw.len() * 4) as u64);
         self.gpu
-            .submit_and_read_bytes(enc, &cb.staging, bytemuck::cast_slice_mut(&mut raw))?;
-        let hit = |h: u32| h as i32 - 1;
-        Ok(Some(Columns {
-            hit: raw[..n2].iter().map(|&h| hit(h)).collect(),
-            coarse_hit: raw[n2..2 * n2].iter().map(|&h| hit(h)).collect(),
-            v_in: raw[2 * n2..3 * n2]
-                .iter()
-                .map(|&b| f32::from_bits(b))
-                .collect(),
-            v_out: raw[3 * n2..].iter().map(|&b| f32::from_bits(b)).collect(),
-            coarse_evaluations: stats.evaluations,
-            final_evaluations: (counts[EVALS] as u64).saturating_sub(stats.evaluations),
-            culled: counts[CULLED[x]] as u64,
-        }))
+            .submit_and_read_bytes(enc, &cb.staging, bytemuck::cast_slice_mut(raw))?;
+        let hit = |h: &u32| *h as i32 - 1;
+        let o = &mut self.out;
+        let fill_i = |v: &mut Vec<i32>, r: &[u32]| {
+            v.clear();
+            v.extend(r.iter().map(hit));
+        };
+        let fill_f = |v: &mut Vec<f32>, r: &[u32]| {
+            v.clear();
+            v.extend(r.iter().map(|&b| f32::from_bits(b)));
+        };
+        fill_i(&mut o.hit, &raw[..n2]);
+        fill_i(&mut o.coarse_hit, &raw[n2..2 * n2]);
+        fill_f(&mut o.v_in, &raw[2 * n2..3 * n2]);
+        fill_f(&mut o.v_out, &raw[3 * n2..]);
+        o.coarse_evaluations = stats.evaluations;
+        o.final_evaluations = (counts[EVALS] as u64).saturating_sub(stats.evaluations);
+        o.culled = counts[CULLED[x]] as u64;
+        Ok(true)
     }
 
     /// The last frame at `size x size` pixels (`render.rs` `render_display`'s rule, from the
-    /// values on the adapter): RGBA8 and depth. `hit`, `depth` and `color` are the frame's
-    /// per column (depth and colour as the host placed and coloured them).
+    /// values on the adapter): RGBA8 into `rgba` and depth into `z`. `depth` and `color` are
+    /// the frame's per column (as the host placed and coloured them).
     pub fn display(
         &mut self,
         size: usize,
         background: [u8; 4],
         depth: &[f32],
         color: &[[f32; 3]],
-    ) -> Result<(Vec<u8>, Vec<f32>), String> {
+        rgba: &mut Vec<u8>,
+        z: &mut Vec<f32>,
+    ) -> Result<(), String> {
         if !self.loc.done {
             return Err("no frame rendered on the adapter".into());
         }
@@ -463,14 +470,15 @@ impl GpuRenderer {
             0,
             0,
         ];
-        let mut cols = Vec::with_capacity(4 * plane + n);
-        for (z, c) in depth.iter().zip(color) {
-            cols.extend_from_slice(&[*z, c[0], c[1], c[2]]);
+        let cols = &mut self.upload;
+        cols.clear();
+        for (d, c) in depth.iter().zip(color) {
+            cols.extend_from_slice(&[*d, c[0], c[1], c[2]]);
         }
         cols.extend((0..n).map(|k| spec.coord(k)));
         let q = &self.gpu.queue;
         q.write_buffer(&db.params, 0, bytemuck::cast_slice(&params));
-        q.write_buffer(&db.cols, 0, bytemuck::cast_slice(&cols));
+        q.write_buffer(&db.cols, 0, bytemuck::cast_slice(cols));
         let c = self.gpu.count();
         c.bytes_up
             .fetch_add((cols.len() * 4 + 32) as u64, Ordering::Relaxed);
@@ -484,20 +492,14 @@ impl GpuRenderer {
         }
         c.dispatches.fetch_add(1, Ordering::Relaxed);
         enc.copy_buffer_to_buffer(&db.out, 0, &db.staging, 0, (2 * size * size * 4) as u64);
-        let mut raw = vec![0u32; 2 * size * size];
+        let raw = &mut self.raw;
+        raw.resize(2 * size * size, 0);
         self.gpu
-            .submit_and_read_bytes(enc, &db.staging, bytemuck::cast_slice_mut(&mut raw))?;
-        let rgba = raw[..size * size]
-            .iter()
-            .flat_map(|p| p.to_le_bytes())
-            .collect();
-        let z = raw[size * size..]
-            .iter()
-            .map(|&b| f32::from_bits(b))
-            .collect();
-        Ok((rgba, z))
+            .submit_and_read_bytes(enc, &db.staging, bytemuck::cast_slice_mut(raw))?;
+        rgba.clear();
+        rgba.extend(raw[..size * size].iter().flat_map(|p| p.to_le_bytes()));
+        z.clear();
+        z.extend(raw[size * size..].iter().map(|&b| f32::from_bits(b)));
+        Ok(())
     }
 }
-
-/// The counter slots the renderer reads (kept in step with `render.wgsl`).
-const _: () = assert!(LOG < COUNTS && CULLED[1] < COUNTS);

@@ -1,0 +1,183 @@
+//! Recording a frame's localization: compute passes on one encoder, the levels of the
+//! hierarchical method, one submission per conflict round (its counters read back).
+
+use super::{Bufs, COUNTS, EVALS, FieldBufs, LIST, OVERFLOW, Pipes};
+use crate::gpu::{Gpu, groups};
+use crate::grid::GridSpec;
+use crate::localize::{HierarchicalMode, LocalizeStats};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+
+/// Records a frame's work: compute passes on one encoder, submitted where the host must read
+/// a count (the conflict loop's rounds, the frame's end).
+pub(in crate::gpu) struct Rec<'a> {
+    pub(in crate::gpu) gpu: &'a Arc<Gpu>,
+    pub(in crate::gpu) b: &'a Bufs,
+    pub(super) f: &'a FieldBufs,
+    pub(in crate::gpu) p: &'a Pipes,
+    pub(super) eval: &'a wgpu::ComputePipeline,
+    pub(in crate::gpu) spec: GridSpec,
+    pub(super) enc: Option<wgpu::CommandEncoder>,
+    pub(in crate::gpu) dispatches: u64,
+}
+
+impl<'a> Rec<'a> {
+    /// Record one compute pass of `steps` (pipeline, level, orientation, how).
+    pub(in crate::gpu) fn pass(
+        &mut self,
+        steps: &[(&wgpu::ComputePipeline, u32, usize, Dispatch<'_>)],
+    ) {
+        let enc = self
+            .enc
+            .get_or_insert_with(|| self.gpu.device.create_command_encoder(&Default::default()));
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        for (pipe, l, o, how) in steps {
+            pass.set_pipeline(pipe);
+            pass.set_bind_group(0, &self.b.binds[*l as usize][*o], &[]);
+            match how {
+                Dispatch::One => pass.dispatch_workgroups(1, 1, 1),
+                Dispatch::Prep => {
+                    pass.set_bind_group(1, &self.b.args_bind, &[]);
+                    pass.dispatch_workgroups(1, 1, 1)
+                }
+                Dispatch::Points(count) => {
+                    let (x, y) = groups(*count);
+                    pass.dispatch_workgroups(x, y, 1)
+                }
+                Dispatch::Indirect => pass.dispatch_workgroups_indirect(&self.b.args, 0),
+                Dispatch::Eval => {
+                    pass.set_bind_group(1, &self.f.bind, &[]);
+                    pass.dispatch_workgroups_indirect(&self.b.args, 0)
+                }
+                Dispatch::With(g, count) => {
+                    pass.set_bind_group(1, *g, &[]);
+                    match count {
+                        Some(c) => {
+                            let (x, y) = groups(*c);
+                            pass.dispatch_workgroups(x, y, 1)
+                        }
+                        None => pass.dispatch_workgroups_indirect(&self.b.args, 0),
+                    }
+                }
+            }
+            self.dispatches += 1;
+        }
+    }
+
+    /// The evaluation kernel of the field uploaded.
+    pub(in crate::gpu) fn eval_pipe(&self) -> &'a wgpu::ComputePipeline {
+        self.eval
+    }
+
+    /// Points of level `l` (all, not only the new ones).
+    pub(in crate::gpu) fn level_points(&self, l: u32) -> u32 {
+        let n = self.spec.n() as u32;
+        let nl = (n - 1) / self.spec.stride(l) as u32 + 1;
+        nl * nl * nl
+    }
+
+    /// Submit what was recorded with a copy of the counters and read them.
+    pub(in crate::gpu) fn counts(&mut self) -> Result<[u32; COUNTS], String> {
+        let mut enc = self
+            .enc
+            .take()
+            .unwrap_or_else(|| self.gpu.device.create_command_encoder(&Default::default()));
+        let b = self.b;
+        enc.copy_buffer_to_buffer(&b.counts, 0, &b.counts_staging, 0, (COUNTS * 4) as u64);
+        let mut out = [0u32; COUNTS];
+        self.gpu.submit_and_read_bytes(
+            enc,
+            &b.counts_staging,
+            bytemuck::cast_slice_mut(&mut out),
+        )?;
+        Ok(out)
+    }
+
+    /// Levels `coarse..=last` (the coarsest evaluated whole): (stats, whether a list
+    /// overflowed). With the conflict loop, each round is one submission.
+    pub(in crate::gpu) fn levels(
+        &mut self,
+        coarse: u32,
+        last: u32,
+        mode: HierarchicalMode,
+    ) -> Result<(LocalizeStats, bool), String> {
+        let p = self.p;
+        let ev = self.eval;
+        let pts = self.level_points(coarse);
+        self.pass(&[
+            (&p.zero, coarse, 1, Dispatch::One),
+            (&p.seed, coarse, 1, Dispatch::Points(pts)),
+            (&p.prep_eval, coarse, 0, Dispatch::Prep),
+            (ev, coarse, 0, Dispatch::Eval),
+        ]);
+        let mut rounds = 0u32;
+        for l in coarse + 1..=last {
+            let pts = self.level_points(l);
+            self.pass(&[
+                (&p.zero, l, 1, Dispatch::One),
+                (&p.upsample, l, 1, Dispatch::Points(pts)),
+                (&p.prep_cand, l, 1, Dispatch::Prep),
+                (&p.dilate, l, 1, Dispatch::Indirect),
+                (&p.prep_eval, l, 0, Dispatch::Prep),
+                (ev, l, 0, Dispatch::Eval),
+            ]);
+            if mode == HierarchicalMode::NoConflict {
+                continue;
+            }
+            self.pass(&[
+                (&p.zero, l, 0, Dispatch::One),
+                (&p.prep_src, l, 0, Dispatch::Prep),
+                (&p.conflict, l, 0, Dispatch::Indirect),
+            ]);
+            // The conflict loop: the list just written (o = 1 reads list 1) is evaluated and
+            // scanned until a round lists nothing.
+            let mut o = 1usize;
+            loop {
+                let counts = self.counts()?;
+                if counts[OVERFLOW] != 0 {
+                    return Ok((LocalizeStats::default(), true));
+                }
+                if counts[LIST[o]] == 0 {
+                    break;
+                }
+                rounds += 1;
+                self.pass(&[
+                    (&p.prep_eval, l, o, Dispatch::Prep),
+                    (ev, l, o, Dispatch::Eval),
+                    (&p.zero, l, o, Dispatch::One),
+                    (&p.prep_src, l, o, Dispatch::Prep),
+                    (&p.conflict, l, o, Dispatch::Indirect),
+                ]);
+                o = 1 - o;
+            }
+        }
+        let counts = self.counts()?;
+        let c = self.gpu.count();
+        c.dispatches
+            .fetch_add(std::mem::take(&mut self.dispatches), Ordering::Relaxed);
+        c.localize_runs.fetch_add(1, Ordering::Relaxed);
+        let stats = LocalizeStats {
+            evaluations: counts[EVALS] as u64,
+            conflict_rounds: rounds,
+            empty: false,
+        };
+        Ok((stats, counts[OVERFLOW] != 0))
+    }
+}
+
+/// How a step dispatches.
+#[derive(Clone, Copy)]
+pub(in crate::gpu) enum Dispatch<'g> {
+    /// One invocation.
+    One,
+    /// One invocation writing the indirect arguments.
+    Prep,
+    /// One invocation per point of a count known to the host.
+    Points(u32),
+    /// The indirect arguments.
+    Indirect,
+    /// The field's evaluation, over the indirect arguments.
+    Eval,
+    /// With a second bind group: over a count, or the indirect arguments.
+    With(&'g wgpu::BindGroup, Option<u32>),
+}
