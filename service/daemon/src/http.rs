@@ -39,11 +39,13 @@ pub struct App {
     /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can
     /// never share its address), resolution, coarse level, and the bytes.
     pub mesh_cache: Mutex<Option<MeshCache>>,
+    /// The thread that computes meshes, and its counts.
+    pub mesh_worker: MeshWorker,
     /// RTSP's figures (`[rtsp]`; off unless the daemon sets them after `new`).
     pub rtsp: Arc<crate::rtsp::Status>,
 }
 
-pub use mesh::{MESH_CONCURRENCY, MeshCache};
+pub use mesh::{MESH_CONCURRENCY, MeshCache, MeshWorker};
 
 impl App {
     pub fn new(
@@ -65,6 +67,7 @@ impl App {
             loopback_bind,
             mesh_gate: mesh::mesh_gate(),
             mesh_cache: Mutex::new(None),
+            mesh_worker: MeshWorker::default(),
             rtsp: Default::default(),
         }
     }

@@ -35,9 +35,10 @@ fn fps(addr: &str, secs: f64) -> f64 {
 }
 
 /// `n` requests for `/mesh.glb`, each abandoned `after` its head was sent, from one address;
-/// meanwhile the peak RSS (kB), the most mesh threads seen at once and the most threads.
-fn abandon_meshes(addr: &str, pid: u32, n: usize, after: Duration) -> (u64, usize, u64) {
-    let (mut rss, mut mesh, mut threads) = (0u64, 0usize, 0u64);
+/// meanwhile the peak RSS (kB), the most mesh threads seen at once, the most threads and the
+/// most computations running at once (`volcap_mesh_busy`).
+fn abandon_meshes(addr: &str, pid: u32, n: usize, after: Duration) -> (u64, usize, u64, u64) {
+    let (mut rss, mut mesh, mut threads, mut busy) = (0u64, 0usize, 0u64, 0u64);
     let status = |key: &str| -> u64 {
         std::fs::read_to_string(format!("/proc/{pid}/status"))
             .unwrap_or_default()
@@ -55,8 +56,19 @@ fn abandon_meshes(addr: &str, pid: u32, n: usize, after: Duration) -> (u64, usiz
         rss = rss.max(status("VmRSS:"));
         threads = threads.max(status("Threads:"));
         mesh = mesh.max(threads_named(pid, "volcap-mesh"));
+        busy = busy.max(mesh_metric(addr, "volcap_mesh_busy"));
     }
-    (rss, mesh, threads)
+    (rss, mesh, threads, busy)
+}
+
+/// A line of `/metrics` (`NAME VALUE`), as an integer.
+fn mesh_metric(addr: &str, name: &str) -> u64 {
+    let (st, _, body) = request(addr, "GET", "/metrics", "");
+    assert_eq!(st, 200);
+    String::from_utf8_lossy(&body)
+        .lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("/metrics has no {name}"))
 }
 
 /// Collects `WATCHDOG=1` times and `STATUS=` lines from a NOTIFY_SOCKET until dropped.
@@ -161,16 +173,21 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     let own_thread = threads_named(pid, "volcap-mesh");
     let (st, head, _) = request(&addr, "GET", "/mesh.glb", "");
     assert_eq!(st, 503, "a second mesh beside the first: {head}");
-    // Abandoned: the computation stops (the thread goes away well before a 257^3 mesh
+    // Abandoned: the computation stops (the worker is free again well before a 257^3 mesh
     // would be done) and no second one ever runs beside it.
     drop(a);
     let t = Instant::now();
-    while threads_named(pid, "volcap-mesh") > 0 && t.elapsed() < Duration::from_secs(10) {
+    while mesh_metric(&addr, "volcap_mesh_busy") > 0 && t.elapsed() < Duration::from_secs(10) {
         std::thread::sleep(Duration::from_millis(20));
     }
     let cancelled_in = t.elapsed();
+    assert_eq!(
+        mesh_metric(&addr, "volcap_mesh_total{result=\"cancelled\"}"),
+        1
+    );
+    assert_eq!(mesh_metric(&addr, "volcap_mesh_total{result=\"done\"}"), 0);
     let from = Instant::now();
-    let (rss, mesh, threads) = abandon_meshes(&addr, pid, 300, Duration::from_millis(20));
+    let (rss, mesh, threads, busy) = abandon_meshes(&addr, pid, 300, Duration::from_millis(20));
     let during = fps(&addr, 3.0);
     let gap = notify.longest_gap(from);
     eprintln!(
@@ -184,7 +201,8 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     assert!(during >= before / 2.0, "fps {before:.1} -> {during:.1}");
     assert!(gap < Duration::from_secs(5), "watchdog gap {gap:?}");
     assert_eq!(own_thread, 1, "the mesh runs on its own thread");
-    assert!(mesh <= 1, "{mesh} mesh computations at once");
+    assert!(mesh <= 1, "{mesh} mesh threads at once");
+    assert!(busy <= 1, "{busy} mesh computations at once");
     assert!(
         cancelled_in < Duration::from_secs(1),
         "an abandoned mesh ran on for {cancelled_in:?}"
@@ -207,13 +225,16 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
         s["resolution"] == 513
     });
     let rss513 = proc_status(&p, "VmRSS:");
-    let (peak, mesh, _) = abandon_meshes(&addr, pid, 100, Duration::from_millis(50));
+    let (peak, mesh, _, busy) = abandon_meshes(&addr, pid, 100, Duration::from_millis(50));
     eprintln!(
-        "513^3: 100 abandoned: RSS {} -> peak {} MB, mesh threads at once {mesh}",
+        "513^3: 100 abandoned: RSS {} -> peak {} MB, mesh threads at once {mesh}, computations at once {busy}",
         rss513 / 1024,
         peak / 1024
     );
-    assert!(mesh <= 1, "{mesh} mesh computations at once");
+    assert!(
+        mesh <= 1 && busy <= 1,
+        "{mesh} mesh threads, {busy} computations at once"
+    );
     // One mesh grid at 513^3 is 540 MB: at most one beside the render's own memory.
     assert!(
         peak < rss513 + 900 * 1024,

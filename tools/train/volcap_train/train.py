@@ -260,6 +260,25 @@ def thin_mask(coeff: torch.Tensor, radius: int) -> torch.Tensor:
     return occ * (1.0 - opened)
 
 
+def ray_level_bce(pred: torch.Tensor, target: torch.Tensor, k: int, samples: int, gen: torch.Generator, tau: float = 10.0, level: float = 0.5, band: int = 2) -> torch.Tensor:
+    """The surface level on every ray (`train fourier --ray-bce-weight`): both series [B, 2K+1,
+    H, W] decoded at `samples` stratified depths (one random offset per call), the target's
+    reading above `level` the label, BCE on tau (pred - level) as a logit (finite for any
+    series value); the mean over the rays the person covers, dilated by `band` map pixels so
+    that the silhouette's outside counts too. The Parseval L2 is content with a thin ray's
+    blurred, low series (its peak under the level: the hands vanish); this loss is not."""
+    dev = pred.device
+    z = ((torch.arange(samples, dtype=torch.float32) + torch.rand(samples, generator=gen)) / samples * 2.0 - 1.0).to(dev)
+    b = FO.basis(z, k)  # [M, 2K+1]
+    c = FO.channels(k)
+    p = torch.einsum("bchw,mc->bmhw", pred[:, :c], b)
+    lab = (torch.einsum("bchw,mc->bmhw", target[:, :c], b) > level).float()
+    occ = (target[:, :1] > 0.005).float()
+    ray = F.max_pool2d(occ, 2 * band + 1, stride=1, padding=band) if band > 0 else occ  # [B, 1, H, W]
+    bce = F.binary_cross_entropy_with_logits(tau * (p - level), lab, reduction="none")  # [B, M, H, W]
+    return (bce * ray).sum() / (ray.sum() * samples).clamp(min=1.0)
+
+
 def fourier_query(coeff: torch.Tensor, pts: torch.Tensor, k: int) -> torch.Tensor:
     """The whole point query of the Fourier head: coefficient maps [B, 2K+1, H, W], crop-NDC
     points [B, N, 3] -> occupancy [B, N] (grid_sample rule of the engine, zeta from crop z)."""
@@ -594,6 +613,9 @@ def train_fourier(args):
         d = mirror_some(d, flips) if d is not None else None
         dense, bce, occ, lab = losses(pred, tr, items, pidx, args.thin_weight)
         loss = dense + args.point_weight * bce.mean()
+        if args.ray_bce_weight > 0:
+            t = tr["coeff"][items].float().to(dev)
+            loss = loss + args.ray_bce_weight * ray_level_bce(pred, t, k, args.ray_samples, gen, tau)
         if args.moment_weight > 0:
             # Depth order: L1 on each ray's first moment int z f dz (linear in the sine terms),
             # whose L2 share in the Parseval loss is small next to the ray length's.
@@ -655,6 +677,8 @@ def main(argv=None):
     ap.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="fourier: where the net trains (auto: CUDA when present)")
     ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
     ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight")
+    ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
+    ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)

@@ -1,14 +1,6 @@
-//! Scene file parsing: any text gives a scene or an error naming the file, never a panic.
+//! Fuzz target: see bodies/scene_parse.rs (shared with the replay test `tests/fuzz_replay.rs`).
 #![no_main]
-use libfuzzer_sys::fuzz_target;
+#[path = "../bodies/scene_parse.rs"]
+mod body;
 
-fuzz_target!(|data: &[u8]| {
-    if let Ok(text) = std::str::from_utf8(data)
-        && let Err(e) = volcap_sim::Scene::parse(text, std::path::Path::new("fuzz.toml"))
-    {
-        assert!(
-            e.to_string().contains("fuzz.toml"),
-            "error does not name the file: {e}"
-        );
-    }
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| body::run(data));

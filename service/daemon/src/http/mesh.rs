@@ -5,8 +5,9 @@ use axum::body::Bytes;
 use axum::extract::State;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
 use volcap_engine::field::{FieldError, OccupancyField};
 
 /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can never
@@ -31,6 +32,62 @@ pub const MESH_NICE: i32 = 10;
 /// The gate of [`MESH_CONCURRENCY`] computations.
 pub fn mesh_gate() -> Arc<tokio::sync::Semaphore> {
     Arc::new(tokio::sync::Semaphore::new(MESH_CONCURRENCY))
+}
+
+/// A computation handed to the worker.
+type Job = Box<dyn FnOnce() + Send>;
+
+/// The mesh worker: one long-lived thread, `volcap-mesh` at [`MESH_NICE`], started by the
+/// first request, that runs the computations one after another (the gate lets at most
+/// [`MESH_CONCURRENCY`] = 1 be handed over at a time, so its queue of one never fills). One
+/// thread for the daemon's life: no thread is created per request, and a computation that
+/// ends cannot overlap the next one even while its thread tears down. A computation that
+/// panics is caught (its client gets 500); a worker that is gone is started again.
+#[derive(Default)]
+pub struct MeshWorker {
+    tx: Mutex<Option<SyncSender<Job>>>,
+    /// Computations that gave a mesh, that stopped because their client left, that failed.
+    pub done: AtomicU64,
+    pub cancelled: AtomicU64,
+    pub failed: AtomicU64,
+}
+
+impl MeshWorker {
+    fn submit(&self, job: Job) -> Result<(), String> {
+        let mut tx = self.tx.lock().unwrap_or_else(|p| p.into_inner());
+        let mut job = job;
+        for _ in 0..2 {
+            if tx.is_none() {
+                *tx = Some(Self::start()?);
+            }
+            let Some(sender) = tx.as_ref() else { break };
+            match sender.try_send(job) {
+                Ok(()) => return Ok(()),
+                Err(TrySendError::Full(_)) => return Err("mesh worker busy".into()),
+                Err(TrySendError::Disconnected(j)) => {
+                    job = j;
+                    *tx = None;
+                }
+            }
+        }
+        Err("mesh worker cannot be started".into())
+    }
+
+    fn start() -> Result<SyncSender<Job>, String> {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Job>(MESH_CONCURRENCY);
+        std::thread::Builder::new()
+            .name("volcap-mesh".into())
+            .spawn(move || {
+                lower_priority();
+                while let Ok(job) = rx.recv() {
+                    if std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)).is_err() {
+                        tracing::warn!("a mesh computation panicked; the worker goes on");
+                    }
+                }
+            })
+            .map_err(|e| format!("mesh thread: {e}"))?;
+        Ok(tx)
+    }
 }
 
 /// The field, refusing to be evaluated once `cancel` is set: a mesh whose client left
@@ -105,7 +162,7 @@ fn compute(
 /// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms): it runs on
 /// a thread of its own at a lower priority ([`MESH_NICE`]), [`MESH_CONCURRENCY`] at a time
 /// (others get 503 with Retry-After), and its bytes are cached for the frame, so a repeated
-/// request for the same frame costs nothing. The gate's permit moves into the computation
+/// request for the same frame costs nothing (the thread: [`MeshWorker`]). The gate's permit moves into the computation
 /// and is released only when it ends, so a client that leaves cannot let another one start
 /// beside it; leaving cancels the computation at its next batch of points (nobody else can
 /// be waiting for it: they were told 503).
@@ -138,23 +195,26 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     let cancel = Arc::new(AtomicBool::new(false));
     let (tx, rx) = tokio::sync::oneshot::channel();
     let (app2, flag) = (app.clone(), cancel.clone());
-    let spawned = std::thread::Builder::new()
-        .name("volcap-mesh".into())
-        .spawn(move || {
-            // Held until the computation ends, whatever became of the request.
-            let _permit = permit;
-            lower_priority();
-            let key = Arc::downgrade(&field);
-            let r = compute(field.as_ref(), res, coarse, &flag);
-            drop(field);
-            if let Ok(bytes) = &r {
-                *app2.mesh_cache.lock().unwrap_or_else(|p| p.into_inner()) =
-                    Some((key, res, coarse, bytes.clone()));
-            }
-            let _ = tx.send(r);
-        });
-    if let Err(e) = spawned {
-        tracing::warn!("mesh thread: {e}");
+    let submitted = app.mesh_worker.submit(Box::new(move || {
+        // Held until the computation ends, whatever became of the request.
+        let _permit = permit;
+        let key = Arc::downgrade(&field);
+        let r = compute(field.as_ref(), res, coarse, &flag);
+        drop(field);
+        let counter = match &r {
+            Ok(_) => &app2.mesh_worker.done,
+            Err(_) if flag.load(Ordering::Relaxed) => &app2.mesh_worker.cancelled,
+            Err(_) => &app2.mesh_worker.failed,
+        };
+        counter.fetch_add(1, Ordering::Relaxed);
+        if let Ok(bytes) = &r {
+            *app2.mesh_cache.lock().unwrap_or_else(|p| p.into_inner()) =
+                Some((key, res, coarse, bytes.clone()));
+        }
+        let _ = tx.send(r);
+    }));
+    if let Err(e) = submitted {
+        tracing::warn!("{e}");
         return busy();
     }
     let _cancel_if_gone = CancelOnDrop(cancel);

@@ -148,6 +148,16 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
         "# TYPE volcap_clients gauge\nvolcap_clients {}\n",
         app.clients.load(Ordering::SeqCst)
     ));
+    let w = &app.mesh_worker;
+    s.push_str(&format!(
+        "# HELP volcap_mesh_busy /mesh.glb computations running\n# TYPE volcap_mesh_busy gauge\nvolcap_mesh_busy {}\n\
+         # HELP volcap_mesh_total /mesh.glb computations ended: a mesh, stopped because the client left, failed\n# TYPE volcap_mesh_total counter\n\
+         volcap_mesh_total{{result=\"done\"}} {}\nvolcap_mesh_total{{result=\"cancelled\"}} {}\nvolcap_mesh_total{{result=\"failed\"}} {}\n",
+        super::MESH_CONCURRENCY.saturating_sub(app.mesh_gate.available_permits()),
+        w.done.load(Ordering::Relaxed),
+        w.cancelled.load(Ordering::Relaxed),
+        w.failed.load(Ordering::Relaxed)
+    ));
     s.push_str(&app.rtsp.metrics());
     s.push_str(&sh.compute.metrics());
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()

@@ -13,7 +13,8 @@
 //! [`GpuLocalizer::read_grid`] brings them (and the evaluated set) back into a CPU [`Grid`].
 //! The lists start at [`START_CAP`] entries and grow (the frame run again) when a level
 //! needs more. The whole grid is one storage buffer: grids over the adapter's binding limit
-//! (513^3 at default limits) are refused with the sizes named.
+//! (513^3 where a binding holds 128 MiB, as on lavapipe; a GPU's holds it, see
+//! [`super::buffer_limits`]) are refused with the sizes named.
 
 use super::Gpu;
 use super::kit::entry;

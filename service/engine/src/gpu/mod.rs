@@ -3,9 +3,12 @@
 //!
 //! Adapters are Vulkan's (`WGPU_BACKEND` may narrow the search, as wgpu reads it): a board's
 //! GPU, or Mesa's lavapipe, Vulkan on the CPU, which runs the same shaders here and in CI
-//! for the parity tests (its times say nothing about a GPU). Only default limits are asked
-//! for, and one optional feature where the adapter has it: timestamp queries (the networks'
-//! time on the adapter, `Counters::gpu_ns`); without it nothing is timed there.
+//! for the parity tests (its times say nothing about a GPU). Default limits are asked for
+//! except the two sizes of a buffer (`max_buffer_size`, `max_storage_buffer_binding_size`),
+//! which are the adapter's own ([`buffer_limits`]: a 513^3 grid's 540 MB of values is one
+//! binding, over the default 128 MiB and within a GPU's), and one optional feature where
+//! the adapter has it: timestamp queries (the networks' time on the adapter,
+//! `Counters::gpu_ns`); without it nothing is timed there.
 //!
 //! What runs here: [`net::GpuNet`], the ONNX networks (`model::runtime::Runtime::Wgpu`), and
 //! [`fourier::GpuFourier`], the Fourier field at points, and [`localize::GpuLocalizer`], the
@@ -74,6 +77,20 @@ pub fn adapters() -> Vec<AdapterSummary> {
         .iter()
         .map(|a| AdapterSummary::of(&a.get_info()))
         .collect()
+}
+
+/// The limits the device is opened with: wgpu's defaults (what every adapter has), except the
+/// sizes of one buffer and of one storage binding, which are the adapter's (never below the
+/// defaults), so that the grid of a fine level fits in one binding where the adapter allows.
+pub fn buffer_limits(adapter: &wgpu::Limits) -> wgpu::Limits {
+    let d = wgpu::Limits::default();
+    wgpu::Limits {
+        max_buffer_size: adapter.max_buffer_size.max(d.max_buffer_size),
+        max_storage_buffer_binding_size: adapter
+            .max_storage_buffer_binding_size
+            .max(d.max_storage_buffer_binding_size),
+        ..d
+    }
 }
 
 /// Preference of `auto`: a discrete GPU first, the CPU (lavapipe) last.
@@ -190,7 +207,7 @@ impl Gpu {
         let (device, queue) = pollster::block_on(picked.request_device(&wgpu::DeviceDescriptor {
             label: Some("volcap"),
             required_features: timestamps,
-            required_limits: wgpu::Limits::default(),
+            required_limits: buffer_limits(&picked.limits()),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
