@@ -344,7 +344,26 @@ fn the_fourier_field_at_100k_points_matches_the_cpu_for_every_committed_model() 
             maps.occupancy(&pts, &mut cpu, &mut Vec::new());
             let field = volcap_engine::gpu::fourier::GpuFourier::new(gpu.clone(), &maps).unwrap();
             let mut got = vec![-1.0f32; pts.len()];
-            field.occupancy(&pts, &mut got).unwrap();
+            let other = maps.clone().with_basis(if label == "fourier" {
+                Basis::Cosine
+            } else {
+                Basis::Fourier
+            });
+            assert!(
+                field.occupancy(&other, &pts, &mut got).is_err(),
+                "{name}: maps other than the field's are refused"
+            );
+            let up = gpu.counters().bytes_up;
+            field.occupancy(&maps, &pts, &mut got).unwrap();
+            // The maps went up with the first query, and only then.
+            let maps_bytes = std::mem::size_of_val(maps.coefficients()) as u64;
+            assert!(gpu.counters().bytes_up - up >= maps_bytes);
+            let up = gpu.counters().bytes_up;
+            field.occupancy(&maps, &pts, &mut got).unwrap();
+            assert!(
+                gpu.counters().bytes_up - up < maps_bytes,
+                "the maps went up twice"
+            );
             let worst = cpu
                 .iter()
                 .zip(&got)

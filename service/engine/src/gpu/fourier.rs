@@ -104,16 +104,20 @@ pub(super) fn series_head(maps: &FourierMaps) -> [u32; 5] {
     ]
 }
 
-/// One frame's maps on the adapter.
+/// One frame's maps on the adapter, written there by the first point query (a frame whose
+/// every stage runs on the adapter never asks one, and its maps go up once, to the
+/// localizer, not twice).
 pub struct GpuFourier {
     gpu: Arc<Gpu>,
     pipeline: Arc<wgpu::ComputePipeline>,
     head: [u32; 5],
+    len: usize,
     buffers: Mutex<Option<FieldBuffers>>,
 }
 
 impl GpuFourier {
-    /// Write `maps` (its coefficients, basis and surface level) to the adapter.
+    /// The field of `maps` (its coefficients, basis and surface level) on the adapter: checked
+    /// against the adapter's limit now, written at the first [`Self::occupancy`].
     pub fn new(gpu: Arc<Gpu>, maps: &FourierMaps) -> Result<Self, String> {
         let pipeline = gpu.pipeline("fourier", SOURCE)?;
         let data = maps.coefficients();
@@ -124,35 +128,60 @@ impl GpuFourier {
                 "maps of {bytes} bytes exceed the adapter's {limit} per binding"
             ));
         }
-        let pooled = {
-            let mut pool = gpu.field_pool.lock().unwrap_or_else(|p| p.into_inner());
-            let i = pool.iter().position(|b| b.maps_cap >= data.len());
-            i.map(|i| pool.swap_remove(i))
-        };
-        let b = pooled
-            .unwrap_or_else(|| FieldBuffers::new(&gpu, &pipeline, None, data.len(), MIN_POINTS));
-        gpu.queue
-            .write_buffer(&b.maps, 0, bytemuck::cast_slice(data));
-        gpu.count()
-            .bytes_up
-            .fetch_add(bytes as u64, Ordering::Relaxed);
-        let head = series_head(maps);
         Ok(GpuFourier {
             gpu,
             pipeline,
-            head,
-            buffers: Mutex::new(Some(b)),
+            head: series_head(maps),
+            len: data.len(),
+            buffers: Mutex::new(None),
         })
     }
 
-    /// Occupancy in [0, 1] at crop-NDC `points` into `out` (as [`FourierMaps::occupancy`]).
-    pub fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), String> {
+    /// The maps' buffers, from the adapter's pool or new, with `maps` written in.
+    fn upload(&self, maps: &FourierMaps) -> FieldBuffers {
+        let data = maps.coefficients();
+        let pooled = {
+            let mut pool = self
+                .gpu
+                .field_pool
+                .lock()
+                .unwrap_or_else(|p| p.into_inner());
+            let i = pool.iter().position(|b| b.maps_cap >= data.len());
+            i.map(|i| pool.swap_remove(i))
+        };
+        let b = pooled.unwrap_or_else(|| {
+            FieldBuffers::new(&self.gpu, &self.pipeline, None, data.len(), MIN_POINTS)
+        });
+        self.gpu
+            .queue
+            .write_buffer(&b.maps, 0, bytemuck::cast_slice(data));
+        self.gpu
+            .count()
+            .bytes_up
+            .fetch_add(std::mem::size_of_val(data) as u64, Ordering::Relaxed);
+        b
+    }
+
+    /// Occupancy in [0, 1] at crop-NDC `points` into `out` (as [`FourierMaps::occupancy`]);
+    /// `maps` are the ones this field was made from (written to the adapter on first use).
+    pub fn occupancy(
+        &self,
+        maps: &FourierMaps,
+        points: &[Vec3],
+        out: &mut [f32],
+    ) -> Result<(), String> {
+        if series_head(maps) != self.head || maps.coefficients().len() != self.len {
+            return Err("the maps are not the ones this field was made from".into());
+        }
         let n = points.len().min(out.len());
         if n == 0 {
             return Ok(());
         }
         let mut slot = self.buffers.lock().unwrap_or_else(|p| p.into_inner());
-        let mut b = slot.take().ok_or("the field's buffers are gone")?;
+        let mut b = match slot.take() {
+            Some(b) => b,
+            None => self.upload(maps),
+        };
         if b.cap < n {
             // A larger batch: new point buffers, the maps kept.
             let cap = n.next_power_of_two();

@@ -72,8 +72,8 @@ impl ModelField {
         }
     }
 
-    /// Evaluate the Fourier maps' point queries on `gpu` (the maps uploaded once; the MLP
-    /// family stays as it is).
+    /// Evaluate the Fourier maps' point queries on `gpu` (the maps written there by the first
+    /// query, once; the MLP family stays as it is).
     #[cfg(feature = "wgpu")]
     pub fn on_gpu(mut self, gpu: &Arc<crate::gpu::Gpu>) -> Result<Self, ModelError> {
         if let ShapeState::Fourier(maps) = &self.shape {
@@ -126,7 +126,7 @@ impl ModelField {
     fn fourier(&self, maps: &FourierMaps, q: &[Vec3], occ: &mut [f32]) -> Result<(), FieldError> {
         #[cfg(feature = "wgpu")]
         if let Some(g) = &self.gpu_fourier {
-            return g.occupancy(q, occ).map_err(FieldError::Backend);
+            return g.occupancy(maps, q, occ).map_err(FieldError::Backend);
         }
         maps.occupancy(q, occ, &mut Vec::new());
         Ok(())
