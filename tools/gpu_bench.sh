@@ -1,0 +1,86 @@
+#!/usr/bin/env bash
+# The real-GPU bench of issue 33 (docs/bench/pipeline-gpu.md) for a lent GPU machine, which has
+# no Rust toolchain and no network. Two steps:
+#
+#   here:   tools/gpu_bench.sh prepare
+#           builds the release `volcap` with the GPU backend, packs it stripped into .gpubench/
+#           (xz: the working tree that travels is limited to 64 MiB, the tracked tree is ~51 MB)
+#           and downloads the Vulkan loader into .gl/ (both git-ignored)
+#   there:  device run, carry [".gpubench", ".gl"], command: tools/gpu_bench.sh run
+#           (--quick: a short version, as CI-free checking here on lavapipe does)
+#
+# `run` unpacks the loader, names the adapter, and writes into $OUT (default /tmp/gpubench):
+# pipeline.md/.png (the daemon's pipeline in-process, CPU and GPU backends side by side, 257^3
+# and 513^3, fourier-small and fourier-medium, the camera replayed fast enough never to cap
+# the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter)
+# and nets.md (the networks, tract and the GPU kernels), with run.log. The device is named in
+# every table; the CPU rows are that machine's cores, not the appliance's two.
+set -euo pipefail
+repo="$(cd "$(dirname "$0")/.." && pwd)"
+cd "$repo"
+mode="${1:-}"
+shift || true
+case "$mode" in
+  prepare)
+    cargo build --release --workspace --features volcapd/rtsp,volcap/wgpu
+    rm -rf .gpubench && mkdir -p .gpubench
+    cp target/release/volcap .gpubench/volcap
+    strip .gpubench/volcap
+    xz -9 -T0 -f .gpubench/volcap
+    if ! ls .gl/*.deb >/dev/null 2>&1; then
+      # The loader packages of the device README (amd64, whatever this machine is).
+      mkdir -p .gl /tmp/amd64/partial
+      o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
+      # shellcheck disable=SC2086
+      apt-get $o update -qq
+      # shellcheck disable=SC2086
+      (cd .gl && apt-get $o download libvulkan1)
+    fi
+    du -sh .gpubench .gl
+    echo "now: device run with carry [\".gpubench\", \".gl\"] and command: tools/gpu_bench.sh run"
+    ;;
+  run)
+    quick=0
+    [ "${1:-}" = "--quick" ] && quick=1
+    out="${OUT:-/tmp/gpubench}"
+    mkdir -p "$out"
+    exec > >(tee "$out/run.log") 2>&1
+    if ls .gl/*.deb >/dev/null 2>&1 && ! ldconfig -p | grep -q libvulkan.so.1; then
+      for f in .gl/*.deb; do dpkg -x "$f" /; done
+      ldconfig
+    fi
+    nvidia_icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+    if [ -z "${VK_DRIVER_FILES:-}" ] && [ -f "$nvidia_icd" ]; then
+      export VK_DRIVER_FILES="$nvidia_icd"
+    fi
+    export WGPU_BACKEND="${WGPU_BACKEND:-vulkan}"
+    bin=/tmp/volcap-gpubench
+    if [ -f .gpubench/volcap.xz ]; then
+      xz -dc .gpubench/volcap.xz > "$bin" && chmod +x "$bin"
+    else
+      bin="$repo/target/release/volcap"
+    fi
+    nvidia-smi -L 2>/dev/null || true
+    if [ "$quick" = 1 ]; then
+      res=65 models=fourier-small secs=2 warm=1 runs=1 threads=1
+    else
+      res=257,513 models=fourier-small,fourier-medium secs=10 warm=5 runs=5
+      threads="1,$(nproc)"
+    fi
+    echo "== pipeline ($res; $models; threads $threads)"
+    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
+      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --out "$out"
+    echo "== localization on the model's field"
+    "$bin" bench localize --model fourier-small --backend cpu,wgpu --res "$res" \
+      --methods hierarchical,hierarchical-tight --runs "$runs" --out "$out"
+    mv "$out/accuracy-vs-time.md" "$out/localize.md"
+    mv "$out/accuracy-vs-time.png" "$out/localize.png"
+    echo "== networks"
+    "$bin" bench nets --runtime tract,wgpu --runs "$((runs * 4))" --out "$out"
+    ls -la "$out"
+    ;;
+  *)
+    echo "usage: tools/gpu_bench.sh prepare | run [--quick]" >&2
+    exit 2
+    ;;
+esac
