@@ -110,6 +110,13 @@ pub struct EvalArgs {
     /// smooth fit blurs under the level), `FRAC,MIN` (e.g. 0.5,0.2).
     #[arg(long, value_delimiter = ',')]
     pub peak_level: Option<Vec<f32>>,
+    /// Experimental, Fourier models: `MIN_LEN,MAX_LEN,AWAY`: a pixel whose series peaks under
+    /// the surface level but holds at least MIN_LEN of inside (zeta; the depth range is 2),
+    /// and lies AWAY map pixels beyond every pixel that decodes (or joins such a pixel), is
+    /// read as one interval of its own inside length (at most MAX_LEN) at its own depth
+    /// centre (`FourierMaps::with_moment_fill`; e.g. 0.02,0.1,4).
+    #[arg(long, value_delimiter = ',')]
+    pub moment_fill: Option<Vec<f32>>,
     /// Framing of the test images: `whole` (the whole person in the frame, as the dataset) or
     /// `upper` (a person close to the camera, cut by the frame's lower edge between the hips
     /// and the knees: a webcam's view, where a close-range model takes over). Either way the
@@ -441,6 +448,17 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     {
         bail!("--peak-level {pl:?}: FRAC,MIN with FRAC in (0, 1) and MIN in [0, 1)");
     }
+    if let Some(m) = &a.moment_fill
+        && (m.len() != 3
+            || !(m[0].is_finite() && m[0] > 0.0 && m[0] <= 2.0)
+            || !(m[1] >= m[0] && m[1] <= 2.0)
+            || !(1.0..=32.0).contains(&m[2])
+            || m[2].fract() != 0.0)
+    {
+        bail!(
+            "--moment-fill {m:?}: MIN_LEN,MAX_LEN,AWAY with 0 < MIN_LEN <= MAX_LEN <= 2 and AWAY a whole number of map pixels in 1..=32"
+        );
+    }
     for l in &a.iso_level {
         if !(l.is_finite() && *l > 0.0 && *l < 1.0) {
             anyhow::bail!("--iso-level {l}: each level must lie in (0, 1)");
@@ -483,6 +501,15 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             }
             _ => None,
         };
+        let fill = match (&mut models.shape, &a.moment_fill) {
+            (ShapeModel::Fourier(f), Some(m)) if truth_k.is_none() && m.len() == 3 => {
+                Arc::get_mut(f)
+                    .ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?
+                    .moment_fill = Some((m[0], m[1], m[2] as usize));
+                Some((m[1], m[2] as usize))
+            }
+            _ => None,
+        };
         let level = match (&mut models.shape, level) {
             (ShapeModel::Fourier(f), Some(l)) if truth_k.is_none() => {
                 Arc::get_mut(f)
@@ -498,11 +525,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             _ => None,
         };
         let label = format!(
-            "{name}-{}{}{}{}",
+            "{name}-{}{}{}{}{}",
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
             level.map(|l| format!("-iso{l:.2}")).unwrap_or_default(),
-            peak.map(|f| format!("-peak{f:.2}")).unwrap_or_default()
+            peak.map(|f| format!("-peak{f:.2}")).unwrap_or_default(),
+            fill.map(|(l, d)| format!("-fill{l:.2}x{d}"))
+                .unwrap_or_default()
         );
         pb.set_message(label.clone());
         let frame = frame_of(a.depth_frame, &models, truth_k);

@@ -101,3 +101,25 @@ fn both_framings_score_the_truth_as_near_exact() {
         );
     }
 }
+
+/// The experimental decode knobs are refused by name when their values are off (before any
+/// image is rendered).
+#[test]
+fn bad_decode_knobs_are_refused_by_name() {
+    for (flag, value) in [
+        ("--moment-fill", "0.02,0.01,4"),
+        ("--moment-fill", "0.02,0.1"),
+        ("--moment-fill", "0.02,0.1,2.5"),
+        ("--moment-fill", "nan,0.1,4"),
+        ("--peak-level", "1.5,0.2"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
+            .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+            .args(["eval", "--model", "fourier-small", flag, value])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{flag} {value} accepted");
+        assert!(err.contains(flag), "{flag} {value}: {err}");
+    }
+}

@@ -162,6 +162,29 @@ pub fn interval_coeffs(intervals: &[[f64; 2]], k: usize) -> Vec<f64> {
     out
 }
 
+/// A square dilation of radius `r` (Chebyshev) of an `n x n` row-major mask.
+fn dilate(m: &[bool], n: usize, r: usize) -> Vec<bool> {
+    if r == 0 {
+        return m.to_vec();
+    }
+    // Rows, then columns (a square is separable).
+    let mut rows = vec![false; m.len()];
+    for y in 0..n {
+        for x in 0..n {
+            let (a, b) = (x.saturating_sub(r), (x + r).min(n - 1));
+            rows[y * n + x] = m[y * n + a..=y * n + b].iter().any(|v| *v);
+        }
+    }
+    let mut out = vec![false; m.len()];
+    for y in 0..n {
+        let (a, b) = (y.saturating_sub(r), (y + r).min(n - 1));
+        for x in 0..n {
+            out[y * n + x] = (a..=b).any(|yy| rows[yy * n + x]);
+        }
+    }
+    out
+}
+
 /// Per-pixel Fourier coefficients over the crop: `size x size` pixels, `2K + 1` each,
 /// pixel-interleaved.
 #[derive(Debug, Clone)]
@@ -235,8 +258,21 @@ impl FourierMaps {
         }
         let c = 2 * self.k + 1;
         let iso = self.iso_level();
-        let mut b = vec![0.0f32; c];
-        // The peak sampled at 129 depths (the series is band-limited to K cycles).
+        let peaks = self.peaks();
+        for (px, &peak) in self.data.chunks_exact_mut(c).zip(&peaks) {
+            // Only rays that would vanish (peak under the level) and hold something.
+            if peak >= min_peak && peak < iso {
+                // Read at frac * peak: raise the series by iso - frac * peak.
+                px[0] += iso - frac * peak;
+            }
+        }
+        self
+    }
+
+    /// Each pixel's series at its highest over the ray (sampled at 129 depths: the series is
+    /// band-limited to K cycles).
+    fn peaks(&self) -> Vec<f32> {
+        let c = 2 * self.k + 1;
         let zs: Vec<Vec<f32>> = (0..129)
             .map(|i| {
                 let mut v = vec![0.0f32; c];
@@ -245,17 +281,79 @@ impl FourierMaps {
                 v
             })
             .collect();
-        for px in self.data.chunks_exact_mut(c) {
-            let mut peak = f32::MIN;
-            for v in &zs {
-                b.copy_from_slice(v);
-                let d: f32 = px.iter().zip(&b).map(|(x, y)| x * y).sum();
-                peak = peak.max(d);
-            }
-            // Only rays that would vanish (peak under the level) and hold something.
-            if peak >= min_peak && peak < iso {
-                // Read at frac * peak: raise the series by iso - frac * peak.
-                px[0] += iso - frac * peak;
+        self.data
+            .chunks_exact(c)
+            .map(|px| {
+                zs.iter()
+                    .map(|b| px.iter().zip(b).map(|(x, y)| x * y).sum::<f32>())
+                    .fold(f32::MIN, f32::max)
+            })
+            .collect()
+    }
+
+    /// Thin parts from their moments (experimental, `volcap eval --moment-fill`): a pixel whose
+    /// series peaks under the surface level (its ray would decode empty) yet holds at least
+    /// `min_len` (zeta; the range is 2) of inside is a candidate; its series is replaced by
+    /// the series of one interval of the ray's own inside length (`2 c0`, at most `max_len`)
+    /// at its own depth centre (`int z f / int f`, from the sine terms). A blurred thin part (a hand whose
+    /// depth the net is unsure of) keeps its mass and place instead of vanishing, and grows
+    /// no wider than its predicted length. Only candidates at least `away` map pixels
+    /// (Chebyshev) from any pixel that decodes, and those joined to them within `away - 1`
+    /// steps through candidates, are filled: the blurred band just outside every silhouette
+    /// (a few pixels wide, a candidate too) stays as it was, while a hand, which reaches
+    /// beyond it, comes back. Fourier basis only (other bases are returned unchanged).
+    pub fn with_moment_fill(mut self, min_len: f32, max_len: f32, away: usize) -> Self {
+        if self.basis != Basis::Fourier
+            || !(min_len.is_finite() && min_len > 0.0 && max_len >= min_len)
+            || away == 0
+        {
+            return self;
+        }
+        let (k, c, n) = (self.k, 2 * self.k + 1, self.size);
+        let iso = self.iso_level();
+        let peaks = self.peaks();
+        let solid: Vec<bool> = peaks.iter().map(|p| *p >= iso).collect();
+        let cand: Vec<bool> = self
+            .data
+            .chunks_exact(c)
+            .zip(&peaks)
+            .map(|(px, p)| *p < iso && (min_len..=2.0).contains(&(2.0 * px[0])))
+            .collect();
+        // The seeds: candidates with no decoding pixel within away - 1; then grown back
+        // through candidates, one ring a step.
+        let near = dilate(&solid, n, away - 1);
+        let mut keep: Vec<bool> = cand.iter().zip(&near).map(|(c, s)| *c && !s).collect();
+        for _ in 1..away {
+            keep = dilate(&keep, n, 1)
+                .iter()
+                .zip(&cand)
+                .map(|(k, c)| *k && *c)
+                .collect();
+        }
+        // int_{-1}^{1} z sin(n pi z) dz = 2 (-1)^(n+1) / (n pi); the cosine terms give 0.
+        let w: Vec<f32> = (1..=k)
+            .map(|m| {
+                let sign = if m % 2 == 1 { 1.0 } else { -1.0 };
+                2.0 * sign / (m as f32 * std::f32::consts::PI)
+            })
+            .collect();
+        for (px, _) in self
+            .data
+            .chunks_exact_mut(c)
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+        {
+            let mass = 2.0 * px[0];
+            let m1: f32 = (1..=k).map(|m| px[2 * m] * w[m - 1]).sum();
+            let mid = (m1 / mass).clamp(-1.0, 1.0);
+            // A ray this unsure of its depth spreads its mass too: at most max_len of it.
+            let len = mass.min(max_len);
+            let (lo, hi) = (mid - 0.5 * len, mid + 0.5 * len);
+            // Kept inside [-1, 1] at its full length.
+            let shift = (-1.0 - lo).max(0.0) - (hi - 1.0).max(0.0);
+            let iv = [[(lo + shift) as f64, (hi + shift) as f64]];
+            for (p, v) in px.iter_mut().zip(interval_coeffs(&iv, k)) {
+                *p = v as f32;
             }
         }
         self
@@ -373,6 +471,9 @@ pub struct FourierNet {
     /// Experimental: [`FourierMaps::with_peak_relative_level`] `(frac, min_peak)` on every
     /// frame's maps (`volcap eval --peak-level`); off by default.
     pub peak_level: Option<(f32, f32)>,
+    /// Experimental: [`FourierMaps::with_moment_fill`] `(min_len, max_len, away)` on every
+    /// frame's maps (`volcap eval --moment-fill`); off by default.
+    pub moment_fill: Option<(f32, f32, usize)>,
 }
 
 impl FourierNet {
@@ -458,6 +559,7 @@ impl FourierNet {
             iso_level,
             basis,
             peak_level: None,
+            moment_fill: None,
         })
     }
 
@@ -468,8 +570,12 @@ impl FourierNet {
         FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale)
             .map(|m| {
                 let m = m.with_iso_level(self.iso_level).with_basis(self.basis);
-                match self.peak_level {
+                let m = match self.peak_level {
                     Some((frac, min_peak)) => m.with_peak_relative_level(frac, min_peak),
+                    None => m,
+                };
+                match self.moment_fill {
+                    Some((min_len, max_len, away)) => m.with_moment_fill(min_len, max_len, away),
                     None => m,
                 }
             })

@@ -285,6 +285,147 @@ fn peak_relative_level_keeps_thin_parts_and_nothing_else() {
     assert_eq!(same.pixel(0, 0), thin.pixel(0, 0));
 }
 
+/// The moment fill: a thin part whose series is blurred (its harmonics damped, its mass `c0`
+/// and depth centre kept) peaks under the level and vanishes; filled from its moments it
+/// decodes at its true place and width. A thick ray, an empty one, one under the least length
+/// and other bases are left as they are.
+#[test]
+fn moment_fill_puts_a_blurred_thin_part_back_where_it_was() {
+    let k = 15;
+    let blurred = |iv: [f64; 2], sigma: f64| -> FourierMaps {
+        let c: Vec<f32> = interval_coeffs(&[iv], k)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let n = i.div_ceil(2) as f64;
+                (v * (-(n * sigma).powi(2)).exp()) as f32
+            })
+            .collect();
+        let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
+        FourierMaps::from_planar(&planar, k, 2, 1.0)
+            .unwrap()
+            .with_iso_level(0.55)
+    };
+    let span = |m: &FourierMaps| -> Option<(f32, f32)> {
+        let (mut out, mut s) = ([0.0f32], Vec::new());
+        let zs: Vec<f32> = (0..=4000)
+            .map(|i| -1.0 + 2.0 * i as f32 / 4000.0)
+            .filter(|z| {
+                m.occupancy(&[Vec3::new(0.1, 0.1, *z)], &mut out, &mut s);
+                out[0] > 0.5
+            })
+            .collect();
+        Some((*zs.first()?, *zs.last()?))
+    };
+    let thin = blurred([0.3, 0.42], 0.25);
+    assert_eq!(span(&thin), None, "the blurred part decodes empty");
+    let (lo, hi) = span(&thin.clone().with_moment_fill(0.02, 2.0, 1)).expect("filled");
+    assert!(
+        (lo - 0.3).abs() < 0.03 && (hi - 0.42).abs() < 0.03,
+        "filled at [{lo}, {hi}], true [0.3, 0.42]"
+    );
+    // At most max_len of it, about the same centre.
+    let (lo, hi) = span(&thin.clone().with_moment_fill(0.02, 0.08, 1)).expect("filled");
+    assert!(
+        (hi - lo - 0.08).abs() < 0.03 && ((lo + hi) / 2.0 - 0.36).abs() < 0.02,
+        "capped at [{lo}, {hi}]"
+    );
+    // Near the end of the range: kept inside it at its length.
+    let edge = blurred([0.86, 0.99], 0.25);
+    assert_eq!(span(&edge), None);
+    let (lo, hi) = span(&edge.clone().with_moment_fill(0.02, 2.0, 1)).expect("filled");
+    assert!(hi <= 1.0 && (hi - lo - 0.13).abs() < 0.05, "[{lo}, {hi}]");
+    // A thick ray decodes as it did; so do an empty ray and one under the least length.
+    let thick = blurred([-0.5, 0.3], 0.02);
+    assert_eq!(
+        thick.clone().with_moment_fill(0.02, 2.0, 1).pixel(0, 0),
+        thick.pixel(0, 0)
+    );
+    let empty = blurred([0.0, 0.0], 0.25);
+    assert_eq!(
+        empty.clone().with_moment_fill(0.02, 2.0, 1).pixel(0, 0),
+        empty.pixel(0, 0)
+    );
+    assert_eq!(
+        thin.clone().with_moment_fill(0.2, 2.0, 1).pixel(0, 0),
+        thin.pixel(0, 0)
+    );
+    let cos = thin.clone().with_basis(Basis::Cosine);
+    assert_eq!(
+        cos.clone().with_moment_fill(0.02, 2.0, 1).pixel(0, 0),
+        cos.pixel(0, 0)
+    );
+    // Bad knobs leave the maps alone.
+    assert_eq!(
+        thin.clone().with_moment_fill(f32::NAN, 2.0, 1).pixel(0, 0),
+        thin.pixel(0, 0)
+    );
+}
+
+/// The moment fill on a map: a body (pixels that decode), the blurred band two pixels wide
+/// around it and a blurred "hand" reaching six pixels beyond it (both candidates). Filled
+/// `away` = 4 pixels from the body: the hand, back to one pixel from the body, not the band.
+#[test]
+fn moment_fill_restores_what_reaches_beyond_the_band_around_the_body() {
+    let (k, n) = (15usize, 32usize);
+    let c = 2 * k + 1;
+    let series = |iv: [f64; 2], sigma: f64| -> Vec<f32> {
+        interval_coeffs(&[iv], k)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (v * (-((i.div_ceil(2)) as f64 * sigma).powi(2)).exp()) as f32)
+            .collect()
+    };
+    let body = series([-0.4, 0.4], 0.0);
+    let blurred = series([0.0, 0.14], 0.25);
+    // Body: x, y in 8..16; band: within 2 of it; hand: x in 16..24, y in 11..13 beyond the band.
+    let kind = |x: usize, y: usize| -> u8 {
+        let inb = (8..16).contains(&x) && (8..16).contains(&y);
+        let band = (6..18).contains(&x) && (6..18).contains(&y);
+        let hand = (16..24).contains(&x) && (11..13).contains(&y);
+        if inb {
+            2
+        } else if band || hand {
+            1
+        } else {
+            0
+        }
+    };
+    let mut planar = vec![0.0f32; c * n * n];
+    for y in 0..n {
+        for x in 0..n {
+            let s = match kind(x, y) {
+                2 => &body,
+                1 => &blurred,
+                _ => continue,
+            };
+            for ch in 0..c {
+                planar[ch * n * n + y * n + x] = s[ch];
+            }
+        }
+    }
+    let maps = FourierMaps::from_planar(&planar, k, n, 1.0)
+        .unwrap()
+        .with_iso_level(0.55);
+    let filled = maps.clone().with_moment_fill(0.02, 2.0, 4);
+    let changed = |x: usize, y: usize| filled.pixel(x, y) != maps.pixel(x, y);
+    for y in 0..n {
+        for x in 0..n {
+            let hand = (16..24).contains(&x) && (11..13).contains(&y);
+            match kind(x, y) {
+                // The hand, back to the body's edge (its seeds at x >= 19, grown 3 rings).
+                1 if hand => assert!(changed(x, y), "hand pixel ({x}, {y}) not filled"),
+                // The band away from where the hand meets it.
+                1 if x < 15 || !(8..16).contains(&y) => {
+                    assert!(!changed(x, y), "band pixel ({x}, {y}) filled")
+                }
+                0 | 2 => assert!(!changed(x, y), "pixel ({x}, {y}) changed"),
+                _ => {}
+            }
+        }
+    }
+}
+
 #[test]
 fn maps_refuse_bad_shapes_and_non_finite_values() {
     assert!(FourierMaps::from_planar(&[0.0; 12], 1, 2, 1.0).is_some());
