@@ -435,3 +435,30 @@ fn maps_refuse_bad_shapes_and_non_finite_values() {
     assert!(FourierMaps::from_planar(&v, 1, 2, 1.0).is_none());
     assert!(FourierMaps::from_planar(&[0.0; 12], 1, 2, 0.0).is_none());
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+    /// Adversarial maps (coefficients up to +-1e6, ringing, negative mass) through both
+    /// thin-part readings stay finite, keep their shape, and decode in [0, 1] everywhere.
+    #[test]
+    fn thin_part_readings_of_wild_maps_stay_finite(
+        vals in proptest::collection::vec(-1.0e6f32..1.0e6, 7 * 16),
+        scale in proptest::sample::select(vec![1e-6f32, 1e-2, 1.0, 1e3]),
+        away in 1usize..6,
+    ) {
+        let planar: Vec<f32> = vals.iter().map(|v| v * scale).collect();
+        let maps = FourierMaps::from_planar(&planar, 3, 4, 2.0).unwrap().with_iso_level(0.55);
+        for m in [
+            maps.clone().with_moment_fill(0.02, 0.1, away),
+            maps.clone().with_moment_fill(1e-6, 2.0, away),
+            maps.clone().with_peak_relative_level(0.5, 0.2),
+        ] {
+            proptest::prop_assert_eq!(m.coefficients().len(), planar.len());
+            proptest::prop_assert!(m.coefficients().iter().all(|v| v.is_finite()));
+            let (mut out, mut s) = (vec![0.0f32; 9], Vec::new());
+            let pts: Vec<Vec3> = (0..9).map(|i| Vec3::new(0.3, -0.2, -1.0 + 0.25 * i as f32)).collect();
+            m.occupancy(&pts, &mut out, &mut s);
+            proptest::prop_assert!(out.iter().all(|v| (0.0..=1.0).contains(v)));
+        }
+    }
+}
