@@ -484,9 +484,13 @@ pub fn generate(
                         tensor(Dtype::F32, vec![surface.len(), 3], &sc)?,
                     ),
                 ];
+                // Written beside, then renamed: a generator stopped mid-write (the training
+                // recipe's clock, a kill) leaves a `.part` file, never a torn shard.
                 let path = dir.join(format!("{pi:03}_{vi:02}.safetensors"));
-                safetensors::serialize_to_file(tensors, Some(meta), &path)
-                    .map_err(|e| werr(&path, &e))?;
+                let part = path.with_extension("safetensors.part");
+                safetensors::serialize_to_file(tensors, Some(meta), &part)
+                    .map_err(|e| werr(&part, &e))?;
+                std::fs::rename(&part, &path).map_err(|e| werr(&path, &e))?;
                 done += 1;
                 progress(done);
             }

@@ -5,6 +5,13 @@
 #   tools/train/recipe/make_bundle.sh OUT [--binary PATH] [--assets auto|embedded|PACK]
 #   (copy OUT to the other machine)    OUT/run.sh RESULT [options, see run.sh]
 #
+#   tools/train/recipe/make_bundle.sh .recipe --lean     (a lent machine, through the device
+#   tool: the checkout travels, so the bundle holds only the binary (xz, ~12 MB) and run.sh,
+#   and takes the rest from the checkout around it: the checkout (~51 MB) and a full bundle
+#   (52 MiB) together are over the tool's 64 MiB; the lean one uses the binary's embedded
+#   assets). There: carry [".recipe"], command `.recipe/run.sh /tmp/res --minutes-data 3
+#   --minutes-train 5`, the result copied into $OUT.
+#
 # OUT holds: the simulator's release binary (`volcap.gz`, stripped and packed), the human assets as one
 # pack (`volcap sim pack --everything` from ../shared/data/makehuman when it is here, or the
 # binary's embedded runtime pack with `--assets embedded`), the Python package and its
@@ -15,15 +22,28 @@ here="$(cd "$(dirname "$0")" && pwd)"
 repo="$(cd "$here/../../.." && pwd)"
 out="${1:?usage: make_bundle.sh OUT [--binary PATH] [--assets auto|embedded|PACK]}"
 shift
-binary="$repo/target/release/volcap" assets=auto
+binary="$repo/target/release/volcap" assets=auto lean=0
 while [ $# -gt 0 ]; do
   case "$1" in
+    --lean) lean=1; shift ;;
     --binary) binary="$2"; shift 2 ;;
     --assets) assets="$2"; shift 2 ;;
     *) echo "make_bundle.sh: unknown option $1" >&2; exit 2 ;;
   esac
 done
 [ -x "$binary" ] || { echo "make_bundle.sh: no simulator binary at $binary (cargo build --release -p volcap)" >&2; exit 2; }
+if [ "$lean" = 1 ]; then
+  mkdir -p "$out"
+  [ "$(cd "$out/.." && pwd)" = "$repo" ] || { echo "make_bundle.sh: a lean bundle goes in the checkout's root (e.g. $repo/.recipe), not $out" >&2; exit 2; }
+  rm -rf "$out"/*
+  cp "$binary" "$out/volcap"
+  strip "$out/volcap" 2>/dev/null || objcopy --strip-debug "$out/volcap" 2>/dev/null || true
+  xz -9 -T0 -f "$out/volcap"
+  cp "$here/run.sh" "$out/"
+  git -C "$repo" rev-parse HEAD > "$out/COMMIT" 2>/dev/null || echo unknown > "$out/COMMIT"
+  echo "lean bundle $out: $(( $(du -sb "$out" | cut -f1) / 1048576 )) MiB; the checkout and it: $(( ( $(git -C "$repo" ls-files -z | xargs -0 du -cb 2>/dev/null | tail -1 | cut -f1) + $(du -sb "$out" | cut -f1) ) / 1048576 )) MiB"
+  exit 0
+fi
 mkdir -p "$out/models"
 cp "$binary" "$out/volcap"
 # Line tables are most of the binary; the recipe needs none of them.

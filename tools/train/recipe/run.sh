@@ -4,7 +4,13 @@
 # light checkpoint (<= 16 MiB) and the log in RESULT.
 #
 #   run.sh RESULT [--subjects 48] [--poses 16] [--views 3] [--steps 6000] [--procs NPROC]
-#                 [--tiny] [-- extra `volcap_train.train fourier` options]
+#                 [--minutes-data D] [--minutes-train T] [--tiny]
+#                 [-- extra `volcap_train.train fourier` options]
+#
+# --minutes-data: the generators stop after D minutes (each keeps the subjects it finished;
+# the one in progress is dropped); --minutes-train: training stops after T minutes with its
+# checkpoint, the rate annealed by then (`train --max-minutes`). Both together fit the recipe
+# into a lent machine's call (10 minutes a command there).
 #
 # --procs generators run at once, each the same subjects and split (--seed 11) in poses of
 # its own (--pose-seed 100 + i), their images joined in training (`--more-data`); --tiny is
@@ -16,6 +22,7 @@ b="$(cd "$(dirname "$0")" && pwd)"
 res="${1:?usage: run.sh RESULT [options]}"
 shift
 subjects=48 poses=16 views=3 steps=6000 procs=$(nproc) points=8000 batch=8 extra=()
+minutes_data=0 minutes_train=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --subjects) subjects="$2"; shift 2 ;;
@@ -23,6 +30,8 @@ while [ $# -gt 0 ]; do
     --views) views="$2"; shift 2 ;;
     --steps) steps="$2"; shift 2 ;;
     --procs) procs="$2"; shift 2 ;;
+    --minutes-data) minutes_data="$2"; shift 2 ;;
+    --minutes-train) minutes_train="$2"; shift 2 ;;
     --tiny) subjects=2 poses=1 views=2 steps=3 procs=2 points=4096 batch=2; shift ;;
     --) shift; extra=("$@"); break ;;
     *) echo "run.sh: unknown option $1" >&2; exit 2 ;;
@@ -34,7 +43,16 @@ case "$py" in */*) py="$(cd "$(dirname "$py")" && pwd)/$(basename "$py")" ;; esa
 mkdir -p "$res"
 log="$res/recipe.log"
 echo "recipe $(cat "$b/COMMIT") on $(hostname): $subjects subjects x $poses poses x $views views in $procs generators, $steps steps" | tee "$log"
-gunzip -c "$b/volcap.gz" > "$res/volcap"
+# A lean bundle (make_bundle.sh --lean) lives in the checkout and takes the Python package,
+# the segmentation and the start checkpoint from it; a full bundle carries its own.
+if [ -d "$b/volcap_train" ]; then
+  pydir="$b" seg_model="$b/models/seg.onnx" init="$b/models/init.pt"
+else
+  repo="$(cd "$b/.." && pwd)"
+  pydir="$repo/tools/train" seg_model="$repo/models/seg.onnx" init="$repo/models/checkpoints/shape-fourier-small.pt"
+  [ -d "$pydir/volcap_train" ] || { echo "run.sh: a lean bundle must sit in the checkout's root (no $pydir/volcap_train)" >&2; exit 2; }
+fi
+if [ -f "$b/volcap.xz" ]; then xz -dc "$b/volcap.xz" > "$res/volcap"; else gunzip -c "$b/volcap.gz" > "$res/volcap"; fi
 chmod +x "$res/volcap"
 assets=()
 [ -f "$b/assets.pack.gz" ] && assets=(--assets "$b/assets.pack.gz")
@@ -47,19 +65,53 @@ for i in $(seq 0 $((procs - 1))); do
     > "$res/ds-$i.log" 2>&1 &
   pids+=($!)
 done
-for p in "${pids[@]}"; do wait "$p"; done
+if [ "$minutes_data" != 0 ]; then
+  # The clock: generators still running at the deadline are stopped, and each drops the
+  # subject it was writing (the newest shard folder).
+  end=$(( t0 + $(awk -v m="$minutes_data" 'BEGIN { printf "%d", m * 60 }') ))
+  while [ "$(date +%s)" -lt "$end" ]; do
+    alive=0
+    for p in "${pids[@]}"; do kill -0 "$p" 2>/dev/null && alive=1; done
+    [ "$alive" = 1 ] || break
+    sleep 1
+  done
+  for i in "${!pids[@]}"; do
+    if kill -0 "${pids[$i]}" 2>/dev/null; then
+      kill "${pids[$i]}" 2>/dev/null || true
+      wait "${pids[$i]}" 2>/dev/null || true
+      pids[$i]=""
+      # Shards are written beside and renamed: only the image in progress is lost.
+      find "$res/ds-$i" -name '*.part' -delete
+      find "$res/ds-$i" -mindepth 1 -type d -empty -delete
+      echo "generator $i stopped at $minutes_data min: $(ls "$res/ds-$i"/train/*/*.safetensors 2>/dev/null | wc -l) training and $(ls "$res/ds-$i"/val/*/*.safetensors 2>/dev/null | wc -l) validation images kept" | tee -a "$log"
+    fi
+  done
+fi
+# The generators not stopped by the clock must have succeeded.
+for p in "${pids[@]}"; do [ -z "$p" ] || wait "$p"; done
 echo "dataset: $(( $(date +%s) - t0 )) s" | tee -a "$log"
+# Validation from the first generator that reached a validation subject (a clock may stop
+# some before theirs); the others' training images join.
+first=""
+for i in $(seq 0 $((procs - 1))); do
+  if ls "$res/ds-$i"/val/*/*.safetensors >/dev/null 2>&1; then first=$i; break; fi
+done
+[ -n "$first" ] || { echo "run.sh: no generator wrote a validation image (give --minutes-data more time)" | tee -a "$log" >&2; exit 1; }
 more=()
-for i in $(seq 1 $((procs - 1))); do more+=("$res/ds-$i"); done
+for i in $(seq 0 $((procs - 1))); do
+  [ "$i" = "$first" ] || ! ls "$res/ds-$i"/train/*/*.safetensors >/dev/null 2>&1 || more+=("$res/ds-$i")
+done
 seg=()
-if "$py" -c "import onnxruntime" 2>/dev/null; then seg=(--seg "$b/models/seg.onnx"); else echo "no onnxruntime: crops from the ground-truth masks" | tee -a "$log"; fi
+if "$py" -c "import onnxruntime" 2>/dev/null; then seg=(--seg "$seg_model"); else echo "no onnxruntime: crops from the ground-truth masks" | tee -a "$log"; fi
 t1=$(date +%s)
-cd "$b"
+cd "$pydir"
 md=()
+mt=()
+[ "$minutes_train" != 0 ] && mt=(--max-minutes "$minutes_train")
 [ ${#more[@]} -gt 0 ] && md=(--more-data "${more[@]}")
-"$py" -m volcap_train.train fourier --data "$res/ds-0" "${md[@]}" --out "$res/run" \
+"$py" -m volcap_train.train fourier --data "$res/ds-$first" "${md[@]}" --out "$res/run" \
   --variant fourier-small --steps "$steps" --batch "$batch" --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I \
-  --depth-frame body --points 2048 --device auto --init "$b/models/init.pt" "${seg[@]}" "${extra[@]}" 2>&1 | tee -a "$log"
+  --depth-frame body --points 2048 --device auto --init "$init" "${seg[@]}" "${mt[@]}" "${extra[@]}" 2>&1 | tee -a "$log"
 echo "training: $(( $(date +%s) - t1 )) s" | tee -a "$log"
 "$py" -m volcap_train.light "$res/run" "$res/checkpoint.pt" --variant fourier-small | tee -a "$log"
 cp "$res/run/log.csv" "$res/run/budget.json" "$res/"

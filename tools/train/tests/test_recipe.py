@@ -43,3 +43,32 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     budget = json.loads((res / "budget.json").read_text())
     assert budget["steps"] == 3 and "cuda" in budget["hardware"]
     assert {"ds-0", "ds-1"} <= {p.name for p in res.iterdir()}
+
+
+def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
+    """The lent machine's form (make_bundle.sh --lean): only the packed binary and run.sh, in
+    the checkout's root, the Python package, segmentation and start checkpoint taken from the
+    checkout; --minutes-train stops training at its budget with a checkpoint and says so."""
+    if not BINARY.exists():
+        if os.environ.get("CI"):
+            pytest.fail(f"{BINARY} is missing under CI (cargo build --release -p volcap)")
+        pytest.skip(f"{BINARY} not built")
+    bundle, res = REPO / f".recipe-test-{os.getpid()}", tmp_path / "result"
+    try:
+        subprocess.run([str(REPO / "tools/train/recipe/make_bundle.sh"), str(bundle), "--lean"], check=True)
+        assert sorted(p.name for p in bundle.iterdir()) == ["COMMIT", "run.sh", "volcap.xz"]
+        assert (bundle / "volcap.xz").stat().st_size < 20 * 2**20
+        env = {**os.environ, "PYTHON": sys.executable}
+        subprocess.run(
+            [str(bundle / "run.sh"), str(res), "--tiny", "--minutes-data", "30", "--minutes-train", "0.0001"],
+            check=True, env=env, cwd=tmp_path,
+        )
+    finally:
+        subprocess.run(["rm", "-rf", str(bundle)], check=True)
+    budget = json.loads((res / "budget.json").read_text())
+    assert budget["steps"] == 1 and "max-minutes" in budget["stopped"], budget
+    light = torch.load(res / "checkpoint.pt", weights_only=False)
+    assert light["step"] == 1
+    # A lean bundle outside the checkout's root is refused by name.
+    r = subprocess.run([str(REPO / "tools/train/recipe/make_bundle.sh"), str(tmp_path / "elsewhere"), "--lean"], capture_output=True, text=True)
+    assert r.returncode == 2 and "checkout's root" in r.stderr

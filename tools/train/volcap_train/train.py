@@ -318,6 +318,25 @@ class Run:
         self.ckpt = out / "ckpt.pt"
         self.log = out / "log.csv"
         self.args = args
+        # --max-minutes: the run's wall-clock budget (resumed runs count their earlier time);
+        # `loop` sets t0 and stops at the budget with a checkpoint.
+        minutes = getattr(args, "max_minutes", 0) or 0
+        self.deadline = minutes * 60.0 if minutes > 0 else None
+        self.t0 = time.time()
+
+    def elapsed(self) -> float:
+        return time.time() - self.t0
+
+    def progress(self, step: int, steps: int) -> float:
+        """How far through its budget the run is, in [0, 1]: the larger of the steps' and, with
+        --max-minutes, the clock's share (so a learning-rate schedule anneals by the deadline)."""
+        p = step / max(steps, 1)
+        if self.deadline:
+            p = max(p, self.elapsed() / self.deadline)
+        return min(p, 1.0)
+
+    def out_of_time(self) -> bool:
+        return self.deadline is not None and self.elapsed() >= self.deadline
 
     def save(self, state):
         tmp = self.ckpt.with_suffix(".tmp")
@@ -360,6 +379,8 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
     rows = []
     bar = tqdm(total=steps, initial=step, desc=run.out.name, unit="step")
     t0 = time.time() - wall
+    run.t0 = t0
+    stopped = None
     while step < steps:
         for m in modules.values():
             m.train()
@@ -368,13 +389,18 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
         rows.append((step, f"{loss:.6f}"))
         bar.update(1)
         bar.set_postfix(loss=f"{loss:.4f}")
-        if step % ckpt_every == 0 or step == steps:
+        if run.out_of_time():
+            stopped = f"--max-minutes {run.deadline / 60:g} reached at step {step}"
+        if step % ckpt_every == 0 or step == steps or stopped:
             state = {"modules": {n: m.state_dict() for n, m in modules.items()}, "opt": opt.state_dict(), "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step, "wall": time.time() - t0}
             if extra_state.get("ohem") is not None:
                 state["ohem"] = extra_state["ohem"].state_dict()
             run.save(state)
             run.write_log(rows, header)
             rows = []
+        if stopped:
+            print(stopped)
+            break
     bar.close()
     wall = time.time() - t0
     if st is not None and st["step"] >= steps:
@@ -383,7 +409,7 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
         m.eval()
     with torch.no_grad():
         metrics = eval_fn()
-    b = run.finish(step, wall, {"val": metrics})
+    b = run.finish(step, wall, {"val": metrics, **({"stopped": stopped} if stopped else {})})
     print(json.dumps(b["val"]))
     return b
 
@@ -601,7 +627,7 @@ def train_fourier(args):
 
     def step_fn(step):
         for gparam in opt.param_groups:
-            gparam["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * min(step / sched_total, 1.0)))
+            gparam["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * run.progress(step, sched_total)))
         items = ohem.sample_items(args.batch, gen)
         pidx = ohem.sample_points(items, args.points, gen)
         x = inputs(tr, items, None if args.no_aug else gen)
@@ -677,6 +703,7 @@ def main(argv=None):
     ap.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="fourier: where the net trains (auto: CUDA when present)")
     ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
     ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight")
+    ap.add_argument("--max-minutes", type=float, default=0.0, help="stop at this wall-clock budget (a checkpoint, the validation and budget.json as at the last step; fourier: the learning rate anneals by it); 0: none")
     ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
     ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
