@@ -5,6 +5,38 @@ use super::{EvalArgs, Framing, ImageRow, ModelRow};
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// The options that change what was measured, as they were given (so that the report's
+/// command line reproduces it): framing, mask, surface levels, the experimental readings,
+/// backend.
+fn knobs(a: &EvalArgs) -> String {
+    let list = |v: &[f32]| {
+        v.iter()
+            .map(|x| x.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let mut k = String::new();
+    if a.framing == Framing::Upper {
+        let _ = write!(k, " --framing {}", a.framing.name());
+    }
+    if a.gt_mask {
+        k.push_str(" --gt-mask");
+    }
+    if !a.iso_level.is_empty() {
+        let _ = write!(k, " --iso-level {}", list(&a.iso_level));
+    }
+    if let Some(p) = &a.peak_level {
+        let _ = write!(k, " --peak-level {}", list(p));
+    }
+    if let Some(m) = &a.moment_fill {
+        let _ = write!(k, " --moment-fill {}", list(m));
+    }
+    if a.backend != "cpu" {
+        let _ = write!(k, " --backend {}", a.backend);
+    }
+    k
+}
+
 pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
@@ -24,10 +56,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         a.res,
         a.model.join(","),
         a.seed,
-        match a.framing {
-            Framing::Whole => String::new(),
-            Framing::Upper => format!(" --framing {}", a.framing.name()),
-        },
+        knobs(a),
         a.manifest.display(),
         a.data
             .as_ref()
