@@ -218,3 +218,40 @@ pub(super) fn plot(summary: &[ModelRow], path: &Path) -> anyhow::Result<()> {
         &points,
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        a: EvalArgs,
+    }
+
+    /// The report's command line gives back the options that changed the measurement, and
+    /// nothing for the defaults.
+    #[test]
+    fn the_reports_command_line_names_the_options_given() {
+        let plain = Cli::parse_from(["eval"]).a;
+        assert_eq!(knobs(&plain), "");
+        let a = Cli::parse_from([
+            "eval",
+            "--gt-mask",
+            "--iso-level",
+            "0.5,0.55",
+            "--moment-fill",
+            "0.02,0.1,4",
+            "--peak-level",
+            "0.5,0.2",
+            "--framing",
+            "upper",
+        ])
+        .a;
+        assert_eq!(
+            knobs(&a),
+            " --framing upper --gt-mask --iso-level 0.5,0.55 --peak-level 0.5,0.2 --moment-fill 0.02,0.1,4"
+        );
+    }
+}
