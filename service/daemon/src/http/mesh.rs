@@ -42,7 +42,8 @@ type Job = Box<dyn FnOnce() + Send>;
 /// [`MESH_CONCURRENCY`] = 1 be handed over at a time, so its queue of one never fills). One
 /// thread for the daemon's life: no thread is created per request, and a computation that
 /// ends cannot overlap the next one even while its thread tears down. A computation that
-/// panics is caught (its client gets 500); a worker that is gone is started again.
+/// panics is caught and counted as failed (its client gets 500); a worker that is gone is
+/// started again.
 #[derive(Default)]
 pub struct MeshWorker {
     tx: Mutex<Option<SyncSender<Job>>>,
@@ -160,12 +161,12 @@ fn compute(
 
 /// The current frame as a coloured mesh: hierarchical localization at the render
 /// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms): it runs on
-/// a thread of its own at a lower priority ([`MESH_NICE`]), [`MESH_CONCURRENCY`] at a time
-/// (others get 503 with Retry-After), and its bytes are cached for the frame, so a repeated
-/// request for the same frame costs nothing (the thread: [`MeshWorker`]). The gate's permit moves into the computation
-/// and is released only when it ends, so a client that leaves cannot let another one start
-/// beside it; leaving cancels the computation at its next batch of points (nobody else can
-/// be waiting for it: they were told 503).
+/// the mesh worker's thread at a lower priority ([`MeshWorker`], [`MESH_NICE`]),
+/// [`MESH_CONCURRENCY`] at a time (others get 503 with Retry-After), and its bytes are cached
+/// for the frame, so a repeated request for the same frame costs nothing. The gate's permit
+/// moves into the computation and is released only when it ends, so a client that leaves
+/// cannot let another one start beside it; leaving cancels the computation at its next batch
+/// of points (nobody else can be waiting for it: they were told 503).
 pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
     let Some(field) = app.shared.latest_field() else {
         return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
@@ -199,7 +200,10 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         // Held until the computation ends, whatever became of the request.
         let _permit = permit;
         let key = Arc::downgrade(&field);
-        let r = compute(field.as_ref(), res, coarse, &flag);
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            compute(field.as_ref(), res, coarse, &flag)
+        }))
+        .unwrap_or_else(|_| Err("the mesh computation panicked".into()));
         drop(field);
         let counter = match &r {
             Ok(_) => &app2.mesh_worker.done,
