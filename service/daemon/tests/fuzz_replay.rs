@@ -159,7 +159,7 @@ fn mutate(rng: &mut Rng, seeds: &[Vec<u8>]) -> Vec<u8> {
 
 /// Runs `body` on every seed, every found input and `MUTATIONS` mutations; a panic names the
 /// input (as an escaped string) so that it can be kept as a corpus file.
-fn replay(target: &str, seeds: Vec<Vec<u8>>, body: fn(&[u8])) -> usize {
+fn replay(target: &str, seeds: Vec<Vec<u8>>, body: fn(&[u8])) {
     assert!(!seeds.is_empty(), "{target}: no seeds");
     let mut rng = Rng(target
         .bytes()
@@ -180,7 +180,11 @@ fn replay(target: &str, seeds: Vec<Vec<u8>>, body: fn(&[u8])) -> usize {
             );
         }
     }
-    inputs.len()
+}
+
+/// Text seeds as bytes.
+fn texts(seeds: &[&str]) -> Vec<Vec<u8>> {
+    seeds.iter().map(|s| s.as_bytes().to_vec()).collect()
 }
 
 fn board_configs() -> Vec<Vec<u8>> {
@@ -191,8 +195,7 @@ fn board_configs() -> Vec<Vec<u8>> {
 
 #[test]
 fn config_parse_on_board_configs_and_their_mutations() {
-    let n = replay("config_parse", board_configs(), config_parse::run);
-    assert!(n > MUTATIONS);
+    replay("config_parse", board_configs(), config_parse::run);
 }
 
 #[test]
@@ -249,7 +252,7 @@ fn frame_decode_on_jpegs_yuyv_and_recordings() {
 
 #[test]
 fn host_check_on_request_heads() {
-    let seeds: Vec<Vec<u8>> = [
+    let seeds = texts(&[
         "1 /\nvolcap.lan",
         "1 /state\nvolcap.lan:8080",
         "0 /",
@@ -260,16 +263,13 @@ fn host_check_on_request_heads() {
         "1 /\n[::1]:8080",
         "1 volcap.lan:80",
         "1 /\nVOLCAP.LAN.",
-    ]
-    .iter()
-    .map(|s| s.as_bytes().to_vec())
-    .collect();
+    ]);
     replay("host_check", seeds, host_check::run);
 }
 
 #[test]
 fn http_request_on_every_route() {
-    let seeds: Vec<Vec<u8>> = [
+    let seeds = texts(&[
         "GET\n/\n",
         "GET\n/state\nhost: 127.0.0.1",
         "GET\n/metrics\n",
@@ -282,9 +282,6 @@ fn http_request_on_every_route() {
         "GET\n/stream.mjpg?fps=5\n",
         "0.5,0.5,0.5",
         "DELETE\n/state\n",
-    ]
-    .iter()
-    .map(|s| s.as_bytes().to_vec())
-    .collect();
+    ]);
     replay("http_request", seeds, http_request::run);
 }

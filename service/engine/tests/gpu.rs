@@ -155,12 +155,22 @@ fn the_device_takes_the_adapters_buffer_sizes_and_default_limits_otherwise() {
         volcap_engine::gpu::buffer_limits(&small).max_storage_buffer_binding_size,
         d.max_storage_buffer_binding_size
     );
-    // The opened device has them.
+    // The opened device has them: its adapter's, as the instance lists it.
     if let Some(gpu) = gpu() {
-        assert!(
-            gpu.device.limits().max_storage_buffer_binding_size
-                >= d.max_storage_buffer_binding_size
+        let inst =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapters = pollster::block_on(inst.enumerate_adapters(wgpu::Backends::all()));
+        let a = adapters
+            .iter()
+            .find(|a| a.get_info().name == gpu.adapter.name)
+            .expect("the opened adapter is listed");
+        let want = volcap_engine::gpu::buffer_limits(&a.limits());
+        let got = gpu.device.limits();
+        assert_eq!(
+            got.max_storage_buffer_binding_size,
+            want.max_storage_buffer_binding_size
         );
+        assert_eq!(got.max_buffer_size, want.max_buffer_size);
     }
 }
 

@@ -4,7 +4,7 @@ stays under it (what the Parseval L2 barely sees), and finite for wild series.""
 import torch
 
 from volcap_train import fourier as FO
-from volcap_train.train import ray_level_bce
+from volcap_train.ray_losses import ray_level_bce
 
 K = 15
 

@@ -2,7 +2,7 @@
 (a finger-wide bar) and leaves what is wide (a torso-wide block) and the background alone."""
 import torch
 
-from volcap_train.train import thin_mask
+from volcap_train.ray_losses import thin_mask
 
 
 def test_thin_mask_marks_narrow_parts_only():

@@ -492,29 +492,31 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             *prec,
             &runtime,
         )?;
-        let peak = match (&mut models.shape, &a.peak_level) {
-            (ShapeModel::Fourier(f), Some(pl)) if truth_k.is_none() && pl.len() == 2 => {
-                Arc::get_mut(f)
-                    .ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?
-                    .peak_level = Some((pl[0], pl[1]));
+        // The Fourier net's decode knobs (not the ground-truth rows' nor other families').
+        let knobs = a.peak_level.is_some() || a.moment_fill.is_some() || level.is_some();
+        let mut fourier = match &mut models.shape {
+            ShapeModel::Fourier(f) if truth_k.is_none() && knobs => {
+                Some(Arc::get_mut(f).ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?)
+            }
+            _ => None,
+        };
+        let peak = match (&mut fourier, &a.peak_level) {
+            (Some(f), Some(pl)) if pl.len() == 2 => {
+                f.peak_level = Some((pl[0], pl[1]));
                 Some(pl[0])
             }
             _ => None,
         };
-        let fill = match (&mut models.shape, &a.moment_fill) {
-            (ShapeModel::Fourier(f), Some(m)) if truth_k.is_none() && m.len() == 3 => {
-                Arc::get_mut(f)
-                    .ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?
-                    .moment_fill = Some((m[0], m[1], m[2] as usize));
+        let fill = match (&mut fourier, &a.moment_fill) {
+            (Some(f), Some(m)) if m.len() == 3 => {
+                f.moment_fill = Some((m[0], m[1], m[2] as usize));
                 Some((m[1], m[2] as usize))
             }
             _ => None,
         };
-        let level = match (&mut models.shape, level) {
-            (ShapeModel::Fourier(f), Some(l)) if truth_k.is_none() => {
-                Arc::get_mut(f)
-                    .ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?
-                    .iso_level = l;
+        let level = match (&mut fourier, level) {
+            (Some(f), Some(l)) => {
+                f.iso_level = l;
                 Some(l)
             }
             // Other families and the ground-truth rows once, at their own rule.

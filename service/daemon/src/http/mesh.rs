@@ -80,10 +80,9 @@ impl MeshWorker {
             .name("volcap-mesh".into())
             .spawn(move || {
                 lower_priority();
+                // Each job catches its computation's panic (`mesh_glb`).
                 while let Ok(job) = rx.recv() {
-                    if std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)).is_err() {
-                        tracing::warn!("a mesh computation panicked; the worker goes on");
-                    }
+                    job();
                 }
             })
             .map_err(|e| format!("mesh thread: {e}"))?;
@@ -203,7 +202,10 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             compute(field.as_ref(), res, coarse, &flag)
         }))
-        .unwrap_or_else(|_| Err("the mesh computation panicked".into()));
+        .unwrap_or_else(|_| {
+            tracing::warn!("a mesh computation panicked; the worker goes on");
+            Err("the mesh computation panicked".into())
+        });
         drop(field);
         let counter = match &r {
             Ok(_) => &app2.mesh_worker.done,

@@ -285,6 +285,16 @@ fn peak_relative_level_keeps_thin_parts_and_nothing_else() {
     assert_eq!(same.pixel(0, 0), thin.pixel(0, 0));
 }
 
+/// The series of one interval with its harmonics damped (`exp(-(n sigma)^2)` on the n-th):
+/// a blur that keeps the interval's mass `c0` and its depth centre.
+fn damped(iv: [f64; 2], sigma: f64, k: usize) -> Vec<f32> {
+    interval_coeffs(&[iv], k)
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (v * (-((i.div_ceil(2)) as f64 * sigma).powi(2)).exp()) as f32)
+        .collect()
+}
+
 /// The moment fill: a thin part whose series is blurred (its harmonics damped, its mass `c0`
 /// and depth centre kept) peaks under the level and vanishes; filled from its moments it
 /// decodes at its true place and width. A thick ray, an empty one, one under the least length
@@ -293,14 +303,7 @@ fn peak_relative_level_keeps_thin_parts_and_nothing_else() {
 fn moment_fill_puts_a_blurred_thin_part_back_where_it_was() {
     let k = 15;
     let blurred = |iv: [f64; 2], sigma: f64| -> FourierMaps {
-        let c: Vec<f32> = interval_coeffs(&[iv], k)
-            .iter()
-            .enumerate()
-            .map(|(i, v)| {
-                let n = i.div_ceil(2) as f64;
-                (v * (-(n * sigma).powi(2)).exp()) as f32
-            })
-            .collect();
+        let c = damped(iv, sigma, k);
         let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
         FourierMaps::from_planar(&planar, k, 2, 1.0)
             .unwrap()
@@ -369,15 +372,8 @@ fn moment_fill_puts_a_blurred_thin_part_back_where_it_was() {
 fn moment_fill_restores_what_reaches_beyond_the_band_around_the_body() {
     let (k, n) = (15usize, 32usize);
     let c = 2 * k + 1;
-    let series = |iv: [f64; 2], sigma: f64| -> Vec<f32> {
-        interval_coeffs(&[iv], k)
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (v * (-((i.div_ceil(2)) as f64 * sigma).powi(2)).exp()) as f32)
-            .collect()
-    };
-    let body = series([-0.4, 0.4], 0.0);
-    let blurred = series([0.0, 0.14], 0.25);
+    let body = damped([-0.4, 0.4], 0.0, k);
+    let blurred = damped([0.0, 0.14], 0.25, k);
     // Body: x, y in 8..16; band: within 2 of it; hand: x in 16..24, y in 11..13 beyond the band.
     let kind = |x: usize, y: usize| -> u8 {
         let inb = (8..16).contains(&x) && (8..16).contains(&y);
