@@ -107,7 +107,8 @@ pub struct EvalArgs {
     pub iso_level: Vec<f32>,
     /// Experimental, Fourier models: read a pixel's surface at FRAC of its series' peak
     /// where that peak is under the surface level but at least MIN (thin parts that a
-    /// smooth fit blurs under the level), `FRAC,MIN` (e.g. 0.5,0.2).
+    /// smooth fit blurs under the level), `FRAC,MIN[,GATE]` (e.g. 0.5,0.2): with GATE, only
+    /// on map pixels whose person mask (averaged over the pixel) reaches GATE.
     #[arg(long, value_delimiter = ',')]
     pub peak_level: Option<Vec<f32>>,
     /// Experimental, Fourier models: `MIN_LEN,MAX_LEN,AWAY`: a pixel whose series peaks under
@@ -444,9 +445,14 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         specs.push((name.to_string(), prec));
     }
     if let Some(pl) = &a.peak_level
-        && (pl.len() != 2 || !(pl[0] > 0.0 && pl[0] < 1.0) || !(0.0..1.0).contains(&pl[1]))
+        && (!(2..=3).contains(&pl.len())
+            || !(pl[0] > 0.0 && pl[0] < 1.0)
+            || !(0.0..1.0).contains(&pl[1])
+            || pl.get(2).is_some_and(|g| !(*g > 0.0 && *g <= 1.0)))
     {
-        bail!("--peak-level {pl:?}: FRAC,MIN with FRAC in (0, 1) and MIN in [0, 1)");
+        bail!(
+            "--peak-level {pl:?}: FRAC,MIN[,GATE] with FRAC in (0, 1), MIN in [0, 1) and GATE in (0, 1]"
+        );
     }
     if let Some(m) = &a.moment_fill
         && (m.len() != 3
@@ -501,9 +507,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             _ => None,
         };
         let peak = match (&mut fourier, &a.peak_level) {
-            (Some(f), Some(pl)) if pl.len() == 2 => {
+            (Some(f), Some(pl)) if pl.len() >= 2 => {
                 f.peak_level = Some((pl[0], pl[1]));
-                Some(pl[0])
+                f.peak_gate = pl.get(2).copied();
+                Some((pl[0], f.peak_gate))
             }
             _ => None,
         };
@@ -531,7 +538,11 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
             level.map(|l| format!("-iso{l:.2}")).unwrap_or_default(),
-            peak.map(|f| format!("-peak{f:.2}")).unwrap_or_default(),
+            peak.map(|(f, g)| format!(
+                "-peak{f:.2}{}",
+                g.map(|g| format!("g{g:.2}")).unwrap_or_default()
+            ))
+            .unwrap_or_default(),
             fill.map(|(l, d)| format!("-fill{l:.2}x{d}"))
                 .unwrap_or_default()
         );

@@ -35,6 +35,12 @@ pub fn launch(
     env: &[(&str, &str)],
     keep_stderr: bool,
 ) -> (Proc, String) {
+    // Kept in a file unless piped, so that a daemon that dies mid-test says why ([`request`]).
+    let (err, log) = if keep_stderr {
+        (Stdio::piped(), None)
+    } else {
+        stderr_log()
+    };
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_volcapd"));
     cmd.current_dir(root())
         .arg("--config")
@@ -42,11 +48,7 @@ pub fn launch(
         .args(["--http", "127.0.0.1:0"])
         .args(args)
         .stdout(Stdio::piped())
-        .stderr(if keep_stderr {
-            Stdio::piped()
-        } else {
-            Stdio::null()
-        });
+        .stderr(err);
     for (k, v) in env {
         cmd.env(k, v);
     }
@@ -61,7 +63,51 @@ pub fn launch(
         .and_then(|s| s.split('/').next())
         .unwrap_or_else(|| panic!("no URL in {line:?}"))
         .to_string();
+    if let Some(log) = log {
+        LOGS.lock().unwrap().push((addr.clone(), child.id(), log));
+    }
     (Proc(child), addr)
+}
+
+/// The stderr file of every daemon launched: (HTTP address, pid, file).
+static LOGS: std::sync::Mutex<Vec<(String, u32, PathBuf)>> = std::sync::Mutex::new(Vec::new());
+
+fn stderr_log() -> (Stdio, Option<PathBuf>) {
+    static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let path = std::env::temp_dir().join(format!(
+        "volcapd-test-{}-{n}.stderr",
+        std::process::id()
+    ));
+    match std::fs::File::create(&path) {
+        Ok(f) => (f.into(), Some(path)),
+        Err(_) => (Stdio::null(), None),
+    }
+}
+
+/// What is known of the daemon launched at `addr`: whether its process is still there and
+/// the end of its stderr (for a connection it refused).
+fn daemon_note(addr: &str) -> String {
+    let logs = LOGS.lock().unwrap();
+    let Some((_, pid, log)) = logs.iter().rev().find(|(a, _, _)| a == addr) else {
+        return String::new();
+    };
+    let state = std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .ok()
+        .and_then(|s| s.rsplit(") ").next().and_then(|r| r.chars().next()))
+        .map(|c| match c {
+            'Z' => "has exited (not yet reaped)".to_string(),
+            c => format!("is running (state {c})"),
+        })
+        .unwrap_or_else(|| "is gone".into());
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    let tail: Vec<&str> = text.lines().rev().take(30).collect();
+    let tail: Vec<&str> = tail.into_iter().rev().collect();
+    format!(
+        "; volcapd (pid {pid}) {state}; the end of its stderr ({}):\n{}",
+        log.display(),
+        tail.join("\n")
+    )
 }
 
 /// A tool a test needs: on the PATH, or the test is skipped ([`skip`]: a failure in CI).
@@ -95,7 +141,8 @@ pub fn skip(why: &str) {
 /// Minimal HTTP/1.1 request on loopback: (status, head, body; chunked bodies joined). A
 /// connection closed without a response head gives status 0.
 pub fn request(addr: &str, method: &str, path: &str, extra: &str) -> (u16, String, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap();
+    let mut s = TcpStream::connect(addr)
+        .unwrap_or_else(|e| panic!("connecting to volcapd at {addr}: {e}{}", daemon_note(addr)));
     s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
     write!(
         s,

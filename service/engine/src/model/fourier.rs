@@ -252,16 +252,31 @@ impl FourierMaps {
     /// global level and would vanish; half its peak is where its blurred edges are). The
     /// shift is folded into the pixel's constant term, so decoding is unchanged. Pixels
     /// peaking under `min_peak` (nothing there) keep `iso`.
-    pub fn with_peak_relative_level(mut self, frac: f32, min_peak: f32) -> Self {
-        if !(frac > 0.0 && frac < 1.0 && min_peak.is_finite()) {
+    pub fn with_peak_relative_level(self, frac: f32, min_peak: f32) -> Self {
+        self.with_peak_relative_level_in(frac, min_peak, None)
+    }
+
+    /// [`FourierMaps::with_peak_relative_level`] only on the pixels `gate` marks (`size x
+    /// size`, row-major; e.g. those the person mask covers: the blurred halo just outside a
+    /// silhouette, which a lower reading would turn into surface, lies outside it). A gate of
+    /// another length leaves the maps unchanged.
+    pub fn with_peak_relative_level_in(
+        mut self,
+        frac: f32,
+        min_peak: f32,
+        gate: Option<&[bool]>,
+    ) -> Self {
+        if !(frac > 0.0 && frac < 1.0 && min_peak.is_finite())
+            || gate.is_some_and(|g| g.len() != self.size * self.size)
+        {
             return self;
         }
         let c = 2 * self.k + 1;
         let iso = self.iso_level();
         let peaks = self.peaks();
-        for (px, &peak) in self.data.chunks_exact_mut(c).zip(&peaks) {
+        for (i, (px, &peak)) in self.data.chunks_exact_mut(c).zip(&peaks).enumerate() {
             // Only rays that would vanish (peak under the level) and hold something.
-            if peak >= min_peak && peak < iso {
+            if peak >= min_peak && peak < iso && gate.is_none_or(|g| g[i]) {
                 // Read at frac * peak: raise the series by iso - frac * peak.
                 px[0] += iso - frac * peak;
             }
@@ -471,6 +486,9 @@ pub struct FourierNet {
     /// Experimental: [`FourierMaps::with_peak_relative_level`] `(frac, min_peak)` on every
     /// frame's maps (`volcap eval --peak-level`); off by default.
     pub peak_level: Option<(f32, f32)>,
+    /// With `peak_level`: only on the map pixels whose person mask (the encoder input's
+    /// fourth channel, averaged over the pixel's footprint) reaches this value.
+    pub peak_gate: Option<f32>,
     /// Experimental: [`FourierMaps::with_moment_fill`] `(min_len, max_len, away)` on every
     /// frame's maps (`volcap eval --moment-fill`); off by default.
     pub moment_fill: Option<(f32, f32, usize)>,
@@ -559,6 +577,7 @@ impl FourierNet {
             iso_level,
             basis,
             peak_level: None,
+            peak_gate: None,
             moment_fill: None,
         })
     }
@@ -571,7 +590,10 @@ impl FourierNet {
             .map(|m| {
                 let m = m.with_iso_level(self.iso_level).with_basis(self.basis);
                 let m = match self.peak_level {
-                    Some((frac, min_peak)) => m.with_peak_relative_level(frac, min_peak),
+                    Some((frac, min_peak)) => {
+                        let gate = self.peak_gate.map(|t| mask_gate(&x[3 * s * s..], s, self.size, t));
+                        m.with_peak_relative_level_in(frac, min_peak, gate.as_deref())
+                    }
                     None => m,
                 };
                 match self.moment_fill {
@@ -584,6 +606,26 @@ impl FourierNet {
                 msg: "non-finite Fourier coefficients".into(),
             })
     }
+}
+
+/// The `n x n` map pixels whose `s x s` mask, averaged over each pixel's footprint (`s / n`
+/// input pixels a side), reaches `t`; all false when `s` is not a multiple of `n` or the mask
+/// is short.
+pub fn mask_gate(mask: &[f32], s: usize, n: usize, t: f32) -> Vec<bool> {
+    let mut out = vec![false; n * n];
+    if n == 0 || s % n != 0 || mask.len() < s * s {
+        return out;
+    }
+    let f = s / n;
+    for (i, o) in out.iter_mut().enumerate() {
+        let (y, x) = (i / n, i % n);
+        let sum: f32 = (0..f)
+            .flat_map(|dy| (0..f).map(move |dx| (y * f + dy) * s + x * f + dx))
+            .map(|j| mask[j])
+            .sum();
+        *o = sum / (f * f) as f32 >= t;
+    }
+    out
 }
 
 #[cfg(test)]

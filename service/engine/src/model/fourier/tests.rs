@@ -285,6 +285,53 @@ fn peak_relative_level_keeps_thin_parts_and_nothing_else() {
     assert_eq!(same.pixel(0, 0), thin.pixel(0, 0));
 }
 
+/// The gated form reads only the pixels its gate marks: the same blurred thin part on every
+/// pixel of a 2 x 2 map comes back on the one gated pixel and stays gone on the others; a
+/// gate of the wrong size leaves the maps alone. `mask_gate` averages the mask over each
+/// map pixel's footprint.
+#[test]
+fn gated_peak_level_reads_only_the_gated_pixels() {
+    let k = 15;
+    let c: Vec<f32> = interval_coeffs(&[[-0.1, 0.1]], k)
+        .iter()
+        .map(|v| 0.45 * *v as f32)
+        .collect();
+    let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
+    let thin = FourierMaps::from_planar(&planar, k, 2, 1.0)
+        .unwrap()
+        .with_iso_level(0.55);
+    // Inside anywhere on the ray through a map corner (align-corners: (-1, -1) is pixel 0).
+    let hit = |m: &FourierMaps, x: f32, y: f32| {
+        let (mut out, mut s) = ([0.0f32], Vec::new());
+        (0..=400).any(|i| {
+            m.occupancy(&[Vec3::new(x, y, -1.0 + i as f32 / 200.0)], &mut out, &mut s);
+            out[0] > 0.5
+        })
+    };
+    let gate = [true, false, false, false];
+    let gated = thin
+        .clone()
+        .with_peak_relative_level_in(0.5, 0.2, Some(&gate));
+    assert!(hit(&gated, -1.0, -1.0), "the gated pixel stays empty");
+    for (x, y) in [(1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+        assert!(!hit(&gated, x, y), "an ungated pixel ({x}, {y}) decodes");
+        assert!(hit(&thin.clone().with_peak_relative_level(0.5, 0.2), x, y));
+    }
+    let wrong = thin.clone().with_peak_relative_level_in(0.5, 0.2, Some(&[true; 3]));
+    assert_eq!(wrong.pixel(0, 0), thin.pixel(0, 0));
+
+    // A 4 x 4 mask over 2 x 2 map pixels: the top-left block full, the rest at 0.3 except
+    // one full input pixel in the top-right block (mean 0.475).
+    let mut mask = [0.3f32; 16];
+    for i in [0, 1, 4, 5, 2] {
+        mask[i] = 1.0;
+    }
+    assert_eq!(mask_gate(&mask, 4, 2, 0.5), vec![true, false, false, false]);
+    assert_eq!(mask_gate(&mask, 4, 2, 0.45), vec![true, true, false, false]);
+    assert_eq!(mask_gate(&mask, 4, 3, 0.1), vec![false; 9], "4 is not a multiple of 3");
+    assert_eq!(mask_gate(&mask[..8], 4, 2, 0.1), vec![false; 4], "a short mask");
+}
+
 /// The series of one interval with its harmonics damped (`exp(-(n sigma)^2)` on the n-th):
 /// a blur that keeps the interval's mass `c0` and its depth centre.
 fn damped(iv: [f64; 2], sigma: f64, k: usize) -> Vec<f32> {
