@@ -99,6 +99,10 @@ impl Control {
         if new.dbus != old.dbus {
             restart.push("dbus");
         }
+        // The networks are loaded (and checked) at start.
+        if new.model != old.model {
+            restart.push("model");
+        }
         // Server limits are set when the listener starts.
         if new.http.header_timeout_s != old.http.header_timeout_s {
             restart.push("http.header_timeout_s");
@@ -151,6 +155,7 @@ impl Control {
         keep.render.field = old.render.field;
         keep.render.oracle_voxel_m = old.render.oracle_voxel_m;
         keep.dbus = old.dbus;
+        keep.model = old.model.clone();
         *lock(&self.config) = keep;
         let mut msg = if applied.is_empty() {
             "no change".to_string()

@@ -124,7 +124,17 @@ fn main() -> ExitCode {
                     None => Ok(m),
                 });
         match loaded {
-            Ok(m) => Some(Arc::new(m)),
+            Ok(m) => {
+                let fill = cfg.model.thin_parts.moment_fill();
+                let (m, took) = m.with_moment_fill(fill);
+                if fill.is_some() && took == 0 {
+                    tracing::warn!(
+                        "model.thin_parts = \"moment-fill\": {} is not a Fourier model; read as predicted",
+                        cfg.model.name
+                    );
+                }
+                Some(Arc::new(m))
+            }
             Err(e) => {
                 eprintln!("volcapd: [model] in {}: {e}", cli.config.display());
                 return ExitCode::from(EXIT_CONFIG);

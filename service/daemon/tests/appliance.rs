@@ -208,6 +208,19 @@ fn dbus_properties_methods_errors_and_signals() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("applied: render"));
     assert_eq!(http_state(&http)["view"]["yaw"], 90.0);
     assert_eq!(get(&addr, "Resolution"), "u 65");
+    // The networks are loaded at start: a changed [model] waits for a restart, and says so.
+    let with_model = format!(
+        "{}[model]\nthin_parts = \"moment-fill\"\n",
+        text.replace("yaw = 0.0", "yaw = 90.0")
+    );
+    std::fs::write(&cfg, with_model).unwrap();
+    let o = call(&addr, "Reload", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("needs a restart to take effect: model"),
+        "{out}"
+    );
 
     // PropertiesChanged was signalled for the changes above.
     std::thread::sleep(Duration::from_millis(1500));

@@ -128,7 +128,12 @@ fn serves_h264_over_tcp_and_udp_to_ffmpeg_and_gstreamer() {
     // reproduced here in 5 runs on a loaded CPU) and gst-launch exited 1. A failed shutdown is
     // printed, not failed.
     let out = Command::new("timeout")
-        .args(["40", "gst-launch-1.0", "rtspsrc", &format!("location={url}")])
+        .args([
+            "40",
+            "gst-launch-1.0",
+            "rtspsrc",
+            &format!("location={url}"),
+        ])
         .args(["!", "rtph264depay", "!", "h264parse", "!", "avdec_h264"])
         .args(["!", "fakesink", "num-buffers=10"])
         .output()

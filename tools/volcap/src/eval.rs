@@ -444,11 +444,15 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         };
         specs.push((name.to_string(), prec));
     }
+    let peak_ok = |pl: &[f32]| {
+        (2..=3).contains(&pl.len())
+            && pl[0] > 0.0
+            && pl[0] < 1.0
+            && (0.0..1.0).contains(&pl[1])
+            && pl.get(2).is_none_or(|g| *g > 0.0 && *g <= 1.0)
+    };
     if let Some(pl) = &a.peak_level
-        && (!(2..=3).contains(&pl.len())
-            || !(pl[0] > 0.0 && pl[0] < 1.0)
-            || !(0.0..1.0).contains(&pl[1])
-            || pl.get(2).is_some_and(|g| !(*g > 0.0 && *g <= 1.0)))
+        && !peak_ok(pl)
     {
         bail!(
             "--peak-level {pl:?}: FRAC,MIN[,GATE] with FRAC in (0, 1), MIN in [0, 1) and GATE in (0, 1]"

@@ -211,3 +211,31 @@ fn temporal_section_defaults_bounds_and_off() {
         .is_err()
     );
 }
+
+/// `model.thin_parts`: the series by default, the moment fill by name (with the engine's
+/// measured setting), and a misspelt value refused with its file, line and key.
+#[test]
+fn thin_parts_is_read_and_a_wrong_value_named() {
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    let c = Config::parse(base, Path::new("b.toml")).unwrap();
+    assert_eq!(c.model.thin_parts, ThinParts::Series);
+    assert_eq!(c.model.thin_parts.moment_fill(), None);
+    let c = Config::parse(
+        &format!("{base}[model]\nthin_parts = \"moment-fill\"\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c.model.thin_parts.moment_fill(), Some((0.02, 0.1, 4)));
+    let e = Config::parse(
+        &format!("{base}[model]\nthin_parts = \"fill\"\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("b.toml")
+            && e.contains("line 5")
+            && e.contains("thin_parts")
+            && e.contains("moment-fill"),
+        "{e}"
+    );
+}

@@ -75,10 +75,7 @@ static LOGS: std::sync::Mutex<Vec<(String, u32, PathBuf)>> = std::sync::Mutex::n
 fn stderr_log() -> (Stdio, Option<PathBuf>) {
     static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let path = std::env::temp_dir().join(format!(
-        "volcapd-test-{}-{n}.stderr",
-        std::process::id()
-    ));
+    let path = std::env::temp_dir().join(format!("volcapd-test-{}-{n}.stderr", std::process::id()));
     match std::fs::File::create(&path) {
         Ok(f) => (f.into(), Some(path)),
         Err(_) => (Stdio::null(), None),

@@ -284,24 +284,62 @@ impl FourierMaps {
         self
     }
 
-    /// Each pixel's series at its highest over the ray (sampled at 129 depths: the series is
-    /// band-limited to K cycles).
-    fn peaks(&self) -> Vec<f32> {
-        let c = 2 * self.k + 1;
-        let zs: Vec<Vec<f32>> = (0..129)
+    /// The basis at the 129 depths the peak tests sample (`zeta = -1 + 2 i / 128`: the
+    /// series is band-limited to K cycles).
+    fn sample_basis(&self) -> Vec<Vec<f32>> {
+        (0..129)
             .map(|i| {
-                let mut v = vec![0.0f32; c];
+                let mut v = vec![0.0f32; 2 * self.k + 1];
                 self.basis
                     .values(-1.0 + 2.0 * i as f32 / 128.0, self.k, &mut v);
                 v
             })
-            .collect();
+            .collect()
+    }
+
+    /// Each pixel's series at its highest over the ray (at [`Self::sample_basis`]'s depths).
+    fn peaks(&self) -> Vec<f32> {
+        let c = 2 * self.k + 1;
+        let zs = self.sample_basis();
         self.data
             .chunks_exact(c)
             .map(|px| {
                 zs.iter()
                     .map(|b| px.iter().zip(b).map(|(x, y)| x * y).sum::<f32>())
                     .fold(f32::MIN, f32::max)
+            })
+            .collect()
+    }
+
+    /// Whether each pixel's series reaches the surface level at one of the 129 depths
+    /// [`Self::peaks`] samples: the same answer as `peak >= iso`, without scanning every ray.
+    /// A ray whose coefficients' absolute sum is under the level cannot reach it (every basis
+    /// value lies in [-1, 1]; the background); a Fourier ray that reaches it at the sample
+    /// nearest its depth centre (`int z f / int f`) does (most of the body); only the others
+    /// are scanned, stopping at the first sample that reaches it.
+    fn decodes(&self) -> Vec<bool> {
+        let (k, c) = (self.k, 2 * self.k + 1);
+        let iso = self.iso_level();
+        let zs = self.sample_basis();
+        let at = |px: &[f32], b: &[f32]| px.iter().zip(b).map(|(x, y)| x * y).sum::<f32>();
+        let w = centre_weights(k);
+        self.data
+            .chunks_exact(c)
+            .map(|px| {
+                // (The margin covers the sum's rounding: a ray at the level is scanned.)
+                if px.iter().map(|v| v.abs()).sum::<f32>() + 1e-4 < iso {
+                    return false;
+                }
+                let mass = 2.0 * px[0];
+                if self.basis == Basis::Fourier && mass > 0.0 {
+                    let m1: f32 = (1..=k).map(|m| px[2 * m] * w[m - 1]).sum();
+                    let mid = (m1 / mass).clamp(-1.0, 1.0);
+                    let i = ((mid + 1.0) * 64.0).round().clamp(0.0, 128.0) as usize;
+                    if at(px, &zs[i]) >= iso {
+                        return true;
+                    }
+                }
+                zs.iter().any(|b| at(px, b) >= iso)
             })
             .collect()
     }
@@ -325,14 +363,12 @@ impl FourierMaps {
             return self;
         }
         let (k, c, n) = (self.k, 2 * self.k + 1, self.size);
-        let iso = self.iso_level();
-        let peaks = self.peaks();
-        let solid: Vec<bool> = peaks.iter().map(|p| *p >= iso).collect();
+        let solid = self.decodes();
         let cand: Vec<bool> = self
             .data
             .chunks_exact(c)
-            .zip(&peaks)
-            .map(|(px, p)| *p < iso && (min_len..=2.0).contains(&(2.0 * px[0])))
+            .zip(&solid)
+            .map(|(px, s)| !s && (min_len..=2.0).contains(&(2.0 * px[0])))
             .collect();
         // The seeds: candidates with no decoding pixel within away - 1; then grown back
         // through candidates, one ring a step.
@@ -345,13 +381,7 @@ impl FourierMaps {
                 .map(|(k, c)| *k && *c)
                 .collect();
         }
-        // int_{-1}^{1} z sin(n pi z) dz = 2 (-1)^(n+1) / (n pi); the cosine terms give 0.
-        let w: Vec<f32> = (1..=k)
-            .map(|m| {
-                let sign = if m % 2 == 1 { 1.0 } else { -1.0 };
-                2.0 * sign / (m as f32 * std::f32::consts::PI)
-            })
-            .collect();
+        let w = centre_weights(k);
         for (px, _) in self
             .data
             .chunks_exact_mut(c)
@@ -591,7 +621,9 @@ impl FourierNet {
                 let m = m.with_iso_level(self.iso_level).with_basis(self.basis);
                 let m = match self.peak_level {
                     Some((frac, min_peak)) => {
-                        let gate = self.peak_gate.map(|t| mask_gate(&x[3 * s * s..], s, self.size, t));
+                        let gate = self
+                            .peak_gate
+                            .map(|t| mask_gate(&x[3 * s * s..], s, self.size, t));
                         m.with_peak_relative_level_in(frac, min_peak, gate.as_deref())
                     }
                     None => m,
@@ -608,12 +640,23 @@ impl FourierNet {
     }
 }
 
+/// `int_{-1}^{1} z sin(m pi z) dz = 2 (-1)^(m+1) / (m pi)` for m = 1..=K: a Fourier ray's
+/// first moment is the sum of its sine terms times these (the cosine terms give 0).
+fn centre_weights(k: usize) -> Vec<f32> {
+    (1..=k)
+        .map(|m| {
+            let sign = if m % 2 == 1 { 1.0 } else { -1.0 };
+            2.0 * sign / (m as f32 * std::f32::consts::PI)
+        })
+        .collect()
+}
+
 /// The `n x n` map pixels whose `s x s` mask, averaged over each pixel's footprint (`s / n`
 /// input pixels a side), reaches `t`; all false when `s` is not a multiple of `n` or the mask
 /// is short.
 pub fn mask_gate(mask: &[f32], s: usize, n: usize, t: f32) -> Vec<bool> {
     let mut out = vec![false; n * n];
-    if n == 0 || s % n != 0 || mask.len() < s * s {
+    if n == 0 || !s.is_multiple_of(n) || mask.len() < s * s {
         return out;
     }
     let f = s / n;

@@ -452,6 +452,26 @@ impl Models {
         Ok(self)
     }
 
+    /// Read thin parts from their moments ([`fourier::FourierMaps::with_moment_fill`]
+    /// `(min_len, max_len, away)`) on every Fourier shape model (the main one and the
+    /// close-range one), or not (`None`); other families have no series to fill. Returns how
+    /// many models took it. A model already shared (an `Arc` cloned elsewhere) is left as
+    /// it is: call this right after loading.
+    pub fn with_moment_fill(mut self, fill: Option<(f32, f32, usize)>) -> (Self, usize) {
+        let mut n = 0;
+        let shapes =
+            std::iter::once(&mut self.shape).chain(self.close_range.as_mut().map(|(_, s)| s));
+        for shape in shapes {
+            if let ShapeModel::Fourier(f) = shape
+                && let Some(f) = Arc::get_mut(f)
+            {
+                f.moment_fill = fill;
+                n += 1;
+            }
+        }
+        (self, n)
+    }
+
     /// The soft person mask `[S, S]` of a letterboxed frame `[3, S, S]`.
     pub fn segment(&self, rgb: &[f32]) -> Result<Vec<f32>, ModelError> {
         let s = INPUT_SIZE;

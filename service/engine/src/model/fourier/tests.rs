@@ -304,7 +304,11 @@ fn gated_peak_level_reads_only_the_gated_pixels() {
     let hit = |m: &FourierMaps, x: f32, y: f32| {
         let (mut out, mut s) = ([0.0f32], Vec::new());
         (0..=400).any(|i| {
-            m.occupancy(&[Vec3::new(x, y, -1.0 + i as f32 / 200.0)], &mut out, &mut s);
+            m.occupancy(
+                &[Vec3::new(x, y, -1.0 + i as f32 / 200.0)],
+                &mut out,
+                &mut s,
+            );
             out[0] > 0.5
         })
     };
@@ -317,7 +321,9 @@ fn gated_peak_level_reads_only_the_gated_pixels() {
         assert!(!hit(&gated, x, y), "an ungated pixel ({x}, {y}) decodes");
         assert!(hit(&thin.clone().with_peak_relative_level(0.5, 0.2), x, y));
     }
-    let wrong = thin.clone().with_peak_relative_level_in(0.5, 0.2, Some(&[true; 3]));
+    let wrong = thin
+        .clone()
+        .with_peak_relative_level_in(0.5, 0.2, Some(&[true; 3]));
     assert_eq!(wrong.pixel(0, 0), thin.pixel(0, 0));
 
     // A 4 x 4 mask over 2 x 2 map pixels: the top-left block full, the rest at 0.3 except
@@ -328,8 +334,16 @@ fn gated_peak_level_reads_only_the_gated_pixels() {
     }
     assert_eq!(mask_gate(&mask, 4, 2, 0.5), vec![true, false, false, false]);
     assert_eq!(mask_gate(&mask, 4, 2, 0.45), vec![true, true, false, false]);
-    assert_eq!(mask_gate(&mask, 4, 3, 0.1), vec![false; 9], "4 is not a multiple of 3");
-    assert_eq!(mask_gate(&mask[..8], 4, 2, 0.1), vec![false; 4], "a short mask");
+    assert_eq!(
+        mask_gate(&mask, 4, 3, 0.1),
+        vec![false; 9],
+        "4 is not a multiple of 3"
+    );
+    assert_eq!(
+        mask_gate(&mask[..8], 4, 2, 0.1),
+        vec![false; 4],
+        "a short mask"
+    );
 }
 
 /// The series of one interval with its harmonics damped (`exp(-(n sigma)^2)` on the n-th):
@@ -503,5 +517,37 @@ proptest::proptest! {
             m.occupancy(&pts, &mut out, &mut s);
             proptest::prop_assert!(out.iter().all(|v| (0.0..=1.0).contains(v)));
         }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+    /// The quick "does this ray decode" answer of the moment fill is the full scan's
+    /// (`peaks() >= iso` at the same 129 depths) on maps of blurred intervals at any depth,
+    /// width, blur and height, with noise, for both bases.
+    #[test]
+    fn quick_decode_test_agrees_with_the_full_scan(
+        rays in proptest::collection::vec(
+            (-1.0f64..1.0, 0.0f64..0.8, 0.0f64..0.3, 0.0f32..1.4),
+            16,
+        ),
+        noise in proptest::collection::vec(-1.0f32..1.0, 31 * 16),
+        amp in proptest::sample::select(vec![0.0f32, 0.01, 0.1]),
+        cosine in proptest::bool::ANY,
+    ) {
+        let (k, c) = (15, 31);
+        let mut planar = vec![0.0f32; c * 16];
+        for (p, (lo, len, sigma, gain)) in rays.iter().enumerate() {
+            let series = damped([*lo, (*lo + *len).min(1.0)], *sigma, k);
+            for ch in 0..c {
+                planar[ch * 16 + p] = gain * series[ch] + amp * noise[ch * 16 + p];
+            }
+        }
+        let mut maps = FourierMaps::from_planar(&planar, k, 4, 1.0).unwrap().with_iso_level(0.55);
+        if cosine {
+            maps = maps.with_basis(Basis::Cosine);
+        }
+        let full: Vec<bool> = maps.peaks().iter().map(|p| *p >= maps.iso_level()).collect();
+        proptest::prop_assert_eq!(maps.decodes(), full);
     }
 }
