@@ -156,3 +156,57 @@ fn close_range_model_is_checked_at_start() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `[model] thin_parts = "moment-fill"` through the whole daemon: the still person of
+/// tests/scenes/still-rest.toml (arms held out from the body), rendered by the model at 129^3
+/// with and without it. The default render ends at the wrists; the fill's reaches further on
+/// both sides (the hands) and covers more of the picture, and nothing else changes.
+#[test]
+fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-thin-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // (opaque pixels, first and last opaque column) of the snapshot.
+    let render = |thin: &str| -> (usize, u32, u32) {
+        let cfg = dir.join(format!("{thin}.toml"));
+        std::fs::write(
+            &cfg,
+            format!(
+                "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 129\n[model]\ndir = \"{}\"\nthin_parts = \"{thin}\"\n",
+                root().join("tests/scenes/still-rest.toml").display(),
+                root().join("models").display()
+            ),
+        )
+        .unwrap();
+        let d = start(&cfg);
+        wait_for(&d.addr, "model frames", Duration::from_secs(90), |s| {
+            s["frames_published"].as_u64() > Some(2)
+        });
+        let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
+        assert_eq!(st, 200);
+        let png = image::load_from_memory(&png).unwrap().to_rgba8();
+        let cols: Vec<u32> = png
+            .enumerate_pixels()
+            .filter(|(_, _, p)| p[3] > 0)
+            .map(|(x, _, _)| x)
+            .collect();
+        assert!(!cols.is_empty(), "{thin}: nothing rendered");
+        (
+            cols.len(),
+            *cols.iter().min().unwrap(),
+            *cols.iter().max().unwrap(),
+        )
+    };
+    let (n0, l0, r0) = render("series");
+    let (n1, l1, r1) = render("moment-fill");
+    println!("series: {n0} px, columns {l0}..{r0}; moment-fill: {n1} px, columns {l1}..{r1}");
+    assert!(
+        l1 + 8 <= l0 && r1 >= r0 + 8,
+        "the fill's render reaches {l1}..{r1}, the series' {l0}..{r0}: no hands at one side"
+    );
+    assert!(
+        n1 as f64 > 1.01 * n0 as f64 && (n1 as f64) < 1.2 * n0 as f64,
+        "opaque pixels {n0} -> {n1}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
