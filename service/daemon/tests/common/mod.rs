@@ -89,12 +89,23 @@ fn daemon_note(addr: &str) -> String {
     let Some((_, pid, log)) = logs.iter().rev().find(|(a, _, _)| a == addr) else {
         return String::new();
     };
+    // /proc/PID/stat after the command's ")": field 3 the state, the last (52) the exit
+    // code as waitpid reports it, readable while the process is a zombie.
     let state = std::fs::read_to_string(format!("/proc/{pid}/stat"))
         .ok()
-        .and_then(|s| s.rsplit(") ").next().and_then(|r| r.chars().next()))
-        .map(|c| match c {
-            'Z' => "has exited (not yet reaped)".to_string(),
-            c => format!("is running (state {c})"),
+        .and_then(|s| {
+            let rest = s.rsplit(") ").next()?.to_string();
+            let state = rest.chars().next()?;
+            let code: Option<i32> = rest.split_whitespace().last()?.parse().ok();
+            Some((state, code))
+        })
+        .map(|(c, code)| match (c, code) {
+            ('Z', Some(code)) if code & 0x7f != 0 => {
+                format!("was killed by signal {} (not yet reaped)", code & 0x7f)
+            }
+            ('Z', Some(code)) => format!("has exited with status {}", (code >> 8) & 0xff),
+            ('Z', None) => "has exited (not yet reaped)".to_string(),
+            (c, _) => format!("is running (state {c})"),
         })
         .unwrap_or_else(|| "is gone".into());
     let text = std::fs::read_to_string(log).unwrap_or_default();
