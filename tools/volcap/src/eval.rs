@@ -115,7 +115,9 @@ pub struct EvalArgs {
     /// the surface level but holds at least MIN_LEN of inside (zeta; the depth range is 2),
     /// and lies AWAY map pixels beyond every pixel that decodes (or joins such a pixel), is
     /// read as one interval of its own inside length (at most MAX_LEN) at its own depth
-    /// centre (`FourierMaps::with_moment_fill`; e.g. 0.02,0.1,4).
+    /// centre (`FourierMaps::with_moment_fill`; e.g. 0.02,0.1,4; the daemon's `[model]
+    /// thin_parts = "moment-fill"`). Each Fourier model gets a row as predicted and one with
+    /// the fill (`NAME-f32-fill...`), side by side.
     #[arg(long, value_delimiter = ',')]
     pub moment_fill: Option<Vec<f32>>,
     /// Framing of the test images: `whole` (the whole person in the frame, as the dataset) or
@@ -479,8 +481,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     } else {
         a.iso_level.iter().map(|l| Some(*l)).collect()
     };
+    // Each Fourier model as predicted and, with --moment-fill, with the fill beside it.
+    let fills: Vec<Option<(f32, f32, usize)>> = match &a.moment_fill {
+        Some(m) if m.len() == 3 => vec![None, Some((m[0], m[1], m[2] as usize))],
+        _ => vec![None],
+    };
     let cases = render_cases(a)?;
-    let pb = ProgressBar::new((cases.len() * specs.len() * levels.len()) as u64);
+    let pb = ProgressBar::new((cases.len() * specs.len() * levels.len() * fills.len()) as u64);
     pb.set_style(
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -490,9 +497,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let mut summary = Vec::new();
     let mut stages = crate::backend::Stages::new(&runtime)?;
     let (mut grid, mut truth) = (Grid::new(spec), Grid::new(spec));
-    for ((name, prec), level) in specs
+    for (((name, prec), level), fill) in specs
         .iter()
         .flat_map(|s| levels.iter().map(move |l| (s, *l)))
+        .flat_map(|sl| fills.iter().map(move |f| (sl, *f)))
     {
         let truth_k = truth_order(name);
         // Ground-truth fields still segment (for the mask IoU column) with the default models.
@@ -518,10 +526,15 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             }
             _ => None,
         };
-        let fill = match (&mut fourier, &a.moment_fill) {
-            (Some(f), Some(m)) if m.len() == 3 => {
-                f.moment_fill = Some((m[0], m[1], m[2] as usize));
-                Some((m[1], m[2] as usize))
+        let fill = match (&mut fourier, fill) {
+            (Some(f), Some(m)) => {
+                f.moment_fill = Some(m);
+                Some((m.1, m.2))
+            }
+            // Other families and the ground-truth rows have no series to fill: once.
+            (None, Some(_)) => {
+                pb.inc(cases.len() as u64);
+                continue;
             }
             _ => None,
         };

@@ -112,6 +112,8 @@ fn bad_decode_knobs_are_refused_by_name() {
         ("--moment-fill", "0.02,0.1,2.5"),
         ("--moment-fill", "nan,0.1,4"),
         ("--peak-level", "1.5,0.2"),
+        ("--peak-level", "0.5,0.2,1.5"),
+        ("--peak-level", "0.5,0.2,0.5,1"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
             .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
@@ -122,4 +124,52 @@ fn bad_decode_knobs_are_refused_by_name() {
         assert!(!out.status.success(), "{flag} {value} accepted");
         assert!(err.contains(flag), "{flag} {value}: {err}");
     }
+}
+
+/// `--moment-fill` puts each Fourier model's filled row beside its row as predicted, in one
+/// run; the ground-truth series (no network, nothing to fill) get one row.
+#[test]
+fn moment_fill_rows_stand_beside_the_plain_ones() {
+    let dir = std::env::temp_dir().join(format!("volcap-eval-fill-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let manifest = dir.join("manifest.json");
+    std::fs::write(&manifest, MANIFEST).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+        .args(["eval", "--subjects", "val", "--poses", "1", "--views", "1"])
+        .args([
+            "--res",
+            "33",
+            "--model",
+            "fourier-small,truth-k15",
+            "--json",
+        ])
+        .args(["--moment-fill", "0.02,0.1,4", "--manifest"])
+        .arg(&manifest)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    let summaries: Vec<String> = String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|r| r.get("family").is_some())
+        .map(|r| r["model"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(
+        summaries,
+        [
+            "fourier-small-f32",
+            "fourier-small-f32-fill0.10x4",
+            "truth-k15-f32"
+        ],
+        "{summaries:?}"
+    );
 }
