@@ -268,7 +268,8 @@ impl Capture1 {
     }
 
     /// What produces the field: `reconstruction: NAME (PRECISION, RUNTIME)` (the trained
-    /// networks and what runs them), or `oracle` / `camera` (labelled debugging modes, not
+    /// networks and what runs them; `thin parts: moment-fill` before the runtime when
+    /// `[model] thin_parts` says so), or `oracle` / `camera` (labelled debugging modes, not
     /// reconstructions).
     #[zbus(property)]
     fn model(&self) -> String {

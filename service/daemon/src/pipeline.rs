@@ -114,7 +114,7 @@ pub struct Shared {
     pub published: tokio::sync::watch::Sender<Option<Arc<Published>>>,
     pub mode: &'static str,
     /// What produces the field, as D-Bus `Model` says it: `reconstruction: NAME (PRECISION,
-    /// RUNTIME)` in model mode, `oracle` / `camera` for the labelled debugging modes.
+    /// [thin parts: moment-fill,] RUNTIME)` in model mode, `oracle` / `camera` for the labelled debugging modes.
     pub field_label: String,
     /// Model mode: what runs the networks ("tract", "onnxruntime 1.32.0"; empty in the
     /// other modes) and, when `compute.runtime = "auto"` fell back to tract, why.
@@ -181,11 +181,15 @@ impl Shared {
             mode: cfg.field().name(),
             field_label: match cfg.field() {
                 FieldMode::Model => format!(
-                    "reconstruction: {} ({})",
+                    "reconstruction: {} ({}{})",
                     cfg.model.name,
                     match cfg.model.precision {
                         crate::config::Precision::F32 => "f32",
                         crate::config::Precision::Int8 => "int8",
+                    },
+                    match cfg.model.thin_parts {
+                        crate::config::ThinParts::Series => "",
+                        crate::config::ThinParts::MomentFill => ", thin parts: moment-fill",
                     }
                 ),
                 other => other.name().to_string(),

@@ -179,9 +179,12 @@ fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
         )
         .unwrap();
         let d = start(&cfg);
-        wait_for(&d.addr, "model frames", Duration::from_secs(90), |s| {
+        let s = wait_for(&d.addr, "model frames", Duration::from_secs(90), |s| {
             s["frames_published"].as_u64() > Some(2)
         });
+        // /state (and D-Bus `Model`) say which reading runs.
+        let field = s["field"].as_str().unwrap_or_default();
+        assert_eq!(field.contains("thin parts: moment-fill"), thin == "moment-fill", "{s}");
         let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
         assert_eq!(st, 200);
         let png = image::load_from_memory(&png).unwrap().to_rgba8();
