@@ -184,7 +184,11 @@ fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
         });
         // /state (and D-Bus `Model`) say which reading runs.
         let field = s["field"].as_str().unwrap_or_default();
-        assert_eq!(field.contains("thin parts: moment-fill"), thin == "moment-fill", "{s}");
+        assert_eq!(
+            field.contains("thin parts: moment-fill"),
+            thin == "moment-fill",
+            "{s}"
+        );
         let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
         assert_eq!(st, 200);
         let png = image::load_from_memory(&png).unwrap().to_rgba8();
