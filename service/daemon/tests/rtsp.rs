@@ -36,6 +36,8 @@ fn tools() -> bool {
 }
 
 /// ffprobe's decoded frames of `url` over `transport` for `secs` seconds: (key, pts) each.
+/// The tests ask 8 frames of 5 s (3 s gave 6 through the relay once, both cores busy with
+/// other work): the property is frames arriving in order from a key frame, not a rate.
 fn probe_frames(url: &str, transport: &str, secs: u32) -> Vec<(bool, Option<i64>)> {
     let out = Command::new("timeout")
         .args([
@@ -103,8 +105,8 @@ fn serves_h264_over_tcp_and_udp_to_ffmpeg_and_gstreamer() {
     let s = state(&addr);
     assert_eq!(s["rtsp"]["encoding"], false, "{s}");
     let before = s["frames_published"].as_u64().unwrap();
-    check_frames(&probe_frames(&url, "tcp", 3), 8, "ffprobe over TCP");
-    check_frames(&probe_frames(&url, "udp", 3), 8, "ffprobe over UDP");
+    check_frames(&probe_frames(&url, "tcp", 5), 8, "ffprobe over TCP");
+    check_frames(&probe_frames(&url, "udp", 5), 8, "ffprobe over UDP");
     // ffmpeg decodes the frames it is asked for.
     let ok = Command::new("timeout")
         .args([
@@ -298,7 +300,7 @@ fn udp_ports_stay_in_the_configured_range() {
     );
     drop(s);
     check_frames(
-        &probe_frames(&url, "udp", 3),
+        &probe_frames(&url, "udp", 5),
         8,
         "ffprobe over UDP from the range",
     );
@@ -548,7 +550,7 @@ fn push_survives_the_server_restarting_and_a_relay_fans_out_to_50_clients() {
         s["rtsp"]["push"]["state"] == "streaming"
     });
     let out = format!("rtsp://127.0.0.1:{port}/out");
-    check_frames(&probe_frames(&out, "tcp", 3), 8, "through the relay");
+    check_frames(&probe_frames(&out, "tcp", 5), 8, "through the relay");
 
     // The server goes away: a state, retried; MJPEG keeps going.
     drop(server);
@@ -575,7 +577,7 @@ fn push_survives_the_server_restarting_and_a_relay_fans_out_to_50_clients() {
         |s| s["rtsp"]["push"]["state"] == "streaming",
     );
     check_frames(
-        &probe_frames(&out, "tcp", 3),
+        &probe_frames(&out, "tcp", 5),
         8,
         "through the restarted relay",
     );

@@ -344,7 +344,8 @@ impl FourierMaps {
             .collect()
     }
 
-    /// Thin parts from their moments (experimental, `volcap eval --moment-fill`): a pixel whose
+    /// Thin parts from their moments (`volcap eval --moment-fill`, the daemon's `[model]
+    /// thin_parts = "moment-fill"`; docs/eval/hands.md section 5): a pixel whose
     /// series peaks under the surface level (its ray would decode empty) yet holds at least
     /// `min_len` (zeta; the range is 2) of inside is a candidate; its series is replaced by
     /// the series of one interval of the ray's own inside length (`2 c0`, at most `max_len`)
@@ -519,8 +520,8 @@ pub struct FourierNet {
     /// With `peak_level`: only on the map pixels whose person mask (the encoder input's
     /// fourth channel, averaged over the pixel's footprint) reaches this value.
     pub peak_gate: Option<f32>,
-    /// Experimental: [`FourierMaps::with_moment_fill`] `(min_len, max_len, away)` on every
-    /// frame's maps (`volcap eval --moment-fill`); off by default.
+    /// [`FourierMaps::with_moment_fill`] `(min_len, max_len, away)` on every frame's maps
+    /// (`volcap eval --moment-fill`, `Models::with_moment_fill`); off by default.
     pub moment_fill: Option<(f32, f32, usize)>,
 }
 
