@@ -9,16 +9,9 @@ use std::process::Command;
 const MANIFEST: &str = r#"{"subject_tables": {"t000": "[[subject]]\nid = \"t000\"\ngender = 0.2\nmuscle = 0.5\nweight = 0.6\nheight = 0.55\nrace = [0, 0, 1]\noutfit = \"female_casualsuit01\"\nshoes = \"shoes01\"\nhair = \"ponytail01\"\nskin = \"young_caucasian_female2\"\n"}, "split": {"t000": "val"}}"#;
 
 fn eval(framing: &str) -> Vec<serde_json::Value> {
-    let dir = std::env::temp_dir().join(format!("volcap-eval-{framing}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let manifest = dir.join("manifest.json");
-    std::fs::write(&manifest, MANIFEST).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
-        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
-        .args([
-            "eval",
-            "--subjects",
-            "val",
+    run_eval(
+        framing,
+        &[
             "--poses",
             "1",
             "--views",
@@ -27,11 +20,24 @@ fn eval(framing: &str) -> Vec<serde_json::Value> {
             "65",
             "--model",
             "truth-k15,truth-cos31",
-            "--json",
             "--framing",
             framing,
-            "--manifest",
-        ])
+        ],
+    )
+}
+
+/// `volcap eval --subjects val --json ARGS` on the one-subject manifest: its JSON lines (the
+/// report and plot written, then the folder removed).
+fn run_eval(name: &str, args: &[&str]) -> Vec<serde_json::Value> {
+    let dir = std::env::temp_dir().join(format!("volcap-eval-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let manifest = dir.join("manifest.json");
+    std::fs::write(&manifest, MANIFEST).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+        .args(["eval", "--subjects", "val", "--json"])
+        .args(args)
+        .arg("--manifest")
         .arg(&manifest)
         .arg("--out")
         .arg(&dir)
@@ -130,39 +136,25 @@ fn bad_decode_knobs_are_refused_by_name() {
 /// run; the ground-truth series (no network, nothing to fill) get one row.
 #[test]
 fn moment_fill_rows_stand_beside_the_plain_ones() {
-    let dir = std::env::temp_dir().join(format!("volcap-eval-fill-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let manifest = dir.join("manifest.json");
-    std::fs::write(&manifest, MANIFEST).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
-        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
-        .args(["eval", "--subjects", "val", "--poses", "1", "--views", "1"])
-        .args([
+    let summaries: Vec<String> = run_eval(
+        "fill",
+        &[
+            "--poses",
+            "1",
+            "--views",
+            "1",
             "--res",
             "33",
             "--model",
             "fourier-small,truth-k15",
-            "--json",
-        ])
-        .args(["--moment-fill", "0.02,0.1,4", "--manifest"])
-        .arg(&manifest)
-        .arg("--out")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let _ = std::fs::remove_dir_all(&dir);
-    let summaries: Vec<String> = String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
-        .filter(|r| r.get("family").is_some())
-        .map(|r| r["model"].as_str().unwrap().to_string())
-        .collect();
+            "--moment-fill",
+            "0.02,0.1,4",
+        ],
+    )
+    .iter()
+    .filter(|r| r.get("family").is_some())
+    .map(|r| r["model"].as_str().unwrap().to_string())
+    .collect();
     assert_eq!(
         summaries,
         [
