@@ -3,12 +3,14 @@
 
 mod compute;
 mod live;
+mod model;
 pub mod rtsp;
 mod temporal;
 pub use compute::{
     ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, THREADS,
 };
 pub use live::{Live, LiveError};
+pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, ThinParts};
 pub use rtsp::RtspConfig;
 pub use temporal::TemporalConfig;
 
@@ -291,97 +293,6 @@ pub struct DbusConfig {
     #[serde(default)]
     pub bus: Bus,
 }
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum Precision {
-    #[default]
-    F32,
-    Int8,
-}
-
-/// The networks: which size and precision the board runs (`render.field = "model"`, the
-/// default for real cameras). Files: `DIR/seg[.int8].onnx`, `DIR/shape-NAME.{encoder,mlp}[.int8].onnx`,
-/// `DIR/color.*.onnx`; checked at start (and by `--check-config`) with errors naming the file.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ModelConfig {
-    /// The shape model: `fourier-small` (the default, the best measured) or another committed
-    /// variant (`models/models.json`).
-    #[serde(default = "d_model")]
-    pub name: String,
-    #[serde(default)]
-    pub precision: Precision,
-    /// Folder with the ONNX files and model cards, relative to the config file.
-    #[serde(default = "d_model_dir")]
-    pub dir: PathBuf,
-    /// A second shape model for close-range framing (e.g. `fourier-small-upper`): frames
-    /// whose person the frame's lower edge cuts (an upper body at a desk) are encoded with it;
-    /// unset: `name` for every frame.
-    #[serde(default)]
-    pub close_range: Option<String>,
-    /// Consecutive frames that must agree before the shape model changes between `name` and
-    /// `close_range` (a person at the frame's lower edge would otherwise flip models frame
-    /// by frame: `volcap_engine::model::preprocess::CloseRangeSwitch`); 1 follows every frame.
-    #[serde(default = "d_close_range_frames")]
-    pub close_range_frames: u32,
-    /// How a Fourier model's thin parts are read: `series` (as the network predicts them;
-    /// the default, the most precise surface) or `moment-fill` (a ray that holds inside
-    /// but whose blurred series stays under the surface level, a hand or a wrist, is
-    /// read as one interval of its own length at its own depth: the hands show, at a cost
-    /// of about 0.2 cm P2S on held-out subjects; docs/eval/hands.md section 5).
-    #[serde(default)]
-    pub thin_parts: ThinParts,
-}
-
-/// `model.thin_parts`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum ThinParts {
-    #[default]
-    Series,
-    MomentFill,
-}
-
-impl ThinParts {
-    /// The engine's `(min_len, max_len, away)` for `FourierMaps::with_moment_fill`: the
-    /// setting measured in docs/eval/hands.md (0.02, at most 0.1, 4 map pixels away).
-    pub fn moment_fill(self) -> Option<(f32, f32, usize)> {
-        match self {
-            Self::Series => None,
-            Self::MomentFill => Some((0.02, 0.1, 4)),
-        }
-    }
-}
-
-/// About a quarter of a second at the sim's frame rate, a few frames on a webcam.
-fn d_close_range_frames() -> u32 {
-    5
-}
-
-/// The best model measured (docs/eval): the Fourier head `fourier-small`.
-fn d_model() -> String {
-    "fourier-small".into()
-}
-fn d_model_dir() -> PathBuf {
-    PathBuf::from("../models")
-}
-
-impl Default for ModelConfig {
-    fn default() -> Self {
-        Self {
-            name: d_model(),
-            precision: Precision::F32,
-            dir: d_model_dir(),
-            close_range: None,
-            close_range_frames: d_close_range_frames(),
-            thin_parts: ThinParts::Series,
-        }
-    }
-}
-
-/// `model.close_range_frames`: up to ten seconds at 30 fps.
-pub const CLOSE_RANGE_FRAMES: std::ops::RangeInclusive<u32> = 1..=300;
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]

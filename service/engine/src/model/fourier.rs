@@ -285,16 +285,14 @@ impl FourierMaps {
     }
 
     /// The basis at the 129 depths the peak tests sample (`zeta = -1 + 2 i / 128`: the
-    /// series is band-limited to K cycles).
-    fn sample_basis(&self) -> Vec<Vec<f32>> {
-        (0..129)
-            .map(|i| {
-                let mut v = vec![0.0f32; 2 * self.k + 1];
-                self.basis
-                    .values(-1.0 + 2.0 * i as f32 / 128.0, self.k, &mut v);
-                v
-            })
-            .collect()
+    /// series is band-limited to K cycles), flat: depth `i`'s is the `i`-th chunk of `2K + 1`.
+    fn sample_basis(&self) -> Vec<f32> {
+        let c = 2 * self.k + 1;
+        let mut zs = vec![0.0f32; 129 * c];
+        for (i, v) in zs.chunks_exact_mut(c).enumerate() {
+            self.basis.values(-1.0 + 2.0 * i as f32 / 128.0, self.k, v);
+        }
+        zs
     }
 
     /// Each pixel's series at its highest over the ray (at [`Self::sample_basis`]'s depths).
@@ -304,7 +302,7 @@ impl FourierMaps {
         self.data
             .chunks_exact(c)
             .map(|px| {
-                zs.iter()
+                zs.chunks_exact(c)
                     .map(|b| px.iter().zip(b).map(|(x, y)| x * y).sum::<f32>())
                     .fold(f32::MIN, f32::max)
             })
@@ -335,11 +333,11 @@ impl FourierMaps {
                     let m1: f32 = (1..=k).map(|m| px[2 * m] * w[m - 1]).sum();
                     let mid = (m1 / mass).clamp(-1.0, 1.0);
                     let i = ((mid + 1.0) * 64.0).round().clamp(0.0, 128.0) as usize;
-                    if at(px, &zs[i]) >= iso {
+                    if at(px, &zs[i * c..(i + 1) * c]) >= iso {
                         return true;
                     }
                 }
-                zs.iter().any(|b| at(px, b) >= iso)
+                zs.chunks_exact(c).any(|b| at(px, b) >= iso)
             })
             .collect()
     }
