@@ -7,13 +7,15 @@
 #           (xz: the working tree that travels is limited to 64 MiB, the tracked tree is ~51 MB)
 #           and downloads the Vulkan loader into .gl/ (both git-ignored)
 #   there:  device run, carry [".gpubench", ".gl"], command: tools/gpu_bench.sh run
-#           (--quick: a short version, as CI-free checking here on lavapipe does)
+#           (--quick: a tiny version, as CI-free checking here on lavapipe does; --short: the
+#           whole matrix with shorter windows and the machine's cores only)
 #
 # `run` unpacks the loader, names the adapter, and writes into $OUT (default /tmp/gpubench):
 # pipeline.md/.png (the daemon's pipeline in-process, CPU and GPU backends side by side, 257^3
 # and 513^3, fourier-small and fourier-medium, the camera replayed fast enough never to cap
-# the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter)
-# and nets.md (the networks, tract and the GPU kernels), with run.log. The device is named in
+# the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
+# the adapter's with one and up to eight conflict rounds per read-back) and nets.md (the
+# networks, tract and the GPU kernels, each profiled per node or step), with run.log. The device is named in
 # every table; the CPU rows are that machine's cores, not the appliance's two.
 set -euo pipefail
 repo="$(cd "$(dirname "$0")/.." && pwd)"
@@ -27,14 +29,16 @@ case "$mode" in
     cp target/release/volcap .gpubench/volcap
     strip .gpubench/volcap
     xz -9 -T0 -f .gpubench/volcap
-    if ! ls .gl/*.deb >/dev/null 2>&1; then
-      # The loader packages of the device README (amd64, whatever this machine is).
+    if ! ls .gl/libglvnd0_*.deb >/dev/null 2>&1; then
+      # The loader packages of the device README (amd64, whatever this machine is): the
+      # Vulkan loader, and GLVND, which NVIDIA's Vulkan driver (libGLX_nvidia) needs: with
+      # the loader alone it answers "Could not get 'vkCreateInstance'" and no adapter shows.
       mkdir -p .gl /tmp/amd64/partial
       o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
       # shellcheck disable=SC2086
       apt-get $o update -qq
       # shellcheck disable=SC2086
-      (cd .gl && apt-get $o download libvulkan1)
+      (cd .gl && apt-get $o download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
     fi
     du -sh .gpubench .gl
     echo "now: device run with carry [\".gpubench\", \".gl\"] and command: tools/gpu_bench.sh run"
@@ -42,10 +46,11 @@ case "$mode" in
   run)
     quick=0
     [ "${1:-}" = "--quick" ] && quick=1
+    [ "${1:-}" = "--short" ] && quick=2
     out="${OUT:-/tmp/gpubench}"
     mkdir -p "$out"
     exec > >(tee "$out/run.log") 2>&1
-    if ls .gl/*.deb >/dev/null 2>&1 && ! ldconfig -p | grep -q libvulkan.so.1; then
+    if ls .gl/*.deb >/dev/null 2>&1 && ! ldconfig -p | grep -q libGLdispatch.so.0; then
       for f in .gl/*.deb; do dpkg -x "$f" /; done
       ldconfig
     fi
@@ -62,25 +67,31 @@ case "$mode" in
     fi
     nvidia-smi -L 2>/dev/null || true
     if [ "$quick" = 1 ]; then
-      res=65 models=fourier-small secs=2 warm=1 runs=1 threads=1
+      res=65 models=fourier-small secs=2 warm=1 runs=1 threads=1 loc_backends=cpu,wgpu
+    elif [ "$quick" = 2 ]; then
+      # The whole matrix in about half the time (a lent machine's 15 minutes are shared with
+      # training): shorter windows, the machine's cores only.
+      res=257,513 models=fourier-small,fourier-medium secs=5 warm=2 runs=3
+      threads="$(nproc)" loc_backends=wgpu
     else
       res=257,513 models=fourier-small,fourier-medium secs=10 warm=5 runs=5
-      threads="1,$(nproc)"
+      threads="1,$(nproc)" loc_backends=cpu,wgpu
     fi
     echo "== pipeline ($res; $models; threads $threads)"
     "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
       --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --out "$out"
     echo "== localization on the model's field"
-    "$bin" bench localize --model fourier-small --backend cpu,wgpu --res "$res" \
-      --methods hierarchical,hierarchical-tight --runs "$runs" --out "$out"
+    # The adapter's rows twice: one conflict round per read-back, and up to 8.
+    "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \
+      --methods hierarchical,hierarchical-tight --runs "$runs" --rounds-per-wait 1,8 --out "$out"
     mv "$out/accuracy-vs-time.md" "$out/localize.md"
     mv "$out/accuracy-vs-time.png" "$out/localize.png"
-    echo "== networks"
-    "$bin" bench nets --runtime tract,wgpu --runs "$((runs * 4))" --out "$out"
+    echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
+    "$bin" bench nets --runtime tract,wgpu --runs "$((runs * 4))" --profile --top 12 --out "$out"
     ls -la "$out"
     ;;
   *)
-    echo "usage: tools/gpu_bench.sh prepare | run [--quick]" >&2
+    echo "usage: tools/gpu_bench.sh prepare | run [--quick | --short]" >&2
     exit 2
     ;;
 esac

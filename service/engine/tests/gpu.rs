@@ -419,8 +419,33 @@ fn the_adapter_counts_its_work_and_times_it_where_it_can() {
     );
     if gpu.has_timestamps() {
         assert!(after.gpu_ns > before.gpu_ns, "a timed pass took no time");
+        // The output's read-back, then the timer's.
+        assert_eq!(after.waits - before.waits, 2);
     } else {
         assert_eq!(after.gpu_ns, before.gpu_ns);
+        assert_eq!(after.waits - before.waits, 1);
+    }
+    // The per-step profile: one time per planned step, in plan order, each finite.
+    match net.profile(&[(&[1, 4, s, s], &x)], 1) {
+        Ok(steps) => {
+            assert!(gpu.has_timestamps());
+            assert_eq!(steps.len() as u64, planned);
+            assert!(
+                steps
+                    .iter()
+                    .all(|t| t.ms.is_finite() && t.ms >= 0.0 && !t.node.is_empty()),
+                "{steps:?}"
+            );
+            assert!(steps.iter().map(|t| t.ms).sum::<f64>() > 0.0, "{steps:?}");
+            assert!(
+                steps.iter().any(|t| t.kernel.starts_with("conv")),
+                "{steps:?}"
+            );
+        }
+        Err(e) => {
+            assert!(!gpu.has_timestamps(), "{e}");
+            assert!(e.contains("timestamp"), "{e}");
+        }
     }
 }
 
@@ -461,10 +486,13 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
     let Some(gpu) = gpu() else { return };
     let mut cpu_loc = Localizer::new();
     let mut checked = 0;
-    for (res, cap) in [(33, 1 << 18), (129, 1 << 18), (65, 64)] {
+    // Conflict rounds one per read-back (the default), and in batches of up to 8 and 4 (the
+    // empty rounds after the last one must change nothing; with tiny lists, overflowing).
+    for (res, cap, per_wait) in [(33, 1 << 18, 1), (129, 1 << 18, 8), (65, 64, 4)] {
         let mut gl = GpuLocalizer::new(gpu.clone())
             .unwrap()
-            .with_list_capacity(cap);
+            .with_list_capacity(cap)
+            .with_rounds_per_wait(per_wait);
         let spec = GridSpec::from_resolution(res).unwrap();
         for (name, scene, table) in analytic_tables(spec) {
             for (method, mode) in [
@@ -480,7 +508,10 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
                         .unwrap();
                     let mut g = Grid::new(spec);
                     gl.read_grid(&mut g).unwrap();
-                    let what = format!("{name} {res}^3 {} from level {coarse}", method.name());
+                    let what = format!(
+                        "{name} {res}^3 {} from level {coarse}, {per_wait} rounds per wait",
+                        method.name()
+                    );
                     assert_eq!(got.evaluations, want.evaluations, "{what}: evaluations");
                     assert_eq!(got.conflict_rounds, want.conflict_rounds, "{what}: rounds");
                     assert_eq!(

@@ -230,3 +230,25 @@ def test_fine_int8_percentile_sets_the_activation_ranges(tmp_path):
     names = [s[0] for s in FOURIER_INT8_SCHEMES]
     assert len(set(names)) == len(names)
     assert len({(f, p) for _, f, p in FOURIER_INT8_SCHEMES}) == len(FOURIER_INT8_SCHEMES)
+
+
+def test_export_reads_a_light_checkpoint_as_a_run_s(tmp_path):
+    # What the training recipe brings back from a lent machine is a light checkpoint
+    # ({"net": weights}); placed as RUN/ckpt.pt it exports like a run's full one.
+    from volcap_train.export import load_modules
+    from volcap_train.nets import FourierNet
+
+    net = FourierNet(3, 4, False)
+    run = tmp_path / "fourier-small"
+    run.mkdir()
+    torch.save({"net": net.state_dict(), "step": 7, "variant": "fourier-small"}, run / "ckpt.pt")
+    st, (sd,) = load_modules(run, ["net"])
+    assert st["step"] == 7
+    assert sd.keys() == net.state_dict().keys()
+    full = tmp_path / "full"
+    full.mkdir()
+    torch.save({"modules": {"net": net.state_dict()}, "step": 9}, full / "ckpt.pt")
+    assert load_modules(full, ["net"])[1][0].keys() == sd.keys()
+    # A module the checkpoint lacks is refused naming the file and the module.
+    with pytest.raises(SystemExit, match=r"ckpt\.pt: no module enc"):
+        load_modules(run, ["enc", "net"])

@@ -107,8 +107,17 @@ def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False, percen
 
 
 def load_modules(run: Path, names):
+    """The named modules of a run's ckpt.pt: a full checkpoint ({"modules": ...}) or a light
+    one ({"net": ...}, what the training recipe brings back from a lent machine, placed as
+    RUN/ckpt.pt beside its budget.json)."""
     st = torch.load(run / "ckpt.pt", weights_only=False, map_location="cpu")
-    return st, [st["modules"][n] for n in names]
+    modules = st.get("modules") if isinstance(st, dict) else None
+    if modules is None and isinstance(st, dict) and "net" in st:
+        modules = {"net": st["net"]}
+    missing = [n for n in names if not isinstance(modules, dict) or n not in modules]
+    if missing:
+        raise SystemExit(f"{run / 'ckpt.pt'}: no module {', '.join(missing)} (neither a run checkpoint with `modules` nor a light one with `net`)")
+    return st, [modules[n] for n in names]
 
 
 def golden_sample(feat, n, gen):

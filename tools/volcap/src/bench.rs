@@ -179,60 +179,80 @@ fn adapter_rows(
         return Ok(());
     };
     let (dense_bits, comps, band, dense_evals, dense_ms) = dense;
-    let mut gl = GpuLocalizer::new(gpu.clone()).map_err(anyhow::Error::msg)?;
-    if let Err(e) = gl.check_size(spec) {
-        // A grid over the adapter's buffer limit: the CPU rows stand, the adapter's are left
-        // out and said why (the rest of the table still runs).
-        eprintln!("{name}: no @adapter rows at {}^3: {e}", spec.n());
-        return Ok(());
+    let per_wait: Vec<usize> = if a.rounds_per_wait.is_empty() {
+        vec![volcap_engine::gpu::localize::DEFAULT_ROUNDS_PER_WAIT]
+    } else {
+        a.rounds_per_wait.clone()
+    };
+    if let Some(bad) = per_wait.iter().find(|n| !(1..=64).contains(*n)) {
+        anyhow::bail!("--rounds-per-wait {bad}: must lie in 1..=64");
     }
-    for &m in methods {
-        let mode = match m {
-            Method::Hierarchical => HierarchicalMode::Paper,
-            Method::HierarchicalNoConflict => HierarchicalMode::NoConflict,
-            Method::HierarchicalTight => HierarchicalMode::Tight,
-            _ => continue,
-        };
-        let mut times = Vec::new();
-        let mut stats = LocalizeStats::default();
-        let start = Instant::now();
-        // One warm-up run (kernels compiled, buffers made), not timed.
-        gl.run(&on_gpu, spec, coarse, mode)
-            .map_err(anyhow::Error::msg)?;
-        while times.len() < a.runs.max(1) {
-            let t = Instant::now();
-            stats = gl
-                .run(&on_gpu, spec, coarse, mode)
-                .map_err(anyhow::Error::msg)?;
-            times.push(t.elapsed().as_secs_f64() * 1e3);
-            if start.elapsed().as_secs_f64() > a.time_budget {
-                break;
-            }
+    for &per in &per_wait {
+        let mut gl = GpuLocalizer::new(gpu.clone())
+            .map_err(anyhow::Error::msg)?
+            .with_rounds_per_wait(per);
+        if let Err(e) = gl.check_size(spec) {
+            // A grid over the adapter's buffer limit: the CPU rows stand, the adapter's are
+            // left out and said why (the rest of the table still runs).
+            eprintln!("{name}: no @adapter rows at {}^3: {e}", spec.n());
+            return Ok(());
         }
-        let mut grid = Grid::new(spec);
-        gl.read_grid(&mut grid).map_err(anyhow::Error::msg)?;
-        let bits = grid.binarized();
-        let runs = times.len();
-        let ms = median(&mut times);
-        rows.push(Row {
-            scene: name.to_string(),
-            resolution: spec.n(),
-            coarse_resolution: (1usize << coarse) + 1,
-            method: format!("{}@adapter", m.name()),
-            param: None,
-            evaluations: stats.evaluations,
-            dense_evaluations: dense_evals,
-            band_bound: band,
-            iou_vs_dense: iou_bits(dense_bits, &bits),
-            lost_components: lost_components(comps, &bits),
-            dense_components: comps.len(),
-            ms,
-            bookkeeping_ms: ms,
-            dense_ms,
-            runs,
-            conflict_rounds: stats.conflict_rounds,
-            empty: false,
-        });
+        for &m in methods {
+            let mode = match m {
+                Method::Hierarchical => HierarchicalMode::Paper,
+                Method::HierarchicalNoConflict => HierarchicalMode::NoConflict,
+                Method::HierarchicalTight => HierarchicalMode::Tight,
+                _ => continue,
+            };
+            let mut times = Vec::new();
+            let mut stats = LocalizeStats::default();
+            let start = Instant::now();
+            // One warm-up run (kernels compiled, buffers made), not timed.
+            gl.run(&on_gpu, spec, coarse, mode)
+                .map_err(anyhow::Error::msg)?;
+            let waits0 = gpu.counters().waits;
+            while times.len() < a.runs.max(1) {
+                let t = Instant::now();
+                stats = gl
+                    .run(&on_gpu, spec, coarse, mode)
+                    .map_err(anyhow::Error::msg)?;
+                times.push(t.elapsed().as_secs_f64() * 1e3);
+                if start.elapsed().as_secs_f64() > a.time_budget {
+                    break;
+                }
+            }
+            let waits = (gpu.counters().waits - waits0) as f64 / times.len().max(1) as f64;
+            let mut grid = Grid::new(spec);
+            gl.read_grid(&mut grid).map_err(anyhow::Error::msg)?;
+            let bits = grid.binarized();
+            let runs = times.len();
+            let ms = median(&mut times);
+            rows.push(Row {
+                scene: name.to_string(),
+                resolution: spec.n(),
+                coarse_resolution: (1usize << coarse) + 1,
+                // The adapter's rows name the read-backs each run waited for (and the batch
+                // limit, where more than one is measured).
+                method: if per_wait.len() > 1 {
+                    format!("{}@adapter ({per} rounds/wait, {waits:.0} waits)", m.name())
+                } else {
+                    format!("{}@adapter ({waits:.0} waits)", m.name())
+                },
+                param: None,
+                evaluations: stats.evaluations,
+                dense_evaluations: dense_evals,
+                band_bound: band,
+                iou_vs_dense: iou_bits(dense_bits, &bits),
+                lost_components: lost_components(comps, &bits),
+                dense_components: comps.len(),
+                ms,
+                bookkeeping_ms: ms,
+                dense_ms,
+                runs,
+                conflict_rounds: stats.conflict_rounds,
+                empty: false,
+            });
+        }
     }
     Ok(())
 }

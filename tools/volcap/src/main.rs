@@ -198,6 +198,11 @@ pub struct LocalizeArgs {
     /// the localization's own bookkeeping stays on the CPU). Build with `--features wgpu`.
     #[arg(long = "backend", value_delimiter = ',', default_value = "cpu")]
     pub backends: Vec<String>,
+    /// `--backend wgpu`, the `@adapter` rows: conflict rounds recorded per read-back at most
+    /// (comma-separated: a row set each; batches of 1, 2, 4, ... up to it). The evaluated
+    /// points and the surface do not depend on it; the read-backs the host waits for do.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    pub rounds_per_wait: Vec<usize>,
     /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
     #[arg(long, default_value = "auto")]
     pub adapter: String,

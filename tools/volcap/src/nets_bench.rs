@@ -1,6 +1,6 @@
 //! `volcap bench nets`: each network of the pipeline on its own, one thread, the same input
 //! every run: median milliseconds per network and model, and with `--profile` where tract
-//! spends them (per op kind and the slowest nodes of its optimized plan).
+//! and the GPU backend spend them (per op kind or kernel, and the slowest nodes).
 
 use anyhow::{Context, anyhow};
 use clap::Args;
@@ -30,8 +30,8 @@ pub struct NetsArgs {
     /// Timed runs per network (median reported).
     #[arg(long, default_value_t = 20)]
     pub runs: usize,
-    /// Also time every node of tract's optimized plan: totals per op kind and the
-    /// slowest nodes.
+    /// Also time every node of tract's optimized plan and every step of the GPU backend's
+    /// (the adapter's timestamps): totals per op kind or kernel and the slowest nodes.
     #[arg(long)]
     pub profile: bool,
     /// Slowest nodes listed per network with --profile.
@@ -132,9 +132,28 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
                         gpu_ns as f64 / 1e6 / (a.runs.max(1) + 1) as f64
                     );
                 }
-                if a.profile && matches!(rt, Runtime::Tract) {
-                    let nodes = net.profile(&args, a.runs).map_err(anyhow::Error::msg)?;
-                    profile.push_str(&profile_md(&file, &nodes, a.top));
+                // Per node: tract's optimized plan, or the GPU backend's steps on the
+                // adapter (ONNX Runtime has none to give).
+                let profiled = match rt {
+                    Runtime::Tract => true,
+                    #[cfg(feature = "wgpu")]
+                    Runtime::Wgpu(_) => true,
+                    #[allow(unreachable_patterns)]
+                    _ => false,
+                };
+                if a.profile && profiled {
+                    match net.profile(&args, a.runs) {
+                        Ok(nodes) => profile.push_str(&profile_md(
+                            &format!("{file} on {}", rt.label()),
+                            &nodes,
+                            a.top,
+                        )),
+                        // An adapter without timestamp queries: said, the rest stands.
+                        Err(e) if !matches!(rt, Runtime::Tract) => {
+                            let _ = writeln!(profile, "\n{file} on {}: {e}", rt.label());
+                        }
+                        Err(e) => return Err(anyhow::Error::msg(e)),
+                    }
                 }
             }
         }
@@ -173,7 +192,11 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
     }
     md.push_str(&filter);
     if a.profile {
-        md.push_str("\n## Where tract spends the time (optimized plan, per node)\n");
+        md.push_str(
+            "\n## Where the time goes, per node (tract: its optimized plan, wall time; the GPU \
+             backend: each step in a pass of its own, the adapter's timestamps; ops are then \
+             the kernels)\n",
+        );
         md.push_str(&profile);
     }
     std::fs::create_dir_all(&a.out).with_context(|| a.out.display().to_string())?;

@@ -119,17 +119,24 @@ fn real_photos_give_the_cpu_paths_mask_surface_and_render() {
             b.vertices.len(),
             close * 100.0
         );
-        // Localization on the GPU's field: the same points evaluated, the same inside set
-        // (a point within float rounding of the level could flip; none did on these photos).
+        // Localization on the GPU's field: the same points evaluated and the same inside set
+        // up to rounding. The networks on the adapter add in other orders than tract (the
+        // whole-plane pools reduce in a tree, pool_plane.wgsl), so their outputs differ by
+        // rounding (within 3e-5 of each tensor's scale, service/engine/tests/gpu.rs), and a
+        // grid point that close to the level can land on the other side, pulling a few
+        // different neighbours into the evaluated set (camera.png: 55051 / 55054): the bound
+        // is 0.1 % of the evaluations, as on the adapter's localizer below.
         let grid_iou = volcap_engine::metrics::iou(&a.grid, &b.grid);
         println!(
             "{photo}: {} / {} evaluations, grid IoU {grid_iou:.6}",
             a.evaluations, b.evaluations
         );
         assert!(iou >= 0.999, "{photo}: mask IoU {iou}");
-        assert_eq!(
-            a.evaluations, b.evaluations,
-            "{photo}: the evaluated point sets differ"
+        assert!(
+            a.evaluations.abs_diff(b.evaluations) as f64 <= 1e-3 * a.evaluations as f64,
+            "{photo}: the evaluated point sets differ: {} / {}",
+            a.evaluations,
+            b.evaluations
         );
         assert!(grid_iou >= 0.9999, "{photo}: grid IoU {grid_iou}");
         assert!(d <= 1e-3, "{photo}: Chamfer {d} m");

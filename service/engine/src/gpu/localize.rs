@@ -4,8 +4,10 @@
 //! mask, or a table of values the host computed, which the parity tests use for the analytic
 //! scenes). The steps are those of `localize/hierarchical.rs` (`localize.wgsl`): per level,
 //! upsample the binarized coarse field and list the fractional points, dilate them by the
-//! 1-ring (or not: tight), evaluate, then the conflict loop, one round per submission with the
-//! next list's length read back (32 bytes). Lists are appended with atomics: their order
+//! 1-ring (or not: tight), evaluate, then the conflict loop: its first round goes with the
+//! level's passes, the next ones one per submission with the lists' lengths read back after
+//! each (36 bytes); [`GpuLocalizer::with_rounds_per_wait`] records them in growing batches
+//! instead (a round over an empty list does nothing). Lists are appended with atomics: their order
 //! differs from the CPU's, their sets do not (a point is listed by whichever invocation claims
 //! its bit first, and what decides whether it is listed does not change during a round).
 //!
@@ -44,7 +46,9 @@ pub(super) const EVALS: usize = 4;
 /// The renderer's log of a round's evaluated points, and its two lists of culled points.
 pub(super) const LOG: usize = 5;
 pub(super) const CULLED: [usize; 2] = [6, 7];
-pub(super) const COUNTS: usize = 8;
+/// Conflict rounds that evaluated something (`prep_round`).
+pub(super) const ROUNDS: usize = 8;
+pub(super) const COUNTS: usize = 9;
 /// Parameter blocks per level: lists 0 and 1 read (the other written), the renderer's log
 /// read, its culled list 0 or 1 counted.
 const ORIENTATIONS: usize = 5;
@@ -72,6 +76,7 @@ pub(super) struct Pipes {
     pub(super) prep_cand: wgpu::ComputePipeline,
     pub(super) prep_src: wgpu::ComputePipeline,
     pub(super) prep_eval: wgpu::ComputePipeline,
+    pub(super) prep_round: wgpu::ComputePipeline,
     pub(super) seed: wgpu::ComputePipeline,
     pub(super) upsample: wgpu::ComputePipeline,
     pub(super) dilate: wgpu::ComputePipeline,
@@ -132,7 +137,16 @@ pub struct GpuLocalizer {
     generation: u64,
     /// The buffers' generation and mode (tight or not) the parameter blocks hold.
     params_for: Option<(u64, bool)>,
+    /// Conflict rounds per read-back at most ([`Self::with_rounds_per_wait`]).
+    rounds_per_wait: usize,
 }
+
+/// Conflict rounds recorded per read-back at most, unless set: one. Batches (1, 2, 4, up to
+/// the limit) save read-backs but dispatch the empty rounds after the last one that listed
+/// something, and on an H200 those cost more than the waits they save: at 257^3 the
+/// paper's method took 3.4 ms with one round per read-back (13 waits) and 5.4 ms with up to
+/// eight (11 waits); at 513^3 20.1 and 18.8 ms (docs/bench/pipeline-gpu.md).
+pub const DEFAULT_ROUNDS_PER_WAIT: usize = 1;
 
 impl Pipes {
     fn new(gpu: &Gpu) -> Result<Self, String> {
@@ -161,6 +175,7 @@ impl Pipes {
             prep_cand: pipe(&book, &with_args, "prep_cand"),
             prep_src: pipe(&book, &with_args, "prep_src"),
             prep_eval: pipe(&book, &with_args, "prep_eval"),
+            prep_round: pipe(&book, &with_args, "prep_round"),
             seed: pipe(&book, &plain, "seed"),
             upsample: pipe(&book, &plain, "upsample"),
             dilate: pipe(&book, &plain, "dilate"),
@@ -197,7 +212,17 @@ impl GpuLocalizer {
             eval_fourier: false,
             generation: 0,
             params_for: None,
+            rounds_per_wait: DEFAULT_ROUNDS_PER_WAIT,
         })
+    }
+
+    /// Conflict rounds recorded per read-back at most (default
+    /// [`DEFAULT_ROUNDS_PER_WAIT`], clamped to 1..=64): batches of 1, 2, 4, ... up to it.
+    /// The values, evaluations and rounds do not depend on it; the read-backs waited for
+    /// and the empty rounds dispatched do (`volcap bench localize --rounds-per-wait`).
+    pub fn with_rounds_per_wait(mut self, n: usize) -> Self {
+        self.rounds_per_wait = n.clamp(1, 64);
+        self
     }
 
     /// Lists of `cap` entries at first (the tests make them small to exercise their growth).
@@ -550,6 +575,7 @@ impl GpuLocalizer {
             spec,
             enc: Some(enc),
             dispatches: 0,
+            rounds_per_wait: self.rounds_per_wait,
         })
     }
 

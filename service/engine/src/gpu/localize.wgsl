@@ -7,7 +7,7 @@
 //   [n, s (the level's stride), nl (the level's points per axis), cap (list capacity),
 //    src (counts index of the list read), dst (counts index of the list written),
 //    closure (tight: the sign-change closure), tight (no dilation)]
-// counts: [cand, list A, list B, overflow, evaluations, -, -, -]
+// counts: [cand, list A, list B, overflow, evaluations, -, -, -, conflict rounds]
 // args: indirect dispatch arguments [x, y, z] of the next list-driven kernel.
 
 // The lists hold pairs (point, its value before evaluation as bits). Eight storage buffers
@@ -29,6 +29,7 @@ fn pp(i: u32) -> u32 {
 }
 const OVERFLOW: u32 = 3u;
 const EVALS: u32 = 4u;
+const ROUNDS: u32 = 8u;
 
 fn index(wg: vec3<u32>, nwg: vec3<u32>, lid: vec3<u32>) -> u32 {
     return (wg.y * nwg.x + wg.x) * 64u + lid.x;
@@ -110,6 +111,19 @@ fn prep_eval() {
     let c = list_len(pp(4u));
     set_args(c);
     atomicAdd(&counts[EVALS], c);
+}
+
+// prep_eval for a conflict round, which the host records a few at a time without reading
+// whether the previous one listed anything (record.rs): a round over an empty list is no
+// round, and evaluates, lists and counts nothing.
+@compute @workgroup_size(1)
+fn prep_round() {
+    let c = list_len(pp(4u));
+    set_args(c);
+    atomicAdd(&counts[EVALS], c);
+    if c > 0u {
+        atomicAdd(&counts[ROUNDS], 1u);
+    }
 }
 
 // Every point of the level (the coarsest): claimed and listed for evaluation.

@@ -117,6 +117,9 @@ pub struct Counters {
     pub render_runs: AtomicU64,
     /// Compute dispatches recorded.
     pub dispatches: AtomicU64,
+    /// Read-backs the host waited for (a submission and a wait for the queue each: on a GPU
+    /// each costs the round trip, whatever it reads).
+    pub waits: AtomicU64,
     /// Bytes written from the host to the adapter's buffers (inputs, not the weights).
     pub bytes_up: AtomicU64,
     /// Bytes read back to the host.
@@ -134,6 +137,7 @@ pub struct CounterValues {
     pub localize_runs: u64,
     pub render_runs: u64,
     pub dispatches: u64,
+    pub waits: u64,
     pub bytes_up: u64,
     pub bytes_down: u64,
     pub gpu_ns: u64,
@@ -268,6 +272,7 @@ impl Gpu {
             localize_runs: c.localize_runs.load(Ordering::Relaxed),
             render_runs: c.render_runs.load(Ordering::Relaxed),
             dispatches: c.dispatches.load(Ordering::Relaxed),
+            waits: c.waits.load(Ordering::Relaxed),
             bytes_up: c.bytes_up.load(Ordering::Relaxed),
             bytes_down: c.bytes_down.load(Ordering::Relaxed),
             gpu_ns: c.gpu_ns.load(Ordering::Relaxed),
@@ -302,11 +307,59 @@ impl Gpu {
         })
     }
 
-    /// The pass's time once its work is done (after [`Gpu::submit_and_read`]), added to
-    /// [`Counters::gpu_ns`].
-    pub(crate) fn read_timer(&self, t: &Timer) -> Option<f64> {
+    /// Timestamps for `passes` compute passes (a begin and an end each), where the adapter
+    /// has timestamp queries and the count fits one query set.
+    pub(crate) fn stamps(&self, passes: usize) -> Option<Stamps> {
+        self.timestamp_period?;
+        let count = u32::try_from(2 * passes)
+            .ok()
+            .filter(|c| *c >= 2 && *c <= wgpu::QUERY_SET_MAX_QUERIES)?;
+        let bytes = 8 * count as u64;
+        use wgpu::BufferUsages as U;
+        let buf = |label, usage| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Some(Stamps {
+            queries: self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("step times"),
+                ty: wgpu::QueryType::Timestamp,
+                count,
+            }),
+            resolved: buf("step times", U::QUERY_RESOLVE | U::COPY_SRC),
+            staging: buf("step times read-back", U::MAP_READ | U::COPY_DST),
+            count,
+        })
+    }
+
+    /// Submit `enc` (whose passes wrote `s`'s timestamps) and read each pass's nanoseconds.
+    pub(crate) fn read_stamps(
+        &self,
+        mut enc: wgpu::CommandEncoder,
+        s: &Stamps,
+    ) -> Result<Vec<f64>, String> {
+        let period = self
+            .timestamp_period
+            .ok_or("the adapter has no timestamp queries")?;
+        enc.resolve_query_set(&s.queries, 0..s.count, &s.resolved, 0);
+        enc.copy_buffer_to_buffer(&s.resolved, 0, &s.staging, 0, 8 * s.count as u64);
+        let mut ticks = vec![0u64; s.count as usize];
+        self.submit_and_read_bytes(enc, &s.staging, bytemuck::cast_slice_mut(&mut ticks))?;
+        Ok(ticks
+            .chunks_exact(2)
+            .map(|t| t[1].saturating_sub(t[0]) as f64 * period as f64)
+            .collect())
+    }
+
+    /// The pass's time once its work is done (after [`Gpu::submit_and_read`], whose
+    /// submission `done` is), added to [`Counters::gpu_ns`].
+    pub(crate) fn read_timer(&self, t: &Timer, done: wgpu::SubmissionIndex) -> Option<f64> {
         let period = self.timestamp_period?;
-        self.map_read(&t.staging, 16).ok()?;
+        self.map_read(&t.staging, 16, Some(done)).ok()?;
         let ticks = {
             let v = t.staging.get_mapped_range(0..16).ok()?;
             let at = |i: usize| {
@@ -327,14 +380,26 @@ impl Gpu {
     }
 
     /// Map the first `bytes` of `staging` (MAP_READ) for reading once the submitted work is
-    /// done. The callback answers once: a one-slot channel.
-    fn map_read(&self, staging: &wgpu::Buffer, bytes: u64) -> Result<(), String> {
+    /// done: submission `after` (and those before it on the one queue), or everything
+    /// submitted so far. The stages share the queue: waiting for one's own submission and
+    /// not for what other stages' threads submitted after it keeps them from waiting on each
+    /// other. The callback answers once: a one-slot channel.
+    fn map_read(
+        &self,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+        after: Option<wgpu::SubmissionIndex>,
+    ) -> Result<(), String> {
+        self.counters.waits.fetch_add(1, Ordering::Relaxed);
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         staging.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
             let _ = tx.try_send(r);
         });
         self.device
-            .poll(wgpu::PollType::wait_indefinitely())
+            .poll(wgpu::PollType::Wait {
+                submission_index: after,
+                timeout: None,
+            })
             .map_err(|e| format!("the adapter did not finish: {e}"))?;
         rx.recv()
             .map_err(|_| "the read-back was dropped".to_string())?
@@ -348,10 +413,10 @@ impl Gpu {
         buf: &wgpu::Buffer,
         staging: &wgpu::Buffer,
         len: usize,
-    ) -> Result<Vec<f32>, String> {
+    ) -> Result<(Vec<f32>, wgpu::SubmissionIndex), String> {
         let mut out = vec![0.0f32; len];
-        self.submit_and_read_into(encoder, buf, staging, &mut out)?;
-        Ok(out)
+        let index = self.submit_and_read_into(encoder, buf, staging, &mut out)?;
+        Ok((out, index))
     }
 
     /// Submit `encoder`'s work and read `out.len()` f32 from the start of `buf` (COPY_SRC)
@@ -362,7 +427,7 @@ impl Gpu {
         buf: &wgpu::Buffer,
         staging: &wgpu::Buffer,
         out: &mut [f32],
-    ) -> Result<(), String> {
+    ) -> Result<wgpu::SubmissionIndex, String> {
         let bytes = std::mem::size_of_val(out) as u64;
         encoder.copy_buffer_to_buffer(buf, 0, staging, 0, bytes);
         self.submit_and_read_bytes(encoder, staging, bytemuck::cast_slice_mut(out))
@@ -375,11 +440,11 @@ impl Gpu {
         encoder: wgpu::CommandEncoder,
         staging: &wgpu::Buffer,
         out: &mut [u8],
-    ) -> Result<(), String> {
+    ) -> Result<wgpu::SubmissionIndex, String> {
         let bytes = out.len() as u64;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        self.queue.submit([encoder.finish()]);
-        let mapped = self.map_read(staging, bytes);
+        let index = self.queue.submit([encoder.finish()]);
+        let mapped = self.map_read(staging, bytes, Some(index.clone()));
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("the adapter refused the work: {e}"));
         }
@@ -392,7 +457,7 @@ impl Gpu {
         }
         staging.unmap();
         self.counters.bytes_down.fetch_add(bytes, Ordering::Relaxed);
-        Ok(())
+        Ok(index)
     }
 }
 
@@ -401,6 +466,26 @@ pub(crate) struct Timer {
     queries: wgpu::QuerySet,
     resolved: wgpu::Buffer,
     staging: wgpu::Buffer,
+}
+
+/// Timestamps around many compute passes ([`Gpu::stamps`]): pass `i` writes `2 i` and
+/// `2 i + 1`.
+pub(crate) struct Stamps {
+    queries: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    count: u32,
+}
+
+impl Stamps {
+    pub(crate) fn writes(&self, pass: usize) -> wgpu::ComputePassTimestampWrites<'_> {
+        let i = 2 * pass as u32;
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(i),
+            end_of_pass_write_index: Some(i + 1),
+        }
+    }
 }
 
 impl Timer {

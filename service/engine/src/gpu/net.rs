@@ -27,9 +27,23 @@ fn source(k: Kernel) -> (&'static str, &'static str) {
         Kernel::Conv4 => ("conv4", include_str!("net/conv4.wgsl")),
         Kernel::ConvTranspose => ("conv_transpose", include_str!("net/conv_transpose.wgsl")),
         Kernel::Pool => ("pool", include_str!("net/pool.wgsl")),
+        Kernel::PoolPlane => ("pool_plane", include_str!("net/pool_plane.wgsl")),
         Kernel::Gemm => ("gemm", include_str!("net/gemm.wgsl")),
         Kernel::Resize => ("resize", include_str!("net/resize.wgsl")),
     }
+}
+
+/// One step of a profile ([`GpuNet::profile`]).
+#[derive(Debug, Clone)]
+pub struct StepTime {
+    /// The ONNX node it comes from.
+    pub node: String,
+    /// The kernel (`conv`, `conv4`, `resize`, ...).
+    pub kernel: &'static str,
+    /// Invocations dispatched.
+    pub invocations: u32,
+    /// Median over the runs, milliseconds on the adapter.
+    pub ms: f64,
 }
 
 /// A tensor read back: its name in the graph, shape and values.
@@ -155,6 +169,17 @@ impl GpuNet {
         r: &Realized,
         inputs: &[(&[usize], &[f32])],
     ) -> Result<wgpu::CommandEncoder, String> {
+        self.record_with(r, inputs, None)
+    }
+
+    /// [`Self::record`]; with `per_step`, each step in a compute pass of its own with its
+    /// timestamps (a profile), else one pass timed as a whole where the adapter can.
+    fn record_with(
+        &self,
+        r: &Realized,
+        inputs: &[(&[usize], &[f32])],
+        per_step: Option<&super::Stamps>,
+    ) -> Result<wgpu::CommandEncoder, String> {
         for (i, (shape, data)) in inputs.iter().enumerate() {
             let n: usize = shape.iter().product();
             if data.len() != n {
@@ -176,19 +201,31 @@ impl GpuNet {
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: None,
-                timestamp_writes: r.timer.as_ref().map(|t| t.writes()),
-            });
-            for (pipeline, bg, (x, y)) in &r.steps {
+        if let Some(stamps) = per_step {
+            for (i, (pipeline, bg, (x, y))) in r.steps.iter().enumerate() {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: None,
+                    timestamp_writes: Some(stamps.writes(i)),
+                });
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, bg, &[]);
                 pass.dispatch_workgroups(*x, *y, 1);
             }
-        }
-        if let Some(t) = &r.timer {
-            t.resolve(&mut enc);
+        } else {
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: None,
+                    timestamp_writes: r.timer.as_ref().map(|t| t.writes()),
+                });
+                for (pipeline, bg, (x, y)) in &r.steps {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(0, bg, &[]);
+                    pass.dispatch_workgroups(*x, *y, 1);
+                }
+            }
+            if let Some(t) = &r.timer {
+                t.resolve(&mut enc);
+            }
         }
         let c = self.gpu.count();
         c.dispatches
@@ -215,11 +252,11 @@ impl GpuNet {
         let enc = self.record(r, inputs)?;
         let (ob, oshape) = &r.plan.output;
         let len = oshape.iter().product::<usize>();
-        let out = self
+        let (out, done) = self
             .gpu
             .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)?;
         if let Some(t) = &r.timer {
-            self.gpu.read_timer(t);
+            self.gpu.read_timer(t, done);
         }
         Ok(out)
     }
@@ -241,12 +278,57 @@ impl GpuNet {
                 .gpu
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-            let v = self
+            let (v, _) = self
                 .gpu
                 .submit_and_read(enc, &r.buffers[*b], &r.staging, len)?;
             out.push((name.clone(), shape.clone(), v));
         }
         Ok(out)
+    }
+
+    /// A profile on the adapter: every step in a compute pass of its own with timestamps
+    /// around it, `runs` times after one untimed run; per step, in plan order, the ONNX node,
+    /// the kernel, its invocations and the median milliseconds. A pass per step adds a little
+    /// to each (the sum is near the whole pass's time, not equal to it). Refused where the
+    /// adapter has no timestamp queries.
+    pub fn profile(
+        &self,
+        inputs: &[(&[usize], &[f32])],
+        runs: usize,
+    ) -> Result<Vec<StepTime>, String> {
+        let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
+        let r = self.realize(&shapes, false)?;
+        let stamps = self.gpu.stamps(r.steps.len()).ok_or_else(|| {
+            format!(
+                "no per-step times on {}: no timestamp queries, or {} steps over one query set",
+                self.gpu.adapter.label(),
+                r.steps.len()
+            )
+        })?;
+        let mut times: Vec<Vec<f64>> = vec![Vec::new(); r.steps.len()];
+        for run in 0..=runs.max(1) {
+            let enc = self.record_with(&r, inputs, Some(&stamps))?;
+            let ns = self.gpu.read_stamps(enc, &stamps)?;
+            if run > 0 {
+                for (t, v) in times.iter_mut().zip(ns) {
+                    t.push(v / 1e6);
+                }
+            }
+        }
+        Ok(r.plan
+            .steps
+            .iter()
+            .zip(times)
+            .map(|(s, mut t)| {
+                t.sort_by(f64::total_cmp);
+                StepTime {
+                    node: s.node.clone(),
+                    kernel: source(s.kernel).0,
+                    invocations: s.params.first().copied().unwrap_or(0),
+                    ms: t.get(t.len() / 2).copied().unwrap_or(0.0),
+                }
+            })
+            .collect())
     }
 
     /// The number of dispatches of the plan for `shapes` (planning only).

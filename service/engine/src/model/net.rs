@@ -292,8 +292,9 @@ pub struct NodeTime {
 }
 
 impl Net {
-    /// Run `runs` times (after one untimed run) timing every node of tract's optimized plan:
-    /// per node the median milliseconds, in plan order (tract only).
+    /// Run `runs` times (after one untimed run) timing every node of tract's optimized plan,
+    /// or every step of the GPU backend's plan on the adapter (timestamps): per node the
+    /// median milliseconds, in plan order (not on ONNX Runtime).
     pub fn profile(
         &self,
         inputs: &[(&[usize], &[f32])],
@@ -305,7 +306,23 @@ impl Net {
             #[cfg(feature = "onnxruntime")]
             Backend::Ort(_) => return Err(err("per-node times are tract's only".into())),
             #[cfg(feature = "wgpu")]
-            Backend::Wgpu(_) => return Err(err("per-node times are tract's only".into())),
+            Backend::Wgpu(net) => {
+                // The adapter's own times per step (timestamps): the op is the kernel, with
+                // its invocations.
+                return net
+                    .profile(inputs, runs)
+                    .map(|steps| {
+                        steps
+                            .into_iter()
+                            .map(|s| NodeTime {
+                                name: s.node,
+                                op: s.kernel.to_string(),
+                                ms: s.ms,
+                            })
+                            .collect()
+                    })
+                    .map_err(err);
+            }
         };
         let model = plan.model();
         let mut times: Vec<Vec<f64>> = vec![Vec::new(); model.nodes().len()];

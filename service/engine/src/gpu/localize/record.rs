@@ -1,7 +1,7 @@
 //! Recording a frame's localization: compute passes on one encoder, the levels of the
 //! hierarchical method, one submission per conflict round (its counters read back).
 
-use super::{Bufs, COUNTS, EVALS, FieldBufs, LIST, OVERFLOW, Pipes};
+use super::{Bufs, COUNTS, EVALS, FieldBufs, LIST, OVERFLOW, Pipes, ROUNDS};
 use crate::gpu::{Gpu, groups};
 use crate::grid::GridSpec;
 use crate::localize::{HierarchicalMode, LocalizeStats};
@@ -19,6 +19,8 @@ pub(in crate::gpu) struct Rec<'a> {
     pub(in crate::gpu) spec: GridSpec,
     pub(super) enc: Option<wgpu::CommandEncoder>,
     pub(in crate::gpu) dispatches: u64,
+    /// Conflict rounds per submission at most (`GpuLocalizer::with_rounds_per_wait`).
+    pub(super) rounds_per_wait: usize,
 }
 
 impl<'a> Rec<'a> {
@@ -94,7 +96,8 @@ impl<'a> Rec<'a> {
     }
 
     /// Levels `coarse..=last` (the coarsest evaluated whole): (stats, whether a list
-    /// overflowed). With the conflict loop, each round is one submission.
+    /// overflowed). With the conflict loop, rounds go in batches of growing size, one
+    /// submission each.
     pub(in crate::gpu) fn levels(
         &mut self,
         coarse: u32,
@@ -110,7 +113,6 @@ impl<'a> Rec<'a> {
             (&p.prep_eval, coarse, 0, Dispatch::Prep),
             (ev, coarse, 0, Dispatch::Eval),
         ]);
-        let mut rounds = 0u32;
         for l in coarse + 1..=last {
             let pts = self.level_points(l);
             self.pass(&[
@@ -130,9 +132,24 @@ impl<'a> Rec<'a> {
                 (&p.conflict, l, 0, Dispatch::Indirect),
             ]);
             // The conflict loop: the list just written (o = 1 reads list 1) is evaluated and
-            // scanned until a round lists nothing.
+            // scanned until a round lists nothing. Rounds are recorded `per` at a time (one,
+            // unless `with_rounds_per_wait` allows batches) and the counters read after each
+            // batch: the rounds after the last one that listed something run over empty lists
+            // and change nothing; `prep_round` counts only the rounds that evaluated.
+            // The first batch goes with the level's own passes, in the same submission.
             let mut o = 1usize;
+            let mut per = 1usize;
             loop {
+                for _ in 0..per {
+                    self.pass(&[
+                        (&p.prep_round, l, o, Dispatch::Prep),
+                        (ev, l, o, Dispatch::Eval),
+                        (&p.zero, l, o, Dispatch::One),
+                        (&p.prep_src, l, o, Dispatch::Prep),
+                        (&p.conflict, l, o, Dispatch::Indirect),
+                    ]);
+                    o = 1 - o;
+                }
                 let counts = self.counts()?;
                 if counts[OVERFLOW] != 0 {
                     return Ok((LocalizeStats::default(), true));
@@ -140,15 +157,7 @@ impl<'a> Rec<'a> {
                 if counts[LIST[o]] == 0 {
                     break;
                 }
-                rounds += 1;
-                self.pass(&[
-                    (&p.prep_eval, l, o, Dispatch::Prep),
-                    (ev, l, o, Dispatch::Eval),
-                    (&p.zero, l, o, Dispatch::One),
-                    (&p.prep_src, l, o, Dispatch::Prep),
-                    (&p.conflict, l, o, Dispatch::Indirect),
-                ]);
-                o = 1 - o;
+                per = (per * 2).min(self.rounds_per_wait);
             }
         }
         let counts = self.counts()?;
@@ -158,7 +167,7 @@ impl<'a> Rec<'a> {
         c.localize_runs.fetch_add(1, Ordering::Relaxed);
         let stats = LocalizeStats {
             evaluations: counts[EVALS] as u64,
-            conflict_rounds: rounds,
+            conflict_rounds: counts[ROUNDS],
             empty: false,
         };
         Ok((stats, counts[OVERFLOW] != 0))

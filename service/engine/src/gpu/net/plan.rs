@@ -25,6 +25,8 @@ pub enum Kernel {
     Conv4,
     ConvTranspose,
     Pool,
+    /// A window over the whole plane: a workgroup per plane, reduced in workgroup memory.
+    PoolPlane,
     Gemm,
     Resize,
 }

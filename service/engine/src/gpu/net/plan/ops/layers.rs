@@ -203,6 +203,20 @@ pub(super) fn pool(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), Str
     }
     let oshape = vec![shape[0], shape[1], o[0], o[1]];
     let ob = pl.alloc(numel(&oshape));
+    if o == [1, 1] && k == [h, w] && pads.iter().all(|&v| v == 0) {
+        // The window is the plane: one workgroup per plane (pool_plane.wgsl).
+        let planes = shape[0] * shape[1];
+        pl.step(
+            Kernel::PoolPlane,
+            [planes * 64, planes, h * w, max as usize]
+                .iter()
+                .map(|&v| v as u32)
+                .collect(),
+            vec![b, ob],
+        );
+        pl.define_dev(out, ob, oshape);
+        return Ok(());
+    }
     let p = [
         numel(&oshape),
         shape[0] * shape[1],
