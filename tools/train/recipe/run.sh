@@ -7,6 +7,9 @@
 #                 [--minutes-data D] [--minutes-train T] [--tiny]
 #                 [-- extra `volcap_train.train fourier` options]
 #
+# budget.json's `time_s` says where the training's wall time went (steps, checkpoints,
+# validation).
+#
 # --minutes-data: the generators stop after D minutes (each keeps the subjects it finished;
 # the one in progress is dropped); --minutes-train: training stops after T minutes with its
 # checkpoint, the rate annealed by then (`train --max-minutes`). Both together fit the recipe

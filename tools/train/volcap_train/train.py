@@ -332,7 +332,9 @@ class Run:
 
 
 def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt_every=100, header=("step", "loss")):
-    """The shared resumable loop. step_fn(step) -> loss (float); eval_fn() -> dict."""
+    """The shared resumable loop. step_fn(step) -> loss (float); eval_fn() -> dict.
+    budget.json records where the wall time went (`time_s`: the steps, the checkpoints, the
+    validation): a GPU run that is slower than its GPU says there which part holds it."""
     gen = extra_state["gen"]
     st = run.load()
     step, wall = 0, 0.0
@@ -351,10 +353,13 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
     t0 = time.time() - wall
     run.t0 = t0
     stopped = None
+    spent = {"steps": 0.0, "checkpoints": 0.0, "validation": 0.0}
     while step < steps:
         for m in modules.values():
             m.train()
+        ts = time.time()
         loss = step_fn(step)
+        spent["steps"] += time.time() - ts
         step += 1
         rows.append((step, f"{loss:.6f}"))
         bar.update(1)
@@ -362,12 +367,14 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
         if run.out_of_time():
             stopped = f"--max-minutes {run.deadline / 60:g} reached at step {step}"
         if step % ckpt_every == 0 or step == steps or stopped:
+            ts = time.time()
             state = {"modules": {n: m.state_dict() for n, m in modules.items()}, "opt": opt.state_dict(), "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step, "wall": time.time() - t0}
             if extra_state.get("ohem") is not None:
                 state["ohem"] = extra_state["ohem"].state_dict()
             run.save(state)
             run.write_log(rows, header)
             rows = []
+            spent["checkpoints"] += time.time() - ts
         if stopped:
             print(stopped)
             break
@@ -377,9 +384,12 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
         wall = st["wall"]
     for m in modules.values():
         m.eval()
+    ts = time.time()
     with torch.no_grad():
         metrics = eval_fn()
-    b = run.finish(step, wall, {"val": metrics, **({"stopped": stopped} if stopped else {})})
+    spent["validation"] = time.time() - ts
+    time_s = {k: round(v, 1) for k, v in spent.items()}
+    b = run.finish(step, wall, {"val": metrics, "time_s": time_s, **({"stopped": stopped} if stopped else {})})
     print(json.dumps(b["val"]))
     return b
 

@@ -1,0 +1,42 @@
+"""The shared training loop: a checkpoint every --ckpt-every steps and at the end, every
+step logged, and budget.json saying where the wall time went (steps, checkpoints,
+validation: what a GPU run that is slower than its GPU reads first)."""
+import argparse
+import json
+
+import torch
+
+from volcap_train.train import Run, loop
+
+
+def test_checkpoints_log_and_the_budgets_time_split(tmp_path, monkeypatch):
+    saved = []
+    save = Run.save
+
+    def counting(self, state):
+        saved.append(state["step"])
+        save(self, state)
+
+    monkeypatch.setattr(Run, "save", counting)
+    torch.manual_seed(0)
+    net = torch.nn.Linear(2, 1)
+    opt = torch.optim.SGD(net.parameters(), lr=0.1)
+    run = Run(tmp_path / "run", argparse.Namespace(max_minutes=0))
+
+    def step_fn(step):
+        loss = (net(torch.ones(1, 2)) - 1.0).pow(2).sum()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        return float(loss)
+
+    b = loop(run, {"net": net}, opt, 12, step_fn, lambda: {"ok": 1.0}, {"gen": torch.Generator().manual_seed(0)}, ckpt_every=5)
+    assert saved == [5, 10, 12]
+    rows = (run.out / "log.csv").read_text().strip().splitlines()
+    assert len(rows) == 1 + 12
+    budget = json.loads((run.out / "budget.json").read_text())
+    assert budget == json.loads(json.dumps(b))
+    assert set(budget["time_s"]) == {"steps", "checkpoints", "validation"}
+    assert all(v >= 0.0 for v in budget["time_s"].values())
+    assert sum(budget["time_s"].values()) <= budget["wall_s"] + 1.0
+    assert torch.load(run.out / "ckpt.pt", weights_only=False)["step"] == 12
