@@ -23,20 +23,26 @@ def test_checkpoints_log_and_the_budgets_time_split(tmp_path, monkeypatch):
     opt = torch.optim.SGD(net.parameters(), lr=0.1)
     run = Run(tmp_path / "run", argparse.Namespace(max_minutes=0))
 
+    parts = {"batch": 0.0}
+
     def step_fn(step):
+        parts["batch"] += 0.001
         loss = (net(torch.ones(1, 2)) - 1.0).pow(2).sum()
         opt.zero_grad()
         loss.backward()
         opt.step()
         return float(loss)
 
-    b = loop(run, {"net": net}, opt, 12, step_fn, lambda: {"ok": 1.0}, {"gen": torch.Generator().manual_seed(0)}, ckpt_every=5)
+    b = loop(run, {"net": net}, opt, 12, step_fn, lambda: {"ok": 1.0}, {"gen": torch.Generator().manual_seed(0), "parts": parts}, ckpt_every=5)
     assert saved == [5, 10, 12]
     rows = (run.out / "log.csv").read_text().strip().splitlines()
     assert len(rows) == 1 + 12
     budget = json.loads((run.out / "budget.json").read_text())
     assert budget == json.loads(json.dumps(b))
-    assert set(budget["time_s"]) == {"steps", "checkpoints", "validation"}
-    assert all(v >= 0.0 for v in budget["time_s"].values())
-    assert sum(budget["time_s"].values()) <= budget["wall_s"] + 1.0
+    t = budget["time_s"]
+    assert set(t) == {"steps", "checkpoints", "validation", "steps: batch"}
+    assert all(v >= 0.0 for v in t.values())
+    assert t["steps"] + t["checkpoints"] + t["validation"] <= budget["wall_s"] + 1.0
+    # What step_fn measured of its own time comes through as a part of the steps.
+    assert t["steps: batch"] == round(12 * 0.001, 1)
     assert torch.load(run.out / "ckpt.pt", weights_only=False)["step"] == 12

@@ -388,6 +388,8 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
     with torch.no_grad():
         metrics = eval_fn()
     spent["validation"] = time.time() - ts
+    # Parts of the steps' time that step_fn measured (extra_state "parts"), as "steps: PART".
+    spent.update({f"steps: {k}": v for k, v in (extra_state.get("parts") or {}).items()})
     time_s = {k: round(v, 1) for k, v in spent.items()}
     b = run.finish(step, wall, {"val": metrics, "time_s": time_s, **({"stopped": stopped} if stopped else {})})
     print(json.dumps(b["val"]))
@@ -605,12 +607,19 @@ def train_fourier(args):
             dense = l2.mean()
         return dense, bce, occ, lab
 
+    # Host seconds inside the steps (budget.json time_s): the batch made (OHEM sampling,
+    # augmentation, the input to the device) and the OHEM statistics updated (which waits for
+    # the device's losses). The rest of "steps" is the net's forward and backward.
+    parts = {"batch": 0.0, "ohem update": 0.0}
+
     def step_fn(step):
         for gparam in opt.param_groups:
             gparam["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * run.progress(step, sched_total)))
+        tb = time.time()
         items = ohem.sample_items(args.batch, gen)
         pidx = ohem.sample_points(items, args.points, gen)
         x = inputs(tr, items, None if args.no_aug else gen)
+        parts["batch"] += time.time() - tb
         flips = (torch.rand(len(items), generator=gen) < 0.5).to(dev) if args.flip else None
         pred, d = net(mirror_some(x, flips), with_centre=True)
         # A mirrored image's maps, mirrored back, are compared with the image's own targets:
@@ -636,7 +645,9 @@ def train_fourier(args):
         opt.zero_grad()
         loss.backward()
         opt.step()
+        tb = time.time()
         ohem.update(items, pidx, bce.detach().cpu(), occ.detach().cpu(), lab.cpu())
+        parts["ohem update"] += time.time() - tb
         return loss.item()
 
     def eval_fn():
@@ -652,7 +663,7 @@ def train_fourier(args):
         iou = torch.cat(ious)
         return {"point_iou_mean": iou.mean().item(), "point_iou_worst10": iou.sort().values[:10].mean().item(), "ray_l2": torch.cat(l2s).mean().item(), "images": len(iou), "k": k}
 
-    return loop(run, {"net": net}, opt, args.steps, step_fn, eval_fn, {"gen": gen, "ohem": ohem}, ckpt_every=args.ckpt_every)
+    return loop(run, {"net": net}, opt, args.steps, step_fn, eval_fn, {"gen": gen, "ohem": ohem, "parts": parts}, ckpt_every=args.ckpt_every)
 
 
 def main(argv=None):
