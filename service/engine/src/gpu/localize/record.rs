@@ -1,5 +1,7 @@
 //! Recording a frame's localization: compute passes on one encoder, the levels of the
-//! hierarchical method, one submission per conflict round (its counters read back).
+//! hierarchical method, the conflict rounds one submission each (the first with its level's
+//! passes; in batches with `GpuLocalizer::with_rounds_per_wait`), the counters read back
+//! after each.
 
 use super::{Bufs, COUNTS, EVALS, FieldBufs, LIST, OVERFLOW, Pipes, ROUNDS};
 use crate::gpu::{Gpu, groups};
@@ -96,8 +98,7 @@ impl<'a> Rec<'a> {
     }
 
     /// Levels `coarse..=last` (the coarsest evaluated whole): (stats, whether a list
-    /// overflowed). With the conflict loop, rounds go in batches of growing size, one
-    /// submission each.
+    /// overflowed). With the conflict loop, a submission per round (per batch of rounds).
     pub(in crate::gpu) fn levels(
         &mut self,
         coarse: u32,
