@@ -3,7 +3,7 @@ anything else is refused with the file named."""
 import pytest
 import torch
 
-from volcap_train.train import init_weights
+from volcap_train.runs import init_weights
 
 
 def test_light_and_full_checkpoints_give_the_same_weights():

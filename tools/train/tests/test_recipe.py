@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from volcap_train.train import init_weights
+from volcap_train.runs import init_weights
 
 REPO = Path(__file__).resolve().parents[3]
 BINARY = REPO / "target" / "release" / "volcap"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from .train import init_weights
+from .runs import init_weights
 
 
 def save(path: Path, weights: dict, step: int, variant: str) -> None:

@@ -22,7 +22,8 @@ from pathlib import Path
 import torch
 from . import fourier as FO
 from .nets import FourierNet, fourier_variant, shift_series
-from .train import encoder_input, fourier_cached, fourier_upper_cached, init_weights, predict_points
+from .runs import init_weights
+from .train import encoder_input, fourier_cached, fourier_upper_cached, predict_points
 
 
 def load(path: Path, variant: str) -> FourierNet:

@@ -16,7 +16,7 @@ from pathlib import Path
 import torch
 
 from . import light
-from .train import init_weights
+from .runs import init_weights
 
 
 def load_weights(path: Path) -> dict:

@@ -2,18 +2,15 @@
 
 Every run is seeded, resumable (a checkpoint every --ckpt-every steps and at the end; a run
 that is cut off continues from its last checkpoint with the same data order), shows a
-progress bar, logs losses to RUN/log.csv and records its budget (steps, wall time, hardware)
-in RUN/budget.json for the model card.
+progress bar, logs losses to RUN/log.csv and records its budget (steps, wall time and where
+it went, hardware) in RUN/budget.json for the model card: the run folder and the loop are
+`runs.py`; this module holds the datasets' targets and each network's step.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import json
 import math
-import os
-import platform
 import time
 from pathlib import Path
 
@@ -27,6 +24,7 @@ from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
 from .ray_losses import ray_level_bce, thin_mask
+from .runs import Run, device, init_weights, loop
 
 
 def cropped(split: Split):
@@ -254,146 +252,6 @@ def fourier_query(coeff: torch.Tensor, pts: torch.Tensor, k: int) -> torch.Tenso
     points [B, N, 3] -> occupancy [B, N] (grid_sample rule of the engine, zeta from crop z)."""
     c = sample_features(coeff, pts[..., :2])  # [B, N, 2K+1]
     return FO.decode(c, pts[..., 2] * FO.ZETA_SCALE, k)
-
-
-def device(choice: str) -> torch.device:
-    """`--device`: `auto` (CUDA when present, else the CPU), `cpu` or `cuda`."""
-    if choice == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if choice == "cuda" and not torch.cuda.is_available():
-        raise SystemExit("--device cuda: no CUDA device (torch.cuda.is_available() is false)")
-    return torch.device(choice)
-
-
-def hardware():
-    return {"cpu": platform.processor() or platform.machine(), "threads": torch.get_num_threads(), "torch": torch.__version__, "cuda": torch.cuda.is_available()}
-
-
-def init_weights(ckpt, path) -> dict:
-    """The net's weights (as f32) from a light checkpoint (models/checkpoints/*.pt:
-    {"net": ...}) or from a run's full one ({"modules": {"net": ...}, "opt": ...}: the
-    optimizer state is dropped); anything else is refused naming the file."""
-    weights = None
-    if isinstance(ckpt, dict):
-        weights = ckpt["net"] if "net" in ckpt else (ckpt.get("modules") or {}).get("net")
-    if not isinstance(weights, dict):
-        raise SystemExit(f"--init {path}: neither a light checkpoint (key `net`) nor a run checkpoint (key `modules.net`)")
-    return {n: v.float().cpu() for n, v in weights.items()}
-
-
-class Run:
-    def __init__(self, out: Path, args):
-        self.out = out
-        out.mkdir(parents=True, exist_ok=True)
-        self.ckpt = out / "ckpt.pt"
-        self.log = out / "log.csv"
-        self.args = args
-        # --max-minutes: the run's wall-clock budget (resumed runs count their earlier time);
-        # `loop` sets t0 and stops at the budget with a checkpoint.
-        minutes = getattr(args, "max_minutes", 0) or 0
-        self.deadline = minutes * 60.0 if minutes > 0 else None
-        self.t0 = time.time()
-
-    def elapsed(self) -> float:
-        return time.time() - self.t0
-
-    def progress(self, step: int, steps: int) -> float:
-        """How far through its budget the run is, in [0, 1]: the larger of the steps' and, with
-        --max-minutes, the clock's share (so a learning-rate schedule anneals by the deadline)."""
-        p = step / max(steps, 1)
-        if self.deadline:
-            p = max(p, self.elapsed() / self.deadline)
-        return min(p, 1.0)
-
-    def out_of_time(self) -> bool:
-        return self.deadline is not None and self.elapsed() >= self.deadline
-
-    def save(self, state):
-        tmp = self.ckpt.with_suffix(".tmp")
-        torch.save(state, tmp)
-        os.replace(tmp, self.ckpt)  # atomic: a cut-off run never leaves half a checkpoint
-
-    def load(self):
-        # On the CPU whatever device wrote it (a GPU run resumed here, or the reverse).
-        return torch.load(self.ckpt, weights_only=False, map_location="cpu") if self.ckpt.exists() else None
-
-    def write_log(self, rows, header):
-        new = not self.log.exists()
-        with open(self.log, "a", newline="") as f:
-            w = csv.writer(f)
-            if new:
-                w.writerow(header)
-            w.writerows(rows)
-
-    def finish(self, step, wall, extra):
-        b = {"steps": step, "wall_s": round(wall, 1), "hardware": hardware(), "args": {k: str(v) for k, v in vars(self.args).items()}, **extra}
-        (self.out / "budget.json").write_text(json.dumps(b, indent=2))
-        return b
-
-
-def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt_every=100, header=("step", "loss")):
-    """The shared resumable loop. step_fn(step) -> loss (float); eval_fn() -> dict.
-    budget.json records where the wall time went (`time_s`: the steps, the checkpoints, the
-    validation): a GPU run that is slower than its GPU says there which part holds it."""
-    gen = extra_state["gen"]
-    st = run.load()
-    step, wall = 0, 0.0
-    if st is not None:
-        for name, m in modules.items():
-            m.load_state_dict(st["modules"][name])
-        opt.load_state_dict(st["opt"])
-        gen.set_state(st["gen"])
-        torch.set_rng_state(st["torch_rng"])
-        if "ohem" in st and extra_state.get("ohem") is not None:
-            extra_state["ohem"].load_state_dict(st["ohem"])
-        step, wall = st["step"], st["wall"]
-        print(f"resuming {run.out} at step {step}/{steps}")
-    rows = []
-    bar = tqdm(total=steps, initial=step, desc=run.out.name, unit="step")
-    t0 = time.time() - wall
-    run.t0 = t0
-    stopped = None
-    spent = {"steps": 0.0, "checkpoints": 0.0, "validation": 0.0}
-    while step < steps:
-        for m in modules.values():
-            m.train()
-        ts = time.time()
-        loss = step_fn(step)
-        spent["steps"] += time.time() - ts
-        step += 1
-        rows.append((step, f"{loss:.6f}"))
-        bar.update(1)
-        bar.set_postfix(loss=f"{loss:.4f}")
-        if run.out_of_time():
-            stopped = f"--max-minutes {run.deadline / 60:g} reached at step {step}"
-        if step % ckpt_every == 0 or step == steps or stopped:
-            ts = time.time()
-            state = {"modules": {n: m.state_dict() for n, m in modules.items()}, "opt": opt.state_dict(), "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step, "wall": time.time() - t0}
-            if extra_state.get("ohem") is not None:
-                state["ohem"] = extra_state["ohem"].state_dict()
-            run.save(state)
-            run.write_log(rows, header)
-            rows = []
-            spent["checkpoints"] += time.time() - ts
-        if stopped:
-            print(stopped)
-            break
-    bar.close()
-    wall = time.time() - t0
-    if st is not None and st["step"] >= steps:
-        wall = st["wall"]
-    for m in modules.values():
-        m.eval()
-    ts = time.time()
-    with torch.no_grad():
-        metrics = eval_fn()
-    spent["validation"] = time.time() - ts
-    # Parts of the steps' time that step_fn measured (extra_state "parts"), as "steps: PART".
-    spent.update({f"steps: {k}": v for k, v in (extra_state.get("parts") or {}).items()})
-    time_s = {k: round(v, 1) for k, v in spent.items()}
-    b = run.finish(step, wall, {"val": metrics, "time_s": time_s, **({"stopped": stopped} if stopped else {})})
-    print(json.dumps(b["val"]))
-    return b
 
 
 def train_seg(args):

@@ -18,7 +18,7 @@ import torch
 from torch import nn
 
 from .nets import FourierNet, fourier_variant
-from .train import init_weights
+from .runs import init_weights
 
 
 def segments(name: str, c: int) -> list[int] | None:

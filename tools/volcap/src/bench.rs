@@ -179,15 +179,11 @@ fn adapter_rows(
         return Ok(());
     };
     let (dense_bits, comps, band, dense_evals, dense_ms) = dense;
-    let per_wait: Vec<usize> = if a.rounds_per_wait.is_empty() {
-        vec![volcap_engine::gpu::localize::DEFAULT_ROUNDS_PER_WAIT]
-    } else {
-        a.rounds_per_wait.clone()
-    };
+    let per_wait = &a.rounds_per_wait;
     if let Some(bad) = per_wait.iter().find(|n| !(1..=64).contains(*n)) {
         anyhow::bail!("--rounds-per-wait {bad}: must lie in 1..=64");
     }
-    for &per in &per_wait {
+    for &per in per_wait {
         let mut gl = GpuLocalizer::new(gpu.clone())
             .map_err(anyhow::Error::msg)?
             .with_rounds_per_wait(per);

@@ -201,6 +201,8 @@ pub struct LocalizeArgs {
     /// `--backend wgpu`, the `@adapter` rows: conflict rounds recorded per read-back at most
     /// (comma-separated: a row set each; batches of 1, 2, 4, ... up to it). The evaluated
     /// points and the surface do not depend on it; the read-backs the host waits for do.
+    /// The default is the engine's (`gpu::localize::DEFAULT_ROUNDS_PER_WAIT`, which a build
+    /// without the GPU backend does not have).
     #[arg(long, value_delimiter = ',', default_value = "1")]
     pub rounds_per_wait: Vec<usize>,
     /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
@@ -239,5 +241,23 @@ fn main() -> ExitCode {
             eprintln!("volcap: error: {e:#}");
             ExitCode::from(2)
         }
+    }
+}
+
+#[cfg(all(test, feature = "wgpu"))]
+mod tests {
+    use super::*;
+
+    /// `bench localize --rounds-per-wait` defaults to what the daemon's localizer uses.
+    #[test]
+    fn rounds_per_wait_defaults_to_the_engines() {
+        let cli = Cli::try_parse_from(["volcap", "bench", "localize"]).unwrap();
+        let Cmd::Bench(BenchCmd::Localize(a)) = cli.cmd else {
+            panic!("not bench localize")
+        };
+        assert_eq!(
+            a.rounds_per_wait,
+            [volcap_engine::gpu::localize::DEFAULT_ROUNDS_PER_WAIT]
+        );
     }
 }

@@ -359,7 +359,7 @@ impl Gpu {
     /// submission `done` is), added to [`Counters::gpu_ns`].
     pub(crate) fn read_timer(&self, t: &Timer, done: wgpu::SubmissionIndex) -> Option<f64> {
         let period = self.timestamp_period?;
-        self.map_read(&t.staging, 16, Some(done)).ok()?;
+        self.map_read(&t.staging, 16, done).ok()?;
         let ticks = {
             let v = t.staging.get_mapped_range(0..16).ok()?;
             let at = |i: usize| {
@@ -379,16 +379,15 @@ impl Gpu {
         &self.counters
     }
 
-    /// Map the first `bytes` of `staging` (MAP_READ) for reading once the submitted work is
-    /// done: submission `after` (and those before it on the one queue), or everything
-    /// submitted so far. The stages share the queue: waiting for one's own submission and
-    /// not for what other stages' threads submitted after it keeps them from waiting on each
-    /// other. The callback answers once: a one-slot channel.
+    /// Map the first `bytes` of `staging` (MAP_READ) for reading once submission `after` (and
+    /// those before it on the one queue) is done. The stages share the queue: waiting for
+    /// one's own submission and not for what other stages' threads submitted after it keeps
+    /// them from waiting on each other. The callback answers once: a one-slot channel.
     fn map_read(
         &self,
         staging: &wgpu::Buffer,
         bytes: u64,
-        after: Option<wgpu::SubmissionIndex>,
+        after: wgpu::SubmissionIndex,
     ) -> Result<(), String> {
         self.counters.waits.fetch_add(1, Ordering::Relaxed);
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
@@ -397,7 +396,7 @@ impl Gpu {
         });
         self.device
             .poll(wgpu::PollType::Wait {
-                submission_index: after,
+                submission_index: Some(after),
                 timeout: None,
             })
             .map_err(|e| format!("the adapter did not finish: {e}"))?;
@@ -444,7 +443,7 @@ impl Gpu {
         let bytes = out.len() as u64;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let index = self.queue.submit([encoder.finish()]);
-        let mapped = self.map_read(staging, bytes, Some(index.clone()));
+        let mapped = self.map_read(staging, bytes, index.clone());
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("the adapter refused the work: {e}"));
         }

@@ -40,8 +40,6 @@ pub struct StepTime {
     pub node: String,
     /// The kernel (`conv`, `conv4`, `resize`, ...).
     pub kernel: &'static str,
-    /// Invocations dispatched.
-    pub invocations: u32,
     /// Median over the runs, milliseconds on the adapter.
     pub ms: f64,
 }
@@ -49,12 +47,15 @@ pub struct StepTime {
 /// A tensor read back: its name in the graph, shape and values.
 pub type Tensor = (String, Vec<usize>, Vec<f32>);
 
+/// A planned step made real: its pipeline, bind group and workgroups.
+type RealStep = (Arc<wgpu::ComputePipeline>, wgpu::BindGroup, (u32, u32));
+
 /// A plan made real on the adapter.
 struct Realized {
     shapes: Vec<Vec<usize>>,
     plan: Plan,
     buffers: Vec<wgpu::Buffer>,
-    steps: Vec<(Arc<wgpu::ComputePipeline>, wgpu::BindGroup, (u32, u32))>,
+    steps: Vec<RealStep>,
     staging: wgpu::Buffer,
     timer: Option<super::Timer>,
 }
@@ -201,15 +202,18 @@ impl GpuNet {
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let dispatch = |pass: &mut wgpu::ComputePass<'_>, (pipeline, bg, (x, y)): &RealStep| {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bg, &[]);
+            pass.dispatch_workgroups(*x, *y, 1);
+        };
         if let Some(stamps) = per_step {
-            for (i, (pipeline, bg, (x, y))) in r.steps.iter().enumerate() {
+            for (i, step) in r.steps.iter().enumerate() {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: None,
                     timestamp_writes: Some(stamps.writes(i)),
                 });
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, bg, &[]);
-                pass.dispatch_workgroups(*x, *y, 1);
+                dispatch(&mut pass, step);
             }
         } else {
             {
@@ -217,10 +221,8 @@ impl GpuNet {
                     label: None,
                     timestamp_writes: r.timer.as_ref().map(|t| t.writes()),
                 });
-                for (pipeline, bg, (x, y)) in &r.steps {
-                    pass.set_pipeline(pipeline);
-                    pass.set_bind_group(0, bg, &[]);
-                    pass.dispatch_workgroups(*x, *y, 1);
+                for step in &r.steps {
+                    dispatch(&mut pass, step);
                 }
             }
             if let Some(t) = &r.timer {
@@ -288,7 +290,7 @@ impl GpuNet {
 
     /// A profile on the adapter: every step in a compute pass of its own with timestamps
     /// around it, `runs` times after one untimed run; per step, in plan order, the ONNX node,
-    /// the kernel, its invocations and the median milliseconds. A pass per step adds a little
+    /// the kernel and the median milliseconds. A pass per step adds a little
     /// to each (the sum is near the whole pass's time, not equal to it). Refused where the
     /// adapter has no timestamp queries.
     pub fn profile(
@@ -324,7 +326,6 @@ impl GpuNet {
                 StepTime {
                     node: s.node.clone(),
                     kernel: source(s.kernel).0,
-                    invocations: s.params.first().copied().unwrap_or(0),
                     ms: t.get(t.len() / 2).copied().unwrap_or(0.0),
                 }
             })

@@ -307,8 +307,7 @@ impl Net {
             Backend::Ort(_) => return Err(err("per-node times are tract's only".into())),
             #[cfg(feature = "wgpu")]
             Backend::Wgpu(net) => {
-                // The adapter's own times per step (timestamps): the op is the kernel, with
-                // its invocations.
+                // The adapter's own times per step (timestamps): the op is the kernel.
                 return net
                     .profile(inputs, runs)
                     .map(|steps| {
