@@ -2,7 +2,8 @@
 
 import torch
 
-from volcap_train.data import sensor
+from volcap_train.data import photometric, sensor
+from volcap_train.train import data_on_device, items_bytes, perturb_mask
 
 
 def test_sensor_effects_stay_in_range_and_are_reproducible():
@@ -28,3 +29,38 @@ def test_some_frames_are_greyscale():
     y = sensor(x, torch.Generator().manual_seed(3))
     grey = ((y[:, 0] - y[:, 1]).abs().amax((1, 2)) == 0) & ((y[:, 1] - y[:, 2]).abs().amax((1, 2)) == 0)
     assert 5 <= int(grey.sum()) <= 40  # p = 0.1 of 200
+
+
+def test_photometric_is_seeded_bounded_and_pushes_some_frames_to_the_extremes():
+    x = torch.full((400, 3, 4, 4), 0.5)
+    a = photometric(x.clone(), torch.Generator().manual_seed(7))
+    b = photometric(x.clone(), torch.Generator().manual_seed(7))
+    assert torch.equal(a, b)
+    assert torch.isfinite(a).all() and a.min() >= 0 and a.max() <= 1
+    mean = a.mean((1, 2, 3))
+    # Dark frames (x 0.15, p 0.05) fall under every other frame's lowest gain (0.6 x 0.5 - 0.05).
+    dark = int((mean < 0.2).sum())
+    assert 5 <= dark <= 40, dark
+
+
+def test_perturbed_masks_grow_or_shrink_by_at_most_three_pixels_on_about_half_the_images():
+    m = torch.zeros(200, 1, 32, 32)
+    m[:, :, 10:22, 12:20] = 1.0
+    out = perturb_mask(m, torch.Generator().manual_seed(4))
+    assert torch.equal(out, perturb_mask(m, torch.Generator().manual_seed(4)))
+    changed = (out != m).flatten(1).any(1)
+    assert 70 <= int(changed.sum()) <= 130  # p = 0.5 of 200
+    area = out.sum((1, 2, 3))
+    grown, shrunk = area > m[0].sum(), area < m[0].sum()
+    assert bool((grown | shrunk)[changed].all()) and int(grown.sum()) > 20 and int(shrunk.sum()) > 20
+    # Dilated masks hold the original, eroded ones lie inside it; by at most 3 pixels.
+    assert bool(((out[grown] >= m[grown]).all())) and bool((out[shrunk] <= m[shrunk]).all())
+    assert float(out[grown].sum((1, 2, 3)).max()) <= (12 + 6) * (8 + 6)
+    assert float(out[shrunk].sum((1, 2, 3)).min()) >= (12 - 6) * (8 - 6)
+
+
+def test_items_stay_on_the_host_unless_a_gpu_trains():
+    items = [{"rgb": torch.zeros(2, 3, 4, 4, dtype=torch.uint8), "k": 15}]
+    assert items_bytes(items) == 96
+    for choice in ("auto", "host", "device"):
+        assert not data_on_device(choice, torch.device("cpu"), items)

@@ -97,40 +97,48 @@ def backgrounds(n: int, size: int, gen: torch.Generator) -> torch.Tensor:
     return out
 
 
+def _rand(shape, gen: torch.Generator) -> torch.Tensor:
+    """Uniform draws on the generator's device (a CUDA generator draws on the GPU: the
+    augmentations run where the batch is, `train --device`)."""
+    return torch.rand(shape, generator=gen, device=gen.device)
+
+
 def photometric(rgb: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
-    """Random gain/bias/saturation per image; some images pushed to saturation or near black."""
+    """Random gain/bias/saturation per image; some images pushed to saturation or near black.
+    Runs on `rgb`'s device, which must be `gen`'s."""
     b = rgb.shape[0]
-    gain = 0.6 + 0.8 * torch.rand(b, 1, 1, 1, generator=gen)
-    bias = 0.1 * (torch.rand(b, 1, 1, 1, generator=gen) - 0.5)
+    gain = 0.6 + 0.8 * _rand((b, 1, 1, 1), gen)
+    bias = 0.1 * (_rand((b, 1, 1, 1), gen) - 0.5)
     gray = rgb.mean(1, keepdim=True)
-    sat = 0.5 + torch.rand(b, 1, 1, 1, generator=gen)
+    sat = 0.5 + _rand((b, 1, 1, 1), gen)
     x = gray + (rgb - gray) * sat
     x = x * gain + bias
-    extreme = torch.rand(b, generator=gen)
-    x[extreme < 0.05] = (x[extreme < 0.05] * 2.5)  # over-exposed
-    x[(extreme >= 0.05) & (extreme < 0.1)] *= 0.15  # dark
+    extreme = _rand((b, 1, 1, 1), gen)
+    # Over-exposed (p 0.05) and dark (p 0.05), as factors: no boolean indexing, which would
+    # wait for the device.
+    x = x * torch.where(extreme < 0.05, 2.5, torch.where(extreme < 0.1, 0.15, 1.0))
     return x.clamp(0, 1)
 
 
 def sensor(rgb: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
     """Camera effects that MakeHuman renders lack and real webcams have, per image: white
     balance (per-channel gain), a gamma curve, defocus blur (p 0.3), sensor noise and a few
-    greyscale frames (p 0.1). Input and output [B, 3, H, W] in [0, 1]."""
+    greyscale frames (p 0.1). Input and output [B, 3, H, W] in [0, 1], on `gen`'s device."""
     b = rgb.shape[0]
-    wb = 0.8 + 0.4 * torch.rand(b, 3, 1, 1, generator=gen)
-    gamma = torch.exp((torch.rand(b, 1, 1, 1, generator=gen) - 0.5) * 0.7)  # 0.70 .. 1.42
+    wb = 0.8 + 0.4 * _rand((b, 3, 1, 1), gen)
+    gamma = torch.exp((_rand((b, 1, 1, 1), gen) - 0.5) * 0.7)  # 0.70 .. 1.42
     x = (rgb * wb).clamp(0, 1).clamp_min(1e-6) ** gamma
-    blur = torch.rand(b, generator=gen) < 0.3
+    blur = _rand((b,), gen) < 0.3
     if bool(blur.any()):
-        k = torch.tensor([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
+        k = torch.tensor([1.0, 4.0, 6.0, 4.0, 1.0], device=x.device) / 16.0
         xb = x[blur]
         c = xb.shape[1]
         xb = F.conv2d(F.pad(xb, (2, 2, 0, 0), mode="replicate"), k.view(1, 1, 1, 5).repeat(c, 1, 1, 1), groups=c)
         xb = F.conv2d(F.pad(xb, (0, 0, 2, 2), mode="replicate"), k.view(1, 1, 5, 1).repeat(c, 1, 1, 1), groups=c)
         x[blur] = xb
-    sigma = 0.03 * torch.rand(b, 1, 1, 1, generator=gen)
-    x = x + sigma * torch.randn(x.shape, generator=gen)
-    grey = torch.rand(b, generator=gen) < 0.1
+    sigma = 0.03 * _rand((b, 1, 1, 1), gen)
+    x = x + sigma * torch.randn(x.shape, generator=gen, device=gen.device)
+    grey = _rand((b,), gen) < 0.1
     x[grey] = x[grey].mean(1, keepdim=True).expand(-1, 3, -1, -1)
     return x.clamp(0, 1)
 

@@ -99,6 +99,8 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
     invocation's, where `wall_s` counts a resumed run's earlier time too): a GPU run that is
     slower than its GPU says there which part holds it."""
     gen = extra_state["gen"]
+    # A second generator on the training device (the augmentations' on a GPU), when there is one.
+    agen = extra_state.get("agen")
     st = run.load()
     step, wall = 0, 0.0
     if st is not None:
@@ -106,6 +108,8 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
             m.load_state_dict(st["modules"][name])
         opt.load_state_dict(st["opt"])
         gen.set_state(st["gen"])
+        if agen is not None and "agen" in st:
+            agen.set_state(st["agen"])
         torch.set_rng_state(st["torch_rng"])
         if "ohem" in st and extra_state.get("ohem") is not None:
             extra_state["ohem"].load_state_dict(st["ohem"])
@@ -132,6 +136,8 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
         if step % ckpt_every == 0 or step == steps or stopped:
             ts = time.time()
             state = {"modules": {n: m.state_dict() for n, m in modules.items()}, "opt": opt.state_dict(), "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step, "wall": time.time() - t0}
+            if agen is not None:
+                state["agen"] = agen.get_state()
             if extra_state.get("ohem") is not None:
                 state["ohem"] = extra_state["ohem"].state_dict()
             run.save(state)
