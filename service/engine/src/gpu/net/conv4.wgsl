@@ -1,7 +1,9 @@
-// 2-D convolution as conv.wgsl, four output channels per invocation (ungrouped, M % 4 == 0):
-// each input value is read once for the four, and the index arithmetic is shared.
+// 2-D convolution as conv.wgsl, four output channels per invocation (ungrouped): each input
+// value is read once for the four, and the index arithmetic is shared.
 // p: [count, N, C, H, W, M, OH, OW, KH, KW, sh, sw, pt, pl, dh, dw, group, act, a, b]
-// (count = N (M / 4) OH OW); w: [M, C, KH, KW]; bias: [M].
+// (count = N ceil(M / 4) OH OW); w: [M4, C, KH, KW] and bias: [M4], M4 = 4 ceil(M / 4), the
+// channels from M on zero (the plan pads them): the last block of four writes only the
+// channels below M.
 @group(0) @binding(0) var<storage, read> p: array<u32>;
 @group(0) @binding(1) var<storage, read> src: array<f32>;
 @group(0) @binding(2) var<storage, read> w: array<f32>;
@@ -15,7 +17,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if i >= p[0] { return; }
     let C = p[2]; let H = p[3]; let W = p[4]; let M = p[5]; let OH = p[6]; let OW = p[7];
     let KH = p[8]; let KW = p[9];
-    let M4 = M / 4u;
+    let M4 = (M + 3u) / 4u;
     let ox = i % OW;
     let oy = (i / OW) % OH;
     let m = ((i / (OW * OH)) % M4) * 4u;
@@ -44,7 +46,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let a = pf(18u);
     let b = pf(19u);
     dst[o] = act(acc.x, p[17], a, b);
-    dst[o + plane_out] = act(acc.y, p[17], a, b);
-    dst[o + 2u * plane_out] = act(acc.z, p[17], a, b);
-    dst[o + 3u * plane_out] = act(acc.w, p[17], a, b);
+    if m + 1u < M { dst[o + plane_out] = act(acc.y, p[17], a, b); }
+    if m + 2u < M { dst[o + 2u * plane_out] = act(acc.z, p[17], a, b); }
+    if m + 3u < M { dst[o + 3u * plane_out] = act(acc.w, p[17], a, b); }
 }

@@ -21,7 +21,7 @@ pub enum Kernel {
     Binary,
     Unary,
     Conv,
-    /// Four output channels per invocation (ungrouped convolutions, M % 4 == 0).
+    /// Four output channels per invocation (ungrouped convolutions of 4 outputs or more).
     Conv4,
     ConvTranspose,
     Pool,

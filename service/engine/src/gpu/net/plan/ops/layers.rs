@@ -132,6 +132,17 @@ pub(super) fn conv(
             *v = *v * scale[j] + shift[j];
         }
     }
+    // Ungrouped with at least 4 outputs: four channels per invocation (a count that is not
+    // a multiple of 4 padded with zero channels, which the kernel computes and does not
+    // write: 31 Fourier coefficients cost 32 channels' work, against reading every input
+    // once per channel in `conv`). Under 4 outputs (a mask's 1 or 2) `conv`, which computes
+    // no padding.
+    let blocked = !transpose && group == 1 && m >= 4;
+    if blocked && m % 4 != 0 {
+        let padded = m.div_ceil(4) * 4;
+        w.resize(padded * (w.len() / m), 0.0);
+        bias.resize(padded, 0.0);
+    }
     let wb = pl.upload(w);
     let bb = pl.upload(bias);
     let oshape = vec![nb, m, o[0], o[1]];
@@ -139,15 +150,13 @@ pub(super) fn conv(
     let dims = [
         nb, c, h, wd, m, o[0], o[1], k[0], k[1], s[0], s[1], pt[0], pt[1], d[0], d[1], group,
     ];
-    // Ungrouped with a multiple of 4 outputs: four channels per invocation.
-    let blocked = !transpose && group == 1 && m % 4 == 0;
     let kernel = match (transpose, blocked) {
         (true, _) => Kernel::ConvTranspose,
         (false, true) => Kernel::Conv4,
         (false, false) => Kernel::Conv,
     };
     let count = if blocked {
-        numel(&oshape) / 4
+        nb * m.div_ceil(4) * o[0] * o[1]
     } else {
         numel(&oshape)
     };
