@@ -6,6 +6,7 @@
 //! is refused naming the op and the node.
 
 mod ops;
+mod shifts;
 
 use std::collections::HashMap;
 use tract_onnx::pb::{AttributeProto, GraphProto, NodeProto, TensorProto};
@@ -480,6 +481,7 @@ pub fn plan(graph: &GraphProto, shapes: &[Vec<usize>], keep_all: bool) -> Result
     }
     let is_output = |name: &str| graph.output.iter().any(|o| o.name == name);
     let mut skip = vec![false; graph.node.len()];
+    let shifts = shifts::Finder::new(graph);
     for (idx, n) in graph.node.iter().enumerate() {
         if skip[idx] {
             continue;
@@ -489,6 +491,17 @@ pub fn plan(graph: &GraphProto, shapes: &[Vec<usize>], keep_all: bool) -> Result
         } else {
             n.name.clone()
         };
+        // Export's shifted-sum upsampling (30 nodes): one Resize step.
+        if let Some(g) = shifts.at(idx, &pl.vals) {
+            ops::bilinear_x2(&mut pl, &g.input, &g.output)?;
+            for &i in &g.nodes {
+                skip[i] = true;
+                for x in graph.node[i].input.iter().filter(|x| **x == g.input) {
+                    pl.release(x);
+                }
+            }
+            continue;
+        }
         // A single-reader follower that can be fused: batch-norm into a convolution, an
         // activation into a convolution or Gemm.
         let follower = |out: &str, pred: &dyn Fn(&NodeProto) -> bool| -> Option<usize> {

@@ -5,6 +5,7 @@
 mod layers;
 
 use super::{Attrs, Data, Kernel, Planner, Val, numel, pad6, strides};
+pub(super) use layers::bilinear_x2;
 use layers::{bn_affine, conv, gemm, pool, resize};
 use tract_onnx::pb::NodeProto;
 

@@ -370,6 +370,20 @@ pub(super) fn resize(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), S
         "ceil" => 3,
         other => return Err(pl.err(format!("Resize nearest_mode {other:?}"))),
     };
+    resize_step(pl, b, &shape, [oh, ow], [mode, ctm, near], [sh, sw], out);
+    Ok(())
+}
+
+/// The `Resize` kernel's step: `shape` [N, C, H, W] in buffer `b` to [N, C, OH, OW].
+fn resize_step(
+    pl: &mut Planner,
+    b: usize,
+    shape: &[usize],
+    [oh, ow]: [usize; 2],
+    [mode, ctm, near]: [u32; 3],
+    [sh, sw]: [f32; 2],
+    out: &str,
+) {
     let oshape = vec![shape[0], shape[1], oh, ow];
     let ob = pl.alloc(numel(&oshape));
     let p = vec![
@@ -387,5 +401,20 @@ pub(super) fn resize(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), S
     ];
     pl.step(Kernel::Resize, p, vec![b, ob]);
     pl.define_dev(out, ob, oshape);
+}
+
+/// Bilinear x2 upsampling with half-pixel centres (what export's shifted sums compute,
+/// `plan::shifts`) of the 4-D value `x` into `out`.
+pub(in crate::gpu::net::plan) fn bilinear_x2(
+    pl: &mut Planner,
+    x: &str,
+    out: &str,
+) -> Result<(), String> {
+    let (b, shape) = pl.dev(x)?;
+    if shape.len() != 4 {
+        return Err(pl.err(format!("upsampling of {shape:?} (NCHW)")));
+    }
+    let o = [shape[2] * 2, shape[3] * 2];
+    resize_step(pl, b, &shape, o, [1, 0, 0], [2.0, 2.0], out);
     Ok(())
 }
