@@ -290,6 +290,78 @@ fn every_layer_of_every_committed_network_matches_tract() {
     }
 }
 
+/// The per-point networks run a changing number of points every frame (the render's hits,
+/// a level's batch): planned once per row bucket, not per run, with each run's rows exactly
+/// what a plan for that count gives, whatever earlier runs left in the bucket's other rows.
+#[test]
+fn per_point_networks_keep_their_plans_across_point_counts() {
+    use volcap_engine::gpu::net::{GpuNet, row_bucket};
+    let Some(gpu) = gpu() else { return };
+    // The colour MLP (the product's per-point network on the GPU backend) and the MLP
+    // family's occupancy net.
+    // (Lavapipe runs these at about a millisecond a point: small counts.)
+    for (file, counts, buckets) in [
+        (
+            "color.mlp.onnx",
+            &[900usize, 600, 1500, 2100, 900, 600][..],
+            3,
+        ),
+        ("shape-compact.mlp.onnx", &[900, 600][..], 1),
+    ] {
+        let path = models_dir().join(file);
+        let specs = inputs_of(&path);
+        let net = GpuNet::load(gpu.clone(), &path).unwrap();
+        let fresh = GpuNet::load(gpu.clone(), &path).unwrap();
+        // Two counts in a row share a bucket (900 and 600: 1024): the second run's rows must
+        // not see the first's; then two other buckets, then the first again, from the cache.
+        for (k, &n) in counts.iter().enumerate() {
+            let data: Vec<(Vec<usize>, Vec<f32>)> = specs
+                .iter()
+                .enumerate()
+                .map(|(i, (_, s))| {
+                    let mut s = s.clone();
+                    s[0] = n;
+                    let len = s.iter().product();
+                    (s, values(len, 7 * k + i))
+                })
+                .collect();
+            let args: Vec<(&[usize], &[f32])> = data
+                .iter()
+                .map(|(s, d)| (s.as_slice(), d.as_slice()))
+                .collect();
+            let rows = net.run_rows(&args).unwrap();
+            // The same points through a plan for exactly n rows.
+            let exact = fresh.run(&args).unwrap();
+            assert_eq!(rows.len(), exact.len(), "{file} at {n} points");
+            let d = rows
+                .iter()
+                .zip(&exact)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            assert!(d <= 1e-6, "{file} at {n} points: {d:e} from the exact plan");
+            assert!(rows.iter().all(|v| v.is_finite()));
+        }
+        let distinct: std::collections::HashSet<usize> =
+            counts.iter().map(|&n| row_bucket(n)).collect();
+        assert_eq!(distinct.len(), buckets);
+        assert_eq!(
+            net.plans_made(),
+            buckets as u64,
+            "{file}: one plan per bucket"
+        );
+        // Planned for exact counts, every run plans again here (900 and 600 come back after
+        // three other counts have pushed them out of the cache).
+        assert_eq!(fresh.plans_made(), counts.len() as u64, "{file}");
+    }
+    // Inputs whose point counts disagree are refused, naming the input.
+    let net = GpuNet::load(gpu, &models_dir().join("color.mlp.onnx")).unwrap();
+    let (a, b, c) = (vec![0.0f32; 10 * 32], vec![0.0f32; 9 * 3], vec![0.0f32; 10]);
+    let err = net
+        .run_rows(&[(&[10, 32], &a), (&[9, 3], &b), (&[10, 1], &c)])
+        .unwrap_err();
+    assert!(err.contains("input 1"), "{err}");
+}
+
 #[test]
 fn an_op_without_a_kernel_is_refused_at_load_naming_op_and_node() {
     // The int8 files quantize around their products (QuantizeLinear / DequantizeLinear): a

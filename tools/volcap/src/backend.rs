@@ -39,17 +39,24 @@ fn gpu(_adapter: &str) -> anyhow::Result<Runtime> {
     ))
 }
 
-/// Host <-> adapter traffic, dispatches, the networks' nanoseconds on the adapter and the
-/// read-backs waited for, so far (zeros off the GPU; the fourth 0 where the adapter has no
-/// timestamps).
-pub fn adapter_work(rt: &Runtime) -> [u64; 5] {
+/// Host <-> adapter traffic, dispatches, the networks' nanoseconds on the adapter, the
+/// read-backs waited for and the networks planned, so far (zeros off the GPU; the fourth 0
+/// where the adapter has no timestamps).
+pub fn adapter_work(rt: &Runtime) -> [u64; 6] {
     #[cfg(feature = "wgpu")]
     if let Some(g) = rt.gpu() {
         let c = g.counters();
-        return [c.bytes_up, c.bytes_down, c.dispatches, c.gpu_ns, c.waits];
+        return [
+            c.bytes_up,
+            c.bytes_down,
+            c.dispatches,
+            c.gpu_ns,
+            c.waits,
+            c.net_plans,
+        ];
     }
     let _ = rt;
-    [0; 5]
+    [0; 6]
 }
 
 /// Localization and the mesh-free render of a frame's model field: with `--backend wgpu` on

@@ -58,6 +58,9 @@ pub struct Row {
     pub dispatches_per_frame: f64,
     /// Read-backs the host waited for per frame (each a round trip to the adapter).
     pub waits_per_frame: f64,
+    /// Networks planned and made real on the adapter during the measured seconds (after the
+    /// warm-up: 0 when every shape the frames use has its plan).
+    pub net_plans: u64,
     /// The networks' milliseconds on the adapter per frame (timestamp queries; 0 without).
     pub adapter_ms_per_frame: f64,
     /// Why the run produced no frames, if it did not.
@@ -182,6 +185,7 @@ fn measure(
         bytes_down_per_frame: (work1[1] - work0[1]) as f64 / published.max(1) as f64,
         dispatches_per_frame: (work1[2] - work0[2]) as f64 / published.max(1) as f64,
         waits_per_frame: (work1[4] - work0[4]) as f64 / published.max(1) as f64,
+        net_plans: work1[5] - work0[5],
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         error,
     }
@@ -411,11 +415,12 @@ fn table(rows: &[Row]) -> String {
                 (Some(e), _) => e.clone(),
                 // The GPU backend's traffic: what crosses between host and adapter per frame.
                 (None, true) => format!(
-                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for{}",
+                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for; {} networks planned while measured{}",
                     r.bytes_up_per_frame / 1e6,
                     r.bytes_down_per_frame / 1e6,
                     r.dispatches_per_frame,
                     r.waits_per_frame,
+                    r.net_plans,
                     if r.adapter_ms_per_frame > 0.0 {
                         format!(", networks {:.1} ms on the adapter", r.adapter_ms_per_frame)
                     } else {

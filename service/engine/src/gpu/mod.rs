@@ -109,6 +109,9 @@ fn rank(t: wgpu::DeviceType) -> u8 {
 pub struct Counters {
     /// Network runs on the adapter.
     pub net_runs: AtomicU64,
+    /// Networks planned and made real on the adapter (buffers, weights, bind groups): once
+    /// per network and input shape (a per-point network's row bucket), not per run.
+    pub net_plans: AtomicU64,
     /// Fourier field batches evaluated on the adapter.
     pub field_runs: AtomicU64,
     /// Localizations with the grid on the adapter (each of a rendered frame's too).
@@ -133,6 +136,7 @@ pub struct Counters {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct CounterValues {
     pub net_runs: u64,
+    pub net_plans: u64,
     pub field_runs: u64,
     pub localize_runs: u64,
     pub render_runs: u64,
@@ -268,6 +272,7 @@ impl Gpu {
         let c = &self.counters;
         CounterValues {
             net_runs: c.net_runs.load(Ordering::Relaxed),
+            net_plans: c.net_plans.load(Ordering::Relaxed),
             field_runs: c.field_runs.load(Ordering::Relaxed),
             localize_runs: c.localize_runs.load(Ordering::Relaxed),
             render_runs: c.render_runs.load(Ordering::Relaxed),

@@ -60,12 +60,27 @@ struct Realized {
     timer: Option<super::Timer>,
 }
 
+/// Plans made real kept per network, the most recently used first: the images' networks
+/// keep one shape, the per-point networks cycle through a few row buckets ([`row_bucket`]).
+const REALIZED: usize = 3;
+
+/// The rows a per-point network is planned for when it runs `rows` ([`GpuNet::run_rows`]):
+/// the next power of two, at least 1024. A frame's point count changes every frame (the
+/// render's hits, a localization level's batch); planned for the exact count, every frame
+/// would plan the graph and create its buffers, weights and bind groups again.
+pub fn row_bucket(rows: usize) -> usize {
+    rows.next_power_of_two().max(1024)
+}
+
 /// One network on one adapter.
 pub struct GpuNet {
     gpu: Arc<Gpu>,
     graph: GraphProto,
-    /// The plan of the last input shapes (the pipeline's shapes do not change frame to frame).
-    realized: Mutex<Option<Realized>>,
+    /// Plans made real for the input shapes last run, most recent first (at most
+    /// [`REALIZED`]).
+    realized: Mutex<Vec<Realized>>,
+    /// Plans made real since load (a new input shape, or one evicted from the cache).
+    plans: std::sync::atomic::AtomicU64,
 }
 
 impl GpuNet {
@@ -79,7 +94,8 @@ impl GpuNet {
         Ok(GpuNet {
             gpu,
             graph,
-            realized: Mutex::new(None),
+            realized: Mutex::new(Vec::new()),
+            plans: std::sync::atomic::AtomicU64::new(0),
         })
     }
 
@@ -182,11 +198,12 @@ impl GpuNet {
         per_step: Option<&super::Stamps>,
     ) -> Result<wgpu::CommandEncoder, String> {
         for (i, (shape, data)) in inputs.iter().enumerate() {
-            let n: usize = shape.iter().product();
-            if data.len() != n {
+            // The plan's input holds `data` (all of it, or a per-point network's first rows).
+            let n = data.len();
+            let room: usize = r.shapes.get(i).map_or(0, |s| s.iter().product());
+            if n > room || r.plan.inputs.len() != inputs.len() {
                 return Err(format!(
-                    "input {i}: {} values for shape {shape:?}",
-                    data.len()
+                    "input {i}: {n} values for shape {shape:?}, the plan takes {room}"
                 ));
             }
             let b = r.plan.inputs[i];
@@ -238,22 +255,82 @@ impl GpuNet {
 
     /// Run on f32 inputs (shape, data) in the graph's input order; the first output.
     pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, String> {
-        let mut slot = self.realized.lock().unwrap_or_else(|p| p.into_inner());
-        // Planned again only when the input shapes change (not frame to frame).
-        let same = |r: &Realized| {
-            r.shapes
-                .iter()
-                .map(Vec::as_slice)
-                .eq(inputs.iter().map(|(s, _)| *s))
-        };
-        if !slot.as_ref().is_some_and(same) {
-            let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
-            *slot = Some(self.realize(&shapes, false)?);
+        let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
+        for (i, ((shape, data), s)) in inputs.iter().zip(&shapes).enumerate() {
+            if data.len() != s.iter().product::<usize>() {
+                return Err(format!(
+                    "input {i}: {} values for shape {shape:?}",
+                    data.len()
+                ));
+            }
         }
-        let r = slot.as_ref().ok_or("no plan")?;
-        let enc = self.record(r, inputs)?;
+        self.run_planned(&shapes, inputs, None)
+    }
+
+    /// Run a per-point network (every input's first axis the same point count, each row's
+    /// output from its own row alone: the MLPs) on `rows` points, planned for
+    /// [`row_bucket`]`(rows)` rows: only the `rows` points are written and read back; the
+    /// plan's other rows hold earlier inputs (finite) and are not read. The first output's
+    /// first `rows` rows.
+    pub fn run_rows(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, String> {
+        let rows = inputs
+            .first()
+            .and_then(|(s, _)| s.first().copied())
+            .ok_or("run_rows: no input with a first axis")?;
+        if rows == 0 {
+            return Ok(Vec::new());
+        }
+        let cap = row_bucket(rows);
+        let mut shapes = Vec::with_capacity(inputs.len());
+        for (i, (shape, data)) in inputs.iter().enumerate() {
+            if shape.first() != Some(&rows) || data.len() != shape.iter().product::<usize>() {
+                return Err(format!(
+                    "input {i}: shape {shape:?} with {} values, for {rows} rows",
+                    data.len()
+                ));
+            }
+            let mut s = shape.to_vec();
+            s[0] = cap;
+            shapes.push(s);
+        }
+        self.run_planned(&shapes, inputs, Some((rows, cap)))
+    }
+
+    /// Run the plan for `shapes` (made real when not cached) on `inputs`; with `rows`
+    /// `(rows, cap)` the inputs fill the first `rows` of `cap` rows and the output's first
+    /// `rows` rows come back.
+    fn run_planned(
+        &self,
+        shapes: &[Vec<usize>],
+        inputs: &[(&[usize], &[f32])],
+        rows: Option<(usize, usize)>,
+    ) -> Result<Vec<f32>, String> {
+        let mut cache = self.realized.lock().unwrap_or_else(|p| p.into_inner());
+        match cache.iter().position(|r| r.shapes.as_slice() == shapes) {
+            Some(i) => {
+                let r = cache.remove(i);
+                cache.insert(0, r);
+            }
+            None => {
+                let r = self.realize(shapes, false)?;
+                self.plans.fetch_add(1, Ordering::Relaxed);
+                self.gpu.count().net_plans.fetch_add(1, Ordering::Relaxed);
+                cache.insert(0, r);
+                cache.truncate(REALIZED);
+            }
+        }
+        let r = cache.first().ok_or("no plan")?;
         let (ob, oshape) = &r.plan.output;
-        let len = oshape.iter().product::<usize>();
+        let mut len = oshape.iter().product::<usize>();
+        if let Some((n, cap)) = rows {
+            if oshape.first() != Some(&cap) {
+                return Err(format!(
+                    "not a per-point network: {cap} rows in, output {oshape:?}"
+                ));
+            }
+            len = len / cap * n;
+        }
+        let enc = self.record(r, inputs)?;
         let (out, done) = self
             .gpu
             .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)?;
@@ -261,6 +338,12 @@ impl GpuNet {
             self.gpu.read_timer(t, done);
         }
         Ok(out)
+    }
+
+    /// Plans made real since load: one per new input shape (a per-point network's row
+    /// bucket), not one per run.
+    pub fn plans_made(&self) -> u64 {
+        self.plans.load(Ordering::Relaxed)
     }
 
     /// Run with every buffer kept and read back each tensor computed on the device (name,

@@ -216,7 +216,7 @@ impl ColorField for ModelField {
         }
         let col = color
             .mlp
-            .run(&[(&[n, c], &feat), (&[n, 3], &rgb), (&[n, 1], &z)])
+            .run_rows(&[(&[n, c], &feat), (&[n, 3], &rgb), (&[n, 1], &z)])
             .map_err(Self::field_err)?;
         for (i, o) in out.iter_mut().take(n).enumerate() {
             *o = [col[i * 3], col[i * 3 + 1], col[i * 3 + 2]];

@@ -267,7 +267,7 @@ impl ShapeNets {
         }
         let occ = self
             .mlp
-            .run(&[(&[n, c], &fv), (&[n, zd], &z)])
+            .run_rows(&[(&[n, c], &fv), (&[n, zd], &z)])
             .map_err(|e| FieldError::Backend(e.to_string()))?;
         if occ.len() != n {
             return Err(FieldError::Backend(format!(

@@ -258,6 +258,18 @@ impl Net {
         }
     }
 
+    /// [`Self::run`] for a per-point network (each input's first axis the point count, each
+    /// row's output from its own row: the MLPs): on the GPU backend planned for a bucket of
+    /// rows ([`crate::gpu::net::GpuNet::run_rows`]) so that a changing point count does not
+    /// plan the network again every frame; elsewhere as `run`.
+    pub fn run_rows(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, ModelError> {
+        #[cfg(feature = "wgpu")]
+        if let Backend::Wgpu(net) = &self.backend {
+            return net.run_rows(inputs).map_err(|m| self.run_error(m));
+        }
+        self.run(inputs)
+    }
+
     /// Run on f32 inputs (shape, data); the first output as a flat vector.
     pub fn run(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, ModelError> {
         let err = |msg: String| self.run_error(msg);
