@@ -55,8 +55,9 @@ enum BenchCmd {
     /// model x coarse level x threads: fps, latency, ms per stage, evaluations, speed-up over
     /// one thread. Writes a table and a plot.
     Pipeline(PipelineArgs),
-    /// Each network on its own (segmentation, shape and colour encoders): ms per run, and
-    /// with --profile where tract spends them, per op kind and node. Writes docs/bench/nets.md.
+    /// Each network on its own (segmentation, shape and colour encoders, the colour MLP on a
+    /// frame's surface points): ms per run, and with --profile where tract spends them, per op
+    /// kind and node. Writes docs/bench/nets.md.
     Nets(nets_bench::NetsArgs),
     /// The point MLP's throughput (fused and on tract) against the machine's SGEMM peak.
     Mlp(MlpArgs),

@@ -47,6 +47,12 @@ pub struct NetsArgs {
 
 /// A deterministic input in [-1, 1] of `len` values (a network's time does not depend on
 /// its values, but a constant could take shortcuts).
+/// A network's input: its shape and values.
+type Input<'a> = (Vec<usize>, &'a [f32]);
+
+/// Points of the colour MLP's row: about the surface points of a 257^3 frame of front-walk.
+const HITS: usize = 16384;
+
 fn input(len: usize) -> Vec<f32> {
     (0..len)
         .map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0)
@@ -91,12 +97,30 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
                 ShapeModel::Fourier(f) => &f.net,
                 ShapeModel::Mlp(n) => &n.encoder,
             };
-            let nets: [(&str, &Net, &[f32], [usize; 4]); 3] = [
-                ("segmentation", &models.seg, &rgb, [1, 3, s, s]),
-                ("shape encoder", shape, &x, [1, 4, s, s]),
-                ("colour encoder", &models.color.encoder, &x, [1, 4, s, s]),
+            // The colour MLP on a frame's surface points (about a 257^3 frame's hits): its
+            // features, the input pixel's RGB and the depth.
+            let cc = models.color.channels;
+            let (feat, prgb, z) = (input(HITS * cc), input(HITS * 3), input(HITS));
+            let mlp_what = format!("colour MLP ({HITS} points)");
+            let nets: [(&str, &Net, Vec<Input>); 4] = [
+                ("segmentation", &models.seg, vec![(vec![1, 3, s, s], &rgb)]),
+                ("shape encoder", shape, vec![(vec![1, 4, s, s], &x)]),
+                (
+                    "colour encoder",
+                    &models.color.encoder,
+                    vec![(vec![1, 4, s, s], &x)],
+                ),
+                (
+                    &mlp_what,
+                    &models.color.mlp,
+                    vec![
+                        (vec![HITS, cc], &feat),
+                        (vec![HITS, 3], &prgb),
+                        (vec![HITS, 1], &z),
+                    ],
+                ),
             ];
-            for (what, net, data, dims) in nets {
+            for (what, net, inputs) in nets {
                 let file = net
                     .path()
                     .file_name()
@@ -112,7 +136,8 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
                 if rows[row].2[ri].is_some() {
                     continue;
                 }
-                let args = [(&dims[..], data)];
+                let args: Vec<(&[usize], &[f32])> =
+                    inputs.iter().map(|(d, v)| (d.as_slice(), *v)).collect();
                 // One checked run, then the timed ones (crate::mlp_bench::timed).
                 net.run(&args)
                     .map_err(anyhow::Error::msg)

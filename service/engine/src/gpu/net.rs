@@ -29,6 +29,7 @@ fn source(k: Kernel) -> (&'static str, &'static str) {
         Kernel::Pool => ("pool", include_str!("net/pool.wgsl")),
         Kernel::PoolPlane => ("pool_plane", include_str!("net/pool_plane.wgsl")),
         Kernel::Gemm => ("gemm", include_str!("net/gemm.wgsl")),
+        Kernel::Gemm4 => ("gemm4", include_str!("net/gemm4.wgsl")),
         Kernel::Resize => ("resize", include_str!("net/resize.wgsl")),
     }
 }

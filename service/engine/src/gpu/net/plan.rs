@@ -29,6 +29,8 @@ pub enum Kernel {
     /// A window over the whole plane: a workgroup per plane, reduced in workgroup memory.
     PoolPlane,
     Gemm,
+    /// A constant weight, four outputs of a row per invocation (the MLPs' layers).
+    Gemm4,
     Resize,
 }
 

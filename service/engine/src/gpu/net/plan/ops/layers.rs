@@ -2,7 +2,7 @@
 //! MatMul, resize; and batch-norm's per-channel affine.
 
 use super::{Act, broadcast, input};
-use crate::gpu::net::plan::{Attrs, Kernel, Planner, numel};
+use crate::gpu::net::plan::{Attrs, Kernel, Planner, Val, numel};
 use tract_onnx::pb::NodeProto;
 
 /// Batch-norm's per-channel (scale, shift): y = x scale + shift.
@@ -255,7 +255,8 @@ pub(super) fn gemm(pl: &mut Planner, n: &NodeProto, out: &str, act: Act) -> Resu
     let a = Attrs(&n.attribute);
     let inp = |i: usize| input(n, i);
     let (ba, sa) = pl.dev(inp(0).unwrap_or(""))?;
-    let (bb, sb) = pl.dev(inp(1).unwrap_or(""))?;
+    // B's buffer only for the general kernel (gemm4 uploads its own layout of a constant).
+    let sb = pl.get(inp(1).unwrap_or(""))?.shape().to_vec();
     let gemm = n.op_type == "Gemm";
     let (ta, tb) = if gemm {
         (a.int("transA", 0) == 1, a.int("transB", 0) == 1)
@@ -275,6 +276,31 @@ pub(super) fn gemm(pl: &mut Planner, n: &NodeProto, out: &str, act: Act) -> Resu
     } else {
         (1.0, 0.0)
     };
+    // A constant weight (every MLP layer): transposed and padded at plan time for the
+    // four-outputs-a-row kernel, alpha and beta folded, when C is absent or a constant bias
+    // row.
+    if !ta
+        && nn >= 4
+        && let Some(w4) = weights4(pl, inp(1), tb, k, nn, alpha)?
+        && let Some(bias) = bias4(pl, inp(2).filter(|_| gemm), nn, beta)?
+    {
+        let wb = pl.upload(w4);
+        let biasb = pl.upload(bias);
+        let ob = pl.alloc(m * nn);
+        let p = vec![
+            (m * nn.div_ceil(4)) as u32,
+            m as u32,
+            nn as u32,
+            k as u32,
+            act.0,
+            act.1.to_bits(),
+            act.2.to_bits(),
+        ];
+        pl.step(Kernel::Gemm4, p, vec![ba, wb, biasb, ob]);
+        pl.define_dev(out, ob, vec![m, nn]);
+        return Ok(());
+    }
+    let (bb, _) = pl.dev(inp(1).unwrap_or(""))?;
     let (cb, crs, ccs, has_c) = match inp(2).filter(|_| gemm) {
         Some(c) => {
             let (cb, sc) = pl.dev(c)?;
@@ -307,6 +333,65 @@ pub(super) fn gemm(pl: &mut Planner, n: &NodeProto, out: &str, act: Act) -> Resu
     pl.step(Kernel::Gemm, p, vec![ba, bb, cb, ob]);
     pl.define_dev(out, ob, vec![m, nn]);
     Ok(())
+}
+
+/// A constant Gemm/MatMul weight as the `gemm4` kernel reads it: `[K, N4]` (column `j` of
+/// the output at inner index `k` at `k N4 + j`), times `alpha`, the columns from N to
+/// N4 = 4 ceil(N / 4) zero; `None` when the weight is computed on the device.
+fn weights4(
+    pl: &Planner,
+    name: Option<&str>,
+    tb: bool,
+    k: usize,
+    nn: usize,
+    alpha: f32,
+) -> Result<Option<Vec<f32>>, String> {
+    let Some(name) = name else { return Ok(None) };
+    let Some(Val::Const { data, .. }) = pl.vals.get(name) else {
+        return Ok(None);
+    };
+    let w = data.floats();
+    if w.len() != k * nn {
+        return Err(pl.err(format!("weight of {} values for [{k}, {nn}]", w.len())));
+    }
+    let n4 = nn.div_ceil(4) * 4;
+    let mut out = vec![0.0f32; k * n4];
+    for kk in 0..k {
+        for j in 0..nn {
+            let v = if tb { w[j * k + kk] } else { w[kk * nn + j] };
+            out[kk * n4 + j] = alpha * v;
+        }
+    }
+    Ok(Some(out))
+}
+
+/// A Gemm's C as `gemm4`'s bias (`beta C`, padded like the weight's columns): absent, a
+/// constant `[N]` or `[1, N]` row, or a scalar; `None` for a C that varies per row or is
+/// computed on the device (the general kernel takes those).
+fn bias4(
+    pl: &Planner,
+    name: Option<&str>,
+    nn: usize,
+    beta: f32,
+) -> Result<Option<Vec<f32>>, String> {
+    let n4 = nn.div_ceil(4) * 4;
+    let Some(name) = name else {
+        return Ok(Some(vec![0.0; n4]));
+    };
+    let Some(Val::Const { shape, data }) = pl.vals.get(name) else {
+        return Ok(None);
+    };
+    let c = data.floats();
+    let row: Vec<f32> = match (shape.as_slice(), c.len()) {
+        ([], 1) | ([1], 1) | ([1, 1], 1) => vec![c[0]; nn],
+        ([n], _) | ([1, n], _) if *n == nn => c,
+        _ => return Ok(None),
+    };
+    let mut out = vec![0.0f32; n4];
+    for (o, v) in out.iter_mut().zip(row) {
+        *o = beta * v;
+    }
+    Ok(Some(out))
 }
 
 pub(super) fn resize(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
