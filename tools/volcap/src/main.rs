@@ -113,6 +113,11 @@ pub struct PipelineArgs {
     /// is on).
     #[arg(long, value_delimiter = ',', default_value = "true")]
     pub temporal: Vec<bool>,
+    /// The render view's yaw about the person (`render.yaw`, degrees, comma-separated): 0 is
+    /// the camera's own view, where the surface takes the input pixel's colour; any other
+    /// runs the colour networks on the surface points (what turning the view costs).
+    #[arg(long = "yaw", value_delimiter = ',', default_value = "0")]
+    pub yaws: Vec<f32>,
     /// Runtimes of the networks (`compute.runtime`, comma-separated): tract, onnxruntime,
     /// auto (ONNX Runtime when its library is found, else tract).
     #[arg(long = "runtime", value_delimiter = ',', default_value = "auto")]

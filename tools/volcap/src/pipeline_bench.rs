@@ -38,6 +38,8 @@ pub struct Row {
     pub display_size: usize,
     /// `[temporal] enabled` of the run.
     pub temporal: bool,
+    /// `render.yaw` of the run, degrees (0: the camera's view).
+    pub yaw_deg: f32,
     /// Frames published per second over the measured window.
     pub fps: f64,
     pub latency_p50_ms: f64,
@@ -101,14 +103,24 @@ fn frames(scene: &Path, n: usize) -> anyhow::Result<Vec<Still>> {
 }
 
 /// One configuration: model, precision, resolution, coarse level, threads, segment split,
-/// display size, temporal filter on.
-type Setup = (String, Precision, usize, u32, usize, usize, usize, bool);
+/// display size, temporal filter on, view yaw.
+type Setup = (
+    String,
+    Precision,
+    usize,
+    u32,
+    usize,
+    usize,
+    usize,
+    bool,
+    f32,
+);
 
 fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyhow::Result<Config> {
-    let (name, prec, res, coarse, threads, split, display, temporal) = setup;
+    let (name, prec, res, coarse, threads, split, display, temporal, yaw) = setup;
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
-         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\n\
+         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
          [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\n\
          [dbus]\nbus = \"none\"\n\
@@ -173,6 +185,7 @@ fn measure(
         segment_thread_up_to: cfg.compute.segment_thread_up_to,
         display_size: cfg.render.display_size,
         temporal: cfg.temporal.enabled,
+        yaw_deg: cfg.render.yaw,
         fps: published as f64 / wall,
         latency_p50_ms: l50,
         latency_p99_ms: l99,
@@ -194,6 +207,9 @@ fn measure(
 pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     if !(a.seconds > 0.0 && a.seconds <= 600.0 && a.warmup >= 0.0 && a.warmup <= 600.0) {
         bail!("--seconds must be in (0, 600] and --warmup in [0, 600]");
+    }
+    if let Some(y) = a.yaws.iter().find(|y| !(-180.0..=180.0).contains(*y)) {
+        bail!("--yaw {y}: need degrees in [-180, 180]");
     }
     if let Some(v) = a
         .segment_split
@@ -238,8 +254,20 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                 for &split in &a.segment_split {
                     for &d in &a.display_sizes {
                         for &tf in &a.temporal {
-                            for &t in &a.threads {
-                                configs.push((name.clone(), prec, res, c, t, split, d, tf));
+                            for &yaw in &a.yaws {
+                                for &t in &a.threads {
+                                    configs.push((
+                                        name.clone(),
+                                        prec,
+                                        res,
+                                        c,
+                                        t,
+                                        split,
+                                        d,
+                                        tf,
+                                        yaw,
+                                    ));
+                                }
                             }
                         }
                     }
@@ -319,6 +347,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.segment_thread_up_to == r.segment_thread_up_to
                     && b.display_size == r.display_size
                     && b.temporal == r.temporal
+                    && b.yaw_deg == r.yaw_deg
             })
             .map(|b| r.fps / b.fps.max(1e-9));
     }
@@ -376,13 +405,13 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
 
 fn table(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| model | runtime | res | display px | coarse | threads | segment thread | temporal | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| model | runtime | res | display px | coarse | threads | segment thread | temporal | yaw | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
             r.runtime,
             r.resolution,
@@ -399,6 +428,7 @@ fn table(rows: &[Row]) -> String {
                 "no"
             },
             if r.temporal { "on" } else { "off" },
+            r.yaw_deg,
             r.fps,
             r.speedup_vs_1_thread
                 .map(|x| format!("{x:.2}"))
@@ -452,9 +482,12 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             r.segment_thread_up_to,
             r.display_size,
             r.temporal,
+            // Tenths of a degree: a key that sorts.
+            (r.yaw_deg * 10.0).round() as i64,
         )
     };
-    let mut keys: Vec<(String, u32, usize, usize, usize, bool)> = rows.iter().map(key).collect();
+    let mut keys: Vec<(String, u32, usize, usize, usize, bool, i64)> =
+        rows.iter().map(key).collect();
     keys.sort();
     keys.dedup();
     let xmax = rows.iter().map(|r| r.resolution).max().unwrap_or(257) as f64 * 1.3;
@@ -489,7 +522,7 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
                 .map_err(|e| anyhow!("{e}"))?
                 .label(format!(
-                    "{} c{} x{} seg<={}{}{}",
+                    "{} c{} x{} seg<={}{}{}{}",
                     k.0,
                     k.1,
                     k.2,
@@ -499,7 +532,12 @@ fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                     } else {
                         format!(" {}px", k.4)
                     },
-                    if k.5 { "" } else { " no-temporal" }
+                    if k.5 { "" } else { " no-temporal" },
+                    if k.6 == 0 {
+                        String::new()
+                    } else {
+                        format!(" yaw {}", k.6 as f64 / 10.0)
+                    }
                 ))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))

@@ -238,6 +238,8 @@ fn pipeline_bench_names_bad_arguments() {
             "--segment-thread-up-to 100",
         ),
         (vec!["--frames", "0"], "--frames 0"),
+        (vec!["--yaw", "nan"], "--yaw NaN"),
+        (vec!["--yaw", "0,200"], "--yaw 200"),
     ] {
         let out = volcap()
             .current_dir(repo_root())
@@ -249,6 +251,51 @@ fn pipeline_bench_names_bad_arguments() {
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(want), "{args:?}: {err}");
     }
+}
+
+/// `--yaw`: a row per view, each publishing frames (a turned view runs the colour networks
+/// on the surface points; the camera's view takes the input pixel's colour).
+#[test]
+fn pipeline_bench_measures_turned_views() {
+    let dir = std::env::temp_dir().join(format!("volcap-bench-yaw-{}", std::process::id()));
+    let text = stdout_of(
+        volcap()
+            .current_dir(repo_root())
+            .args([
+                "bench",
+                "pipeline",
+                "--res",
+                "33",
+                "--threads",
+                "1",
+                "--yaw",
+                "0,45",
+                "--seconds",
+                "1",
+                "--warmup",
+                "1",
+                "--frames",
+                "3",
+                "--json",
+                "--out",
+            ])
+            .arg(&dir),
+    );
+    let rows: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(rows.len(), 2, "{text}");
+    for (r, yaw) in rows.iter().zip([0.0, 45.0]) {
+        assert_eq!(r["yaw_deg"].as_f64(), Some(yaw), "{r}");
+        assert!(
+            r["error"].is_null() && r["frames"].as_u64() > Some(0),
+            "{r}"
+        );
+    }
+    let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
+    assert!(md.contains("| yaw |"), "{md}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `bench mlp` puts the fused MLP and tract next to the SGEMM peak; a plain MLP (nothing
