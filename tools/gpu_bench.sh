@@ -77,9 +77,11 @@ case "$mode" in
       res=257,513 models=fourier-small,fourier-medium secs=10 warm=5 runs=5
       threads="1,$(nproc)" loc_backends=cpu,wgpu
     fi
-    echo "== pipeline ($res; $models; threads $threads)"
+    echo "== pipeline ($res; $models; threads $threads; the camera's view and a turned one)"
+    # A turned view (yaw 30) runs the colour networks on the surface points (the colour MLP
+    # through its row buckets); the camera's own view takes the input pixel's colour.
     "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
-      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --out "$out"
+      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
     echo "== localization on the model's field"
     # The adapter's rows twice: one conflict round per read-back, and up to 8.
     "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \
