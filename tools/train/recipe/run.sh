@@ -116,6 +116,10 @@ mt=()
   --variant fourier-small --steps "$steps" --batch "$batch" --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I \
   --depth-frame body --points 2048 --device auto --init "$init" "${seg[@]}" "${mt[@]}" "${extra[@]}" 2>&1 | tee -a "$log"
 echo "training: $(( $(date +%s) - t1 )) s" | tee -a "$log"
+# Where the training's wall time went (steps, of them the batches made and the OHEM update,
+# checkpoints, validation): a GPU run slower than its GPU says here which part holds it.
+"$py" -c 'import json, sys; b = json.load(open(sys.argv[1])); print("steps", b["steps"], "time_s", json.dumps(b.get("time_s")))' \
+  "$res/run/budget.json" | tee -a "$log"
 "$py" -m volcap_train.light "$res/run" "$res/checkpoint.pt" --variant fourier-small | tee -a "$log"
 cp "$res/run/log.csv" "$res/run/budget.json" "$res/"
 size=$(stat -c %s "$res/checkpoint.pt")

@@ -43,6 +43,9 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     budget = json.loads((res / "budget.json").read_text())
     assert budget["steps"] == 3 and "cuda" in budget["hardware"]
     assert {"ds-0", "ds-1"} <= {p.name for p in res.iterdir()}
+    # The log says where the training's time went (the batches made among the steps).
+    log = (res / "recipe.log").read_text()
+    assert "time_s" in log and '"steps: batch"' in log, log[-2000:]
 
 
 def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
