@@ -145,39 +145,45 @@ fn repo_root() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
+/// `bench pipeline` with `args` on 3 frames after 1 s of warm-up, JSON rows on stdout and
+/// the report in `dir`: the output and its rows.
+fn pipeline_rows(args: &[&str], dir: &std::path::Path) -> (String, Vec<serde_json::Value>) {
+    let text = stdout_of(
+        volcap()
+            .current_dir(repo_root())
+            .args([
+                "bench", "pipeline", "--warmup", "1", "--frames", "3", "--json",
+            ])
+            .args(args)
+            .arg("--out")
+            .arg(dir),
+    );
+    let rows = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    (text, rows)
+}
+
 /// `bench pipeline` runs the daemon's pipeline in process: every configuration publishes
 /// frames, renders with field evaluations, times every compute stage, compares with its
 /// one-thread row, and the table and plot are written.
 #[test]
 fn pipeline_bench_measures_every_configuration() {
     let dir = std::env::temp_dir().join(format!("volcap-bench-pipeline-{}", std::process::id()));
-    let text = stdout_of(
-        volcap()
-            .current_dir(repo_root())
-            .args([
-                "bench",
-                "pipeline",
-                "--res",
-                "33,65",
-                "--threads",
-                "1,2",
-                "--segment-thread-up-to",
-                "0,65",
-                "--seconds",
-                "1.5",
-                "--warmup",
-                "1",
-                "--frames",
-                "3",
-                "--json",
-                "--out",
-            ])
-            .arg(&dir),
+    let (_, rows) = pipeline_rows(
+        &[
+            "--res",
+            "33,65",
+            "--threads",
+            "1,2",
+            "--segment-thread-up-to",
+            "0,65",
+            "--seconds",
+            "1.5",
+        ],
+        &dir,
     );
-    let rows: Vec<serde_json::Value> = text
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
     // res x split x threads, in that order.
     assert_eq!(rows.len(), 8);
     for r in &rows {
@@ -258,33 +264,19 @@ fn pipeline_bench_names_bad_arguments() {
 #[test]
 fn pipeline_bench_measures_turned_views() {
     let dir = std::env::temp_dir().join(format!("volcap-bench-yaw-{}", std::process::id()));
-    let text = stdout_of(
-        volcap()
-            .current_dir(repo_root())
-            .args([
-                "bench",
-                "pipeline",
-                "--res",
-                "33",
-                "--threads",
-                "1",
-                "--yaw",
-                "0,45",
-                "--seconds",
-                "1",
-                "--warmup",
-                "1",
-                "--frames",
-                "3",
-                "--json",
-                "--out",
-            ])
-            .arg(&dir),
+    let (text, rows) = pipeline_rows(
+        &[
+            "--res",
+            "33",
+            "--threads",
+            "1",
+            "--yaw",
+            "0,45",
+            "--seconds",
+            "1",
+        ],
+        &dir,
     );
-    let rows: Vec<serde_json::Value> = text
-        .lines()
-        .map(|l| serde_json::from_str(l).unwrap())
-        .collect();
     assert_eq!(rows.len(), 2, "{text}");
     for (r, yaw) in rows.iter().zip([0.0, 45.0]) {
         assert_eq!(r["yaw_deg"].as_f64(), Some(yaw), "{r}");
