@@ -122,7 +122,7 @@ fn real_photos_give_the_cpu_paths_mask_surface_and_render() {
         // Localization on the GPU's field: the same points evaluated and the same inside set
         // up to rounding. The networks on the adapter add in other orders than tract (the
         // whole-plane pools reduce in a tree, pool_plane.wgsl), so their outputs differ by
-        // rounding (within 3e-5 of each tensor's scale, service/engine/tests/gpu.rs), and a
+        // rounding (within 3e-5 of each tensor's scale, service/engine/tests/gpu_nets.rs), and a
         // grid point that close to the level can land on the other side, pulling a few
         // different neighbours into the evaluated set (camera.png: 55051 / 55054): the bound
         // is 0.1 % of the evaluations, as on the adapter's localizer below.

@@ -198,11 +198,18 @@ impl GpuNet {
         inputs: &[(&[usize], &[f32])],
         per_step: Option<&super::Stamps>,
     ) -> Result<wgpu::CommandEncoder, String> {
+        if r.plan.inputs.len() != inputs.len() {
+            return Err(format!(
+                "{} inputs given, the network takes {}",
+                inputs.len(),
+                r.plan.inputs.len()
+            ));
+        }
         for (i, (shape, data)) in inputs.iter().enumerate() {
             // The plan's input holds `data` (all of it, or a per-point network's first rows).
             let n = data.len();
             let room: usize = r.shapes.get(i).map_or(0, |s| s.iter().product());
-            if n > room || r.plan.inputs.len() != inputs.len() {
+            if n > room {
                 return Err(format!(
                     "input {i}: {n} values for shape {shape:?}, the plan takes {room}"
                 ));
@@ -271,8 +278,8 @@ impl GpuNet {
     /// Run a per-point network (every input's first axis the same point count, each row's
     /// output from its own row alone: the MLPs) on `rows` points, planned for
     /// [`row_bucket`]`(rows)` rows: only the `rows` points are written and read back; the
-    /// plan's other rows hold earlier inputs (finite) and are not read. The first output's
-    /// first `rows` rows.
+    /// plan's other rows hold earlier runs' inputs, which (rows being independent) reach
+    /// only rows that are not read. The first output's first `rows` rows.
     pub fn run_rows(&self, inputs: &[(&[usize], &[f32])]) -> Result<Vec<f32>, String> {
         let rows = inputs
             .first()

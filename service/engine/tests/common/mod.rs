@@ -111,3 +111,29 @@ pub fn runtimes() -> Vec<Runtime> {
     }
     out
 }
+
+/// The adapter `auto` opens for the GPU backend's tests (Mesa's lavapipe here and in CI,
+/// `WGPU_BACKEND=vulkan`); without one the tests fail under CI and say so elsewhere.
+#[cfg(feature = "wgpu")]
+pub fn gpu() -> Option<std::sync::Arc<volcap_engine::gpu::Gpu>> {
+    match volcap_engine::gpu::Gpu::open("auto") {
+        Ok(g) => {
+            println!("adapter: {}", g.adapter.label());
+            Some(g)
+        }
+        Err(e) if std::env::var_os("CI").is_some() => {
+            panic!("no GPU adapter under CI (install mesa-vulkan-drivers): {e}")
+        }
+        Err(e) => {
+            println!("skipped: {e}");
+            None
+        }
+    }
+}
+
+/// Deterministic inputs in [-1, 1].
+pub fn values(n: usize, seed: usize) -> Vec<f32> {
+    (0..n)
+        .map(|i| (((i + seed) * 37 % 101) as f32 / 50.0) - 1.0)
+        .collect()
+}

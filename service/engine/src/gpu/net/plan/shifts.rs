@@ -14,13 +14,11 @@ use tract_onnx::pb::GraphProto;
 
 /// A group of the rewrite: its nodes (graph indices, ascending), the value it upsamples and
 /// the value it defines (the replaced `Resize`'s output).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug)]
 pub(super) struct Group {
     pub nodes: Vec<usize>,
     pub input: String,
     pub output: String,
-    /// The input's shape, [N, C, H, W].
-    pub shape: Vec<usize>,
 }
 
 /// Finds the groups: made once per graph, asked at each node as the planner reaches it.
@@ -104,10 +102,7 @@ fn group(
             (m.op_type == op
                 && m.output.len() == 1
                 && m.input.len() >= inputs.len()
-                && inputs
-                    .iter()
-                    .zip(&m.input)
-                    .all(|(a, b)| a.is_empty() || *a == b))
+                && inputs.iter().zip(&m.input).all(|(a, b)| *a == b))
             .then_some(i)
         };
         // The slices: [0, 1), [0, n - 1), [1, n), [n - 1, n) along the axis.
@@ -221,7 +216,6 @@ fn group(
         nodes,
         input: x.to_string(),
         output,
-        shape,
     })
 }
 
