@@ -10,42 +10,53 @@
 # budget.json's `time_s` says where the training's wall time went (steps, checkpoints,
 # validation).
 #
-# --minutes-data: the generators stop after D minutes (each keeps the subjects it finished;
-# the one in progress is dropped); --minutes-train: training stops after T minutes with its
-# checkpoint, the rate annealed by then (`train --max-minutes`). Both together fit the recipe
-# into a lent machine's call (10 minutes a command there).
+# The data: --poses jobs, each `volcap sim dataset` over every subject (the same identities
+# and split, --seed 11) in one pose of its own (--pose-seed 100 + job), --procs of them at
+# once; their images are joined in training (`--more-data`). Every finished job holds every
+# subject, so a clock that stops the data early costs poses, not subjects (a generator that
+# made all its poses per subject before the next subject, as this recipe did first, gave a
+# timed run three subjects in all).
 #
-# --procs generators run at once, each the same subjects and split (--seed 11) in poses of
-# its own (--pose-seed 100 + i), their images joined in training (`--more-data`); --tiny is
-# the end-to-end check (2 subjects, 1 pose, 2 views, 3 steps). Needs python3 with torch,
-# numpy, safetensors, tqdm (onnxruntime for the product's masks; without it the ground
+# --minutes-data: no job starts after D minutes, and the running ones are stopped then (each
+# keeps the subjects it finished; the one in progress is dropped); --minutes-train: training
+# stops after T minutes with its checkpoint, the rate annealed by then (`train
+# --max-minutes`), and without --steps the clock alone decides how many steps (a GPU ran 6000
+# steps of 16 in two minutes). Both together fit the recipe into a lent machine's call (10
+# minutes a command there).
+#
+# --tiny is the end-to-end check (2 subjects, 2 poses, 2 views, 3 steps). Needs python3 with
+# torch, numpy, safetensors, tqdm (onnxruntime for the product's masks; without it the ground
 # truth's), no network.
 set -euo pipefail
 b="$(cd "$(dirname "$0")" && pwd)"
 res="${1:?usage: run.sh RESULT [options]}"
 shift
 subjects=48 poses=16 views=3 steps=6000 procs=$(nproc) points=8000 batch=8 extra=()
-minutes_data=0 minutes_train=0
+minutes_data=0 minutes_train=0 steps_given=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --subjects) subjects="$2"; shift 2 ;;
     --poses) poses="$2"; shift 2 ;;
     --views) views="$2"; shift 2 ;;
-    --steps) steps="$2"; shift 2 ;;
+    --steps) steps="$2"; steps_given=1; shift 2 ;;
     --procs) procs="$2"; shift 2 ;;
     --minutes-data) minutes_data="$2"; shift 2 ;;
     --minutes-train) minutes_train="$2"; shift 2 ;;
-    --tiny) subjects=2 poses=1 views=2 steps=3 procs=2 points=4096 batch=2; shift ;;
+    --tiny) subjects=2 poses=2 views=2 steps=3 steps_given=1 procs=2 points=4096 batch=2; shift ;;
     --) shift; extra=("$@"); break ;;
     *) echo "run.sh: unknown option $1" >&2; exit 2 ;;
   esac
 done
+# With a training clock and no --steps, the clock decides (the step count only bounds it).
+[ "$minutes_train" != 0 ] && [ "$steps_given" = 0 ] && steps=1000000
+# Progress bars into a log (not a terminal): a line every 15 s, not every step.
+[ -t 1 ] || export TQDM_MININTERVAL="${TQDM_MININTERVAL:-15}"
 py="${PYTHON:-python3}"
 # A relative interpreter path stays valid after the cd into the bundle below.
 case "$py" in */*) py="$(cd "$(dirname "$py")" && pwd)/$(basename "$py")" ;; esac
 mkdir -p "$res"
 log="$res/recipe.log"
-echo "recipe $(cat "$b/COMMIT") on $(hostname): $subjects subjects x $poses poses x $views views in $procs generators, $steps steps" | tee "$log"
+echo "recipe $(cat "$b/COMMIT") on $(hostname): $subjects subjects x $poses poses x $views views, $procs generators at once, $steps steps at most" | tee "$log"
 # A lean bundle (make_bundle.sh --lean) lives in the checkout and takes the Python package,
 # the segmentation and the start checkpoint from it; a full bundle carries its own.
 if [ -d "$b/volcap_train" ]; then
@@ -60,48 +71,59 @@ chmod +x "$res/volcap"
 assets=()
 [ -f "$b/assets.pack.gz" ] && assets=(--assets "$b/assets.pack.gz")
 t0=$(date +%s)
-pids=()
-for i in $(seq 0 $((procs - 1))); do
-  rm -rf "$res/ds-$i"
-  "$res/volcap" sim dataset --subjects "$subjects" --poses "$poses" --views "$views" --points "$points" \
-    --val-fraction 0.15 --seed 11 --pose-seed $((100 + i)) --lighting varied "${assets[@]}" --out "$res/ds-$i" \
-    > "$res/ds-$i.log" 2>&1 &
-  pids+=($!)
-done
-if [ "$minutes_data" != 0 ]; then
-  # The clock: generators still running at the deadline are stopped, and each drops the
-  # subject it was writing (the newest shard folder).
-  end=$(( t0 + $(awk -v m="$minutes_data" 'BEGIN { printf "%d", m * 60 }') ))
-  while [ "$(date +%s)" -lt "$end" ]; do
-    alive=0
-    for p in "${pids[@]}"; do kill -0 "$p" 2>/dev/null && alive=1; done
-    [ "$alive" = 1 ] || break
-    sleep 1
-  done
-  for i in "${!pids[@]}"; do
-    if kill -0 "${pids[$i]}" 2>/dev/null; then
-      kill "${pids[$i]}" 2>/dev/null || true
-      wait "${pids[$i]}" 2>/dev/null || true
-      pids[$i]=""
-      # Shards are written beside and renamed: only the image in progress is lost.
-      find "$res/ds-$i" -name '*.part' -delete
-      find "$res/ds-$i" -mindepth 1 -type d -empty -delete
-      echo "generator $i stopped at $minutes_data min: $(ls "$res/ds-$i"/train/*/*.safetensors 2>/dev/null | wc -l) training and $(ls "$res/ds-$i"/val/*/*.safetensors 2>/dev/null | wc -l) validation images kept" | tee -a "$log"
+end=0
+[ "$minutes_data" != 0 ] && end=$(( t0 + $(awk -v m="$minutes_data" 'BEGIN { printf "%d", m * 60 }') ))
+declare -A running=()
+next=0 finished=0
+start_job() {
+  local j=$1
+  rm -rf "$res/ds-$j"
+  "$res/volcap" sim dataset --subjects "$subjects" --poses 1 --views "$views" --points "$points" \
+    --val-fraction 0.15 --seed 11 --pose-seed $((100 + j)) --lighting varied "${assets[@]}" --out "$res/ds-$j" \
+    > "$res/ds-$j.log" 2>&1 &
+  running[$j]=$!
+}
+while :; do
+  for j in "${!running[@]}"; do
+    if ! kill -0 "${running[$j]}" 2>/dev/null; then
+      # A job that ended by itself must have succeeded.
+      wait "${running[$j]}" || { echo "run.sh: generator $j failed:" | tee -a "$log" >&2; tail -5 "$res/ds-$j.log" >&2; exit 1; }
+      unset "running[$j]"
+      finished=$((finished + 1))
     fi
   done
-fi
-# The generators not stopped by the clock must have succeeded.
-for p in "${pids[@]}"; do [ -z "$p" ] || wait "$p"; done
-echo "dataset: $(( $(date +%s) - t0 )) s" | tee -a "$log"
+  late=0
+  [ "$end" != 0 ] && [ "$(date +%s)" -ge "$end" ] && late=1
+  if [ "$late" = 1 ]; then
+    for j in "${!running[@]}"; do
+      kill "${running[$j]}" 2>/dev/null || true
+      wait "${running[$j]}" 2>/dev/null || true
+      # Shards are written beside and renamed: only the image in progress is lost.
+      find "$res/ds-$j" -name '*.part' -delete
+      find "$res/ds-$j" -mindepth 1 -type d -empty -delete
+      echo "generator $j stopped at $minutes_data min: $(ls "$res/ds-$j"/train/*/*.safetensors 2>/dev/null | wc -l) training and $(ls "$res/ds-$j"/val/*/*.safetensors 2>/dev/null | wc -l) validation images kept" | tee -a "$log"
+      unset "running[$j]"
+    done
+    [ "$next" -lt "$poses" ] && echo "$((poses - next)) of $poses poses not started by the $minutes_data min clock" | tee -a "$log"
+    break
+  fi
+  while [ "${#running[@]}" -lt "$procs" ] && [ "$next" -lt "$poses" ]; do
+    start_job "$next"
+    next=$((next + 1))
+  done
+  [ "${#running[@]}" = 0 ] && break
+  sleep 1
+done
+echo "dataset: $(( $(date +%s) - t0 )) s, $finished of $poses poses whole" | tee -a "$log"
 # Validation from the first generator that reached a validation subject (a clock may stop
 # some before theirs); the others' training images join.
 first=""
-for i in $(seq 0 $((procs - 1))); do
+for i in $(seq 0 $((next - 1))); do
   if ls "$res/ds-$i"/val/*/*.safetensors >/dev/null 2>&1; then first=$i; break; fi
 done
 [ -n "$first" ] || { echo "run.sh: no generator wrote a validation image (give --minutes-data more time)" | tee -a "$log" >&2; exit 1; }
 more=()
-for i in $(seq 0 $((procs - 1))); do
+for i in $(seq 0 $((next - 1))); do
   [ "$i" = "$first" ] || ! ls "$res/ds-$i"/train/*/*.safetensors >/dev/null 2>&1 || more+=("$res/ds-$i")
 done
 seg=()

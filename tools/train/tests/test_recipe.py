@@ -63,13 +63,22 @@ def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
         assert (bundle / "volcap.xz").stat().st_size < 20 * 2**20
         env = {**os.environ, "PYTHON": sys.executable}
         subprocess.run(
-            [str(bundle / "run.sh"), str(res), "--tiny", "--minutes-data", "30", "--minutes-train", "0.0001"],
+            [str(bundle / "run.sh"), str(res), "--tiny", "--poses", "3", "--minutes-data", "30", "--minutes-train", "0.0001"],
             check=True, env=env, cwd=tmp_path,
         )
     finally:
         subprocess.run(["rm", "-rf", str(bundle)], check=True)
     budget = json.loads((res / "budget.json").read_text())
     assert budget["steps"] == 1 and "max-minutes" in budget["stopped"], budget
+    # Three poses on two generators: a queue of three one-pose jobs, each over every subject
+    # (a clock that stops the data early then costs poses, not subjects).
+    for j in range(3):
+        ds = res / f"ds-{j}"
+        split = json.loads((ds / "dataset.json").read_text())["split"]
+        assert len(split) == 2 and sorted(split.values()) == ["train", "val"], split
+        for sid, part in split.items():
+            assert len(list((ds / part / sid).glob("*.safetensors"))) == 2, (j, sid)  # 2 views
+    assert "3 of 3 poses whole" in (res / "recipe.log").read_text()
     light = torch.load(res / "checkpoint.pt", weights_only=False)
     assert light["step"] == 1
     # A lean bundle outside the checkout's root is refused by name.
