@@ -105,6 +105,8 @@ impl<T: volcap_engine::field::OccupancyField + volcap_engine::field::ColorField 
 /// Shared between the pipeline threads, the HTTP server, D-Bus and the watchdog.
 pub struct Shared {
     pub stats: [StageStats; 5],
+    /// Model mode: the field and render stages' parts ([`part`]).
+    pub parts: [StageStats; part::COUNT],
     pub e2e: StageStats,
     pub state: Mutex<PipelineState>,
     pub camera: Mutex<CameraStatus>,
@@ -167,6 +169,7 @@ impl Shared {
     ) -> Self {
         Self {
             stats: Default::default(),
+            parts: Default::default(),
             e2e: Default::default(),
             state: Mutex::new(PipelineState::Starting),
             camera: Mutex::new(CameraStatus {
@@ -264,6 +267,38 @@ pub mod stage {
     pub const FIELD: usize = 2;
     pub const RENDER: usize = 3;
     pub const ENCODE: usize = 4;
+}
+
+/// The parts of the field and render stages in model mode (`Shared::parts`, by these
+/// indices): where each stage's time goes, for the pipeline bench.
+pub mod part {
+    /// Field: the image and mask cropped to the networks' input.
+    pub const INPUT: usize = 0;
+    /// Field: the shape network.
+    pub const SHAPE: usize = 1;
+    /// Field: the colour encoder.
+    pub const COLOR: usize = 2;
+    /// Field: the temporal filter of the maps.
+    pub const TEMPORAL: usize = 3;
+    /// Field: the field made (on the GPU backend, the maps' buffers on the adapter).
+    pub const FIELD: usize = 4;
+    /// Render: localization and the surface depths (on the GPU backend, the adapter's frame).
+    pub const LOCALIZE: usize = 5;
+    /// Render: the surface points' colour (and shading), the grid-size image.
+    pub const SURFACE: usize = 6;
+    /// Render: the rest of the stage (the image at display size).
+    pub const DISPLAY: usize = 7;
+    pub const COUNT: usize = 8;
+    pub const NAMES: [&str; COUNT] = [
+        "field: input",
+        "field: shape net",
+        "field: colour encoder",
+        "field: temporal filter",
+        "field: series",
+        "render: localize",
+        "render: surface and colour",
+        "render: display",
+    ];
 }
 
 struct Rendered {
@@ -380,7 +415,8 @@ fn render_field(
     };
     let r = renderer.render(field, colors, spec, &opts);
     let r = r.map_err(|e| e.to_string());
-    finish_render(sh, t, live, r, |size| {
+    let times = renderer.last_times();
+    finish_render(sh, t, live, r.map(|st| (st, times)), |size| {
         Ok(if size == live.resolution {
             renderer.rgba().to_vec()
         } else {
@@ -395,23 +431,30 @@ fn finish_render(
     sh: &Shared,
     t: Instant,
     live: &Live,
-    r: Result<volcap_engine::render::RenderStats, String>,
+    r: Result<
+        (
+            volcap_engine::render::RenderStats,
+            volcap_engine::render::RenderTimes,
+        ),
+        String,
+    >,
     image: impl FnOnce(usize) -> Result<Vec<u8>, String>,
 ) -> Option<Vec<u8>> {
     let fail = |e: String| {
         sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
         sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
     };
-    match r {
-        Ok(st) => {
+    let times = match r {
+        Ok((st, times)) => {
             let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
             sh.evaluations.fetch_add(n, Ordering::Relaxed);
+            times
         }
         Err(e) => {
             fail(e);
             return None;
         }
-    }
+    };
     let rgba = match image(live.out_size()) {
         Ok(px) => px,
         Err(e) => {
@@ -419,7 +462,13 @@ fn finish_render(
             return None;
         }
     };
-    sh.stats[stage::RENDER].record(t.elapsed().as_secs_f64() * 1e3);
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    sh.stats[stage::RENDER].record(ms);
+    if sh.mode == "model" {
+        sh.parts[part::LOCALIZE].record(times.localize_ms);
+        sh.parts[part::SURFACE].record(times.surface_ms);
+        sh.parts[part::DISPLAY].record((ms - times.localize_ms - times.surface_ms).max(0.0));
+    }
     Some(rgba)
 }
 
@@ -490,6 +539,7 @@ impl AdapterRenderer {
         };
         let r = renderer
             .render_gpu(&mut self.gpu, &on_gpu, field, field, spec, &opts)
+            .map(|st| (st, renderer.last_times()))
             .map_err(|e| e.to_string());
         let gpu = &mut self.gpu;
         finish_render(sh, t, live, r, |size| {

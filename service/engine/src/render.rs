@@ -62,10 +62,22 @@ pub struct RenderStats {
     pub hits: u64,
 }
 
+/// Where the last frame's time went (wall ms on the calling thread): the parts the pipeline
+/// bench splits the render stage into.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RenderTimes {
+    /// Steps 1-4: localization, the final level and each column's surface depth (on the GPU
+    /// backend the adapter's frame, its read-back included).
+    pub localize_ms: f64,
+    /// Step 5: the surface points, their colour and optional shading, the grid-size image.
+    pub surface_ms: f64,
+}
+
 /// A mesh-free renderer; owns its buffers and reuses them frame to frame.
 #[derive(Default)]
 pub struct Renderer {
     threads: usize,
+    times: RenderTimes,
     hier: Hierarchical,
     grid: Option<Grid>,
     coarse_hit: Vec<i32>,
@@ -171,6 +183,7 @@ impl Renderer {
         spec: GridSpec,
         opts: &RenderOptions,
     ) -> Result<RenderStats, LocalizeError> {
+        let t = std::time::Instant::now();
         let big_l = spec.level();
         let fine = spec
             .coarser()
@@ -270,7 +283,7 @@ impl Renderer {
             };
         }
         self.on_gpu = false;
-        self.finish(field, colors, spec, opts, stats)
+        self.timed_finish(t, field, colors, spec, opts, stats)
     }
 
     /// The frame on the GPU backend's adapter (`gpu::render::GpuRenderer`): localization and
@@ -287,6 +300,7 @@ impl Renderer {
         spec: GridSpec,
         opts: &RenderOptions,
     ) -> Result<RenderStats, LocalizeError> {
+        let t = std::time::Instant::now();
         let fine = spec
             .coarser()
             .ok_or(crate::grid::GridError::BadResolution(spec.n()))?;
@@ -317,7 +331,7 @@ impl Renderer {
         self.final_nodes.clear();
         self.culled.clear();
         self.on_gpu = true;
-        self.finish(field, colors, spec, opts, stats)
+        self.timed_finish(t, field, colors, spec, opts, stats)
     }
 
     /// The last frame rendered by [`Self::render_gpu`] at display size, drawn on the adapter
@@ -342,6 +356,33 @@ impl Renderer {
         )?;
         self.display_size = size.max(2);
         Ok(&self.display_rgba)
+    }
+
+    /// Where the last frame's time went ([`Self::render`] or `render_gpu`; zero before the
+    /// first).
+    pub fn last_times(&self) -> RenderTimes {
+        self.times
+    }
+
+    /// [`Self::finish`], the frame's times kept: localization from `t` until now, the rest
+    /// from now.
+    fn timed_finish(
+        &mut self,
+        t: std::time::Instant,
+        field: &dyn OccupancyField,
+        colors: &dyn ColorField,
+        spec: GridSpec,
+        opts: &RenderOptions,
+        stats: RenderStats,
+    ) -> Result<RenderStats, LocalizeError> {
+        let localize_ms = t.elapsed().as_secs_f64() * 1e3;
+        let t = std::time::Instant::now();
+        let r = self.finish(field, colors, spec, opts, stats);
+        self.times = RenderTimes {
+            localize_ms,
+            surface_ms: t.elapsed().as_secs_f64() * 1e3,
+        };
+        r
     }
 
     /// Steps 4 and 5 from the hits and depths per column: the surface points, their colour,

@@ -364,6 +364,29 @@ fn hard_frames(models: &Models) {
         grid.binarized().count_ones() > 0,
         "no inside point for a real person"
     );
+    // In the camera's own view every visible point takes its input pixel's colour: the
+    // colour encoder does not run; a turned view has its features.
+    assert!(!field.has_color_features());
+    let turned = ModelView {
+        yaw_deg: 30.0,
+        ..ModelView::default()
+    };
+    let (turned, _) = models.frame(&person, s, s, turned).unwrap();
+    assert!(turned.has_color_features());
+    // Each field says where its encoding spent its time.
+    for f in [&field, &turned] {
+        let t = f.timings();
+        let all = [
+            t.input_ms,
+            t.shape_ms,
+            t.color_ms,
+            t.temporal_ms,
+            t.field_ms,
+        ];
+        assert!(all.iter().all(|v| v.is_finite() && *v >= 0.0), "{t:?}");
+        assert!(t.shape_ms > 0.0, "{t:?}");
+    }
+    assert!(turned.timings().color_ms > 0.0);
 }
 
 /// Points far outside the cube and non-finite points: finite occupancy or a clear error.

@@ -47,6 +47,11 @@ pub struct Row {
     /// p50 ms per stage, in `volcapd::pipeline::STAGES` order (capture, segment, field,
     /// render, encode).
     pub stage_p50_ms: [f64; 5],
+    /// Model mode: the mean ms of each part of the field and render stages
+    /// (`volcapd::pipeline::part::NAMES` order), with the two stages' means; empty otherwise.
+    pub part_mean_ms: Vec<f64>,
+    pub field_mean_ms: f64,
+    pub render_mean_ms: f64,
     /// Occupancy evaluations per rendered frame.
     pub evaluations: f64,
     pub frames: u64,
@@ -163,6 +168,13 @@ fn measure(
     let evals = shared.evaluations.load(Ordering::Relaxed) - evals0;
     let (l50, l99, _) = shared.e2e.window(t0);
     let stage_p50_ms = std::array::from_fn(|i| shared.stats[i].window(t0).0);
+    let part_mean_ms = if shared.mode == "model" {
+        shared.parts.iter().map(|p| p.mean(t0)).collect()
+    } else {
+        Vec::new()
+    };
+    let field_mean_ms = shared.stats[stage::FIELD].mean(t0);
+    let render_mean_ms = shared.stats[stage::RENDER].mean(t0);
     let error = match &*shared.state.lock().unwrap_or_else(|p| p.into_inner()) {
         PipelineState::Failed(r) | PipelineState::Degraded(r) => Some(r.clone()),
         _ if published == 0 => Some("no frame published".into()),
@@ -190,6 +202,9 @@ fn measure(
         latency_p50_ms: l50,
         latency_p99_ms: l99,
         stage_p50_ms,
+        part_mean_ms,
+        field_mean_ms,
+        render_mean_ms,
         evaluations: evals as f64 / rendered.max(1) as f64,
         frames: published,
         seconds: wall,
@@ -357,7 +372,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             writeln!(out, "{}", serde_json::to_string(r)?)?;
         }
     } else {
-        print!("{}", table(&rows));
+        print!("{}{}", table(&rows), parts_table(&rows));
     }
     if !a.json || a.out.is_some() {
         let dir = a.out.clone().unwrap_or_else(|| PathBuf::from("docs/bench"));
@@ -382,7 +397,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
-            table(&rows),
+            table(&rows) + &parts_table(&rows),
             if rows.iter().any(|r| r.runtime.contains("llvmpipe")) {
                 "\nRows on `wgpu llvmpipe` ran the GPU backend's kernels on Mesa's lavapipe, Vulkan emulated \
                  on this CPU: their times say nothing about a GPU (the kernels are written for thousands of \
@@ -460,6 +475,49 @@ fn table(rows: &[Row]) -> String {
                 (None, false) => String::new(),
             },
         );
+    }
+    s
+}
+
+/// Model-mode rows: where the field and render stages' time goes, each part's mean ms beside
+/// its stage's mean (the parts of a stage add up to about its mean; what is left of the field
+/// stage is the thread's bookkeeping). Empty without such rows.
+fn parts_table(rows: &[Row]) -> String {
+    let names = volcapd::pipeline::part::NAMES;
+    let rows: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.part_mean_ms.len() == names.len() && r.error.is_none())
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\nWhere the field and render stages' time goes (mean ms per frame; each stage's mean beside its parts):\n\n\
+         | model | runtime | res | yaw | field |",
+    );
+    for n in &names[..volcapd::pipeline::part::LOCALIZE] {
+        let _ = write!(s, " {} |", n.trim_start_matches("field: "));
+    }
+    s.push_str(" render |");
+    for n in &names[volcapd::pipeline::part::LOCALIZE..] {
+        let _ = write!(s, " {} |", n.trim_start_matches("render: "));
+    }
+    s.push('\n');
+    s.push_str(&"|---".repeat(6 + names.len()));
+    s.push_str("|\n");
+    for r in rows {
+        let _ = write!(
+            s,
+            "| {} | {} | {} | {} | {:.2} |",
+            r.model, r.runtime, r.resolution, r.yaw_deg, r.field_mean_ms
+        );
+        for (i, ms) in r.part_mean_ms.iter().enumerate() {
+            if i == volcapd::pipeline::part::LOCALIZE {
+                let _ = write!(s, " {:.2} |", r.render_mean_ms);
+            }
+            let _ = write!(s, " {ms:.2} |");
+        }
+        s.push('\n');
     }
     s
 }

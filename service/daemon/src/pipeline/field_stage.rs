@@ -11,7 +11,7 @@
 //! steadied before the encoders run and their maps blended with the last frame's after;
 //! a frame without a person resets it.
 
-use super::{PipelineState, Shared, Slot, stage};
+use super::{PipelineState, Shared, Slot, part, stage};
 use crate::capture::Frame;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -152,12 +152,24 @@ fn encode(
         }
         None => (crop, None),
     };
+    // The temporal filter's crop part (its maps' part is the engine's `temporal_ms`).
+    let steady_ms = t.elapsed().as_secs_f64() * 1e3;
     let r = volcap_engine::model::with_threads(threads, || {
         models.encode_steady(&img, &mask, crop, view, temporal)
     })
     .map_err(|e| format!("model: {e}"));
-    if r.is_ok() {
+    if let Ok(field) = &r {
         sh.stats[stage::FIELD].record(t.elapsed().as_secs_f64() * 1e3);
+        let tm = field.timings();
+        for (i, ms) in [
+            (part::INPUT, tm.input_ms),
+            (part::SHAPE, tm.shape_ms),
+            (part::COLOR, tm.color_ms),
+            (part::TEMPORAL, steady_ms + tm.temporal_ms),
+            (part::FIELD, tm.field_ms),
+        ] {
+            sh.parts[i].record(ms);
+        }
     }
     r
 }

@@ -117,6 +117,17 @@ impl StageStats {
         (q(0.5), q(0.99), v.len())
     }
 
+    /// The mean in ms of the samples taken since `since` (0 when none): the parts of a stage
+    /// add up in means, not in medians.
+    pub fn mean(&self, since: Instant) -> f64 {
+        let s = self.samples.lock().unwrap_or_else(|p| p.into_inner());
+        let (sum, n) = s
+            .iter()
+            .filter(|(t, _)| *t >= since)
+            .fold((0.0, 0usize), |(a, n), (_, ms)| (a + ms, n + 1));
+        if n == 0 { 0.0 } else { sum / n as f64 }
+    }
+
     /// (p50, p99) in ms over the last 256 frames.
     pub fn percentiles(&self) -> (f64, f64) {
         let (p50, p99, _) = self.window(self.samples_start());

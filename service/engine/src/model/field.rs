@@ -37,6 +37,25 @@ pub struct ModelField {
     /// The Fourier maps on the GPU backend's adapter: the point queries run there.
     #[cfg(feature = "wgpu")]
     gpu_fourier: Option<crate::gpu::fourier::GpuFourier>,
+    /// Where its encoding spent its time ([`super::Models::encode`] sets it).
+    pub(super) timings: EncodeTimings,
+}
+
+/// Where one frame's encoding spent its time (wall ms on the encoding thread): the parts the
+/// pipeline bench splits the field stage into.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EncodeTimings {
+    /// The image and mask cropped to the networks' input and normalized.
+    pub input_ms: f64,
+    /// The shape network, its maps or features back on the host.
+    pub shape_ms: f64,
+    /// The colour encoder.
+    pub color_ms: f64,
+    /// The temporal filter of the maps (0 when it is off).
+    pub temporal_ms: f64,
+    /// The field made from them: the colour MLP's pixel input, and on the GPU backend the
+    /// Fourier maps' buffers on the adapter.
+    pub field_ms: f64,
 }
 
 impl ModelField {
@@ -58,7 +77,7 @@ impl ModelField {
         };
         // Render NDC p -> metric (D p) -> rotate back into the input view -> crop NDC.
         let to_crop = d.inverse() * r.transpose() * d * (1.0 / zoom);
-        let identity_view = view.yaw_deg == 0.0 && view.pitch_deg == 0.0;
+        let identity_view = view.is_input_view();
         Self {
             mask,
             shape,
@@ -69,7 +88,20 @@ impl ModelField {
             identity_view,
             #[cfg(feature = "wgpu")]
             gpu_fourier: None,
+            timings: EncodeTimings::default(),
         }
+    }
+
+    /// Whether the colour encoder's features came with the field (a turned view; the
+    /// camera's own view takes the input's colours without them).
+    pub fn has_color_features(&self) -> bool {
+        self.color.is_some()
+    }
+
+    /// Where this field's encoding spent its time (all zero for a field not made by
+    /// [`super::Models::encode`]).
+    pub fn timings(&self) -> EncodeTimings {
+        self.timings
     }
 
     /// Evaluate the Fourier maps' point queries on `gpu` (the maps written there by the first

@@ -29,7 +29,7 @@ pub mod temporal;
 
 use crate::field::FieldError;
 use crate::softz::{SOFTZ_BINS, soft_z};
-pub use field::{ModelField, ShapeState};
+pub use field::{EncodeTimings, ModelField, ShapeState};
 pub use fourier::{DepthFrame, FourierNet};
 
 use glam::Vec3;
@@ -390,6 +390,14 @@ pub struct ModelView {
     pub zoom: f32,
 }
 
+impl ModelView {
+    /// The input camera's own view (no turn): the surface seen there takes the input pixel's
+    /// colour (the paper's rule), so the colour networks have nothing to do.
+    pub fn is_input_view(&self) -> bool {
+        self.yaw_deg == 0.0 && self.pitch_deg == 0.0
+    }
+}
+
 impl Default for ModelView {
     fn default() -> Self {
         Self {
@@ -558,10 +566,15 @@ impl Models {
         view: ModelView,
         temporal: Option<&mut temporal::Temporal>,
     ) -> Result<ModelField, ModelError> {
+        let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
+        let mut timings = EncodeTimings::default();
+        let t = std::time::Instant::now();
         let s = INPUT_SIZE;
         let rgb_c = crop.apply(img, 3, s);
         let mask_c = crop.apply(mask, 1, s);
         let x = preprocess::encoder_input(&rgb_c, &mask_c, s);
+        timings.input_ms = ms(t);
+        let t = std::time::Instant::now();
         let mut shape = match self.shape_for(&crop) {
             ShapeModel::Mlp(nets) => ShapeState::Mlp {
                 feat: nets.features(&x)?,
@@ -569,14 +582,26 @@ impl Models {
             },
             ShapeModel::Fourier(net) => ShapeState::Fourier(net.maps(&x)?),
         };
-        let mut color_feat = self.color.encoder.run(&[(&[1, 4, s, s], &x)])?;
+        timings.shape_ms = ms(t);
+        let t = std::time::Instant::now();
+        // In the input camera's view every visible point takes its input pixel's colour: the
+        // colour encoder runs only for a turned view (its temporal state then starts again).
+        let mut color_feat = if view.is_input_view() {
+            None
+        } else {
+            Some(self.color.encoder.run(&[(&[1, 4, s, s], &x)])?)
+        };
+        timings.color_ms = ms(t);
+        let t = std::time::Instant::now();
         if let Some(t) = temporal {
             let planar = |channels| temporal::MapLayout {
                 channels,
                 size: FEATURE_SIZE,
                 interleaved: false,
             };
-            let color = Some((planar(self.color.channels), color_feat.as_mut_slice()));
+            let color = color_feat
+                .as_mut()
+                .map(|f| (planar(self.color.channels), f.as_mut_slice()));
             match &mut shape {
                 ShapeState::Mlp { nets, feat } => {
                     let l = planar(nets.channels);
@@ -592,12 +617,14 @@ impl Models {
                 }
             }
         }
+        timings.temporal_ms = ms(t);
+        let t = std::time::Instant::now();
         // The colour MLP's pixel input, as in training: the masked RGB back in [0, 1].
         let image: Vec<f32> = x[..3 * s * s].iter().map(|v| v * 0.5 + 0.5).collect();
-        let field = ModelField::new(
+        let mut field = ModelField::new(
             mask_c,
             shape,
-            Some((self.color.clone(), color_feat)),
+            color_feat.map(|f| (self.color.clone(), f)),
             image,
             crop,
             view,
@@ -605,8 +632,10 @@ impl Models {
         // On the GPU backend the Fourier series is evaluated where the maps were made.
         #[cfg(feature = "wgpu")]
         if let Some(g) = self.runtime.gpu() {
-            return field.on_gpu(g);
+            field = field.on_gpu(g)?;
         }
+        timings.field_ms = ms(t);
+        field.timings = timings;
         Ok(field)
     }
 }

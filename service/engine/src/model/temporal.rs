@@ -441,8 +441,9 @@ impl Temporal {
 
     /// Blend this frame's maps (made through `crop`, the crop [`Self::steady_input`] gave)
     /// with the last frame's, in place: the shape maps and, when given, the colour features.
-    /// Called once per frame after [`Self::steady_input`]; maps of another layout than the
-    /// last ones (a model switch) start again.
+    /// Called once per frame after [`Self::steady_input`]; shape maps of another layout than
+    /// the last ones (a model switch) start again; colour features that come back after
+    /// frames without them (or in another layout) start again on their own.
     pub fn steady_maps(
         &mut self,
         crop: Crop,
@@ -461,16 +462,8 @@ impl Temporal {
             self.maps = None;
             return;
         }
-        let same_layout = |last: &LastMaps, color: &Option<(MapLayout, &mut [f32])>| {
-            last.shape.0 == shape.0
-                && match (&last.color, color) {
-                    (Some((a, _)), Some((b, _))) => a == b,
-                    (None, None) => true,
-                    _ => false,
-                }
-        };
         match self.maps.take() {
-            Some(mut last) if self.dt > 0.0 && same_layout(&last, &color) => {
+            Some(mut last) if self.dt > 0.0 && last.shape.0 == shape.0 => {
                 // The last maps in this frame's crop (as they are when the crop did not
                 // move), once per map: the weights and the blend read the same values.
                 let l = shape.0;
@@ -483,24 +476,38 @@ impl Temporal {
                     resampled(&last.shape_taps, moved, l, &last.shape.1, &mut last.spare);
                 let weights = self.blend_weights(old, valid, l, shape.1, &mut last.rate);
                 blend(old, valid, l, shape.1, &weights);
-                if let (Some((_, lc)), Some((lcol, d))) = (&mut last.color, color.as_mut()) {
-                    let lcol = *lcol;
-                    let (w, taps, moved) = if lcol.size == l.size {
-                        (weights, &last.shape_taps, moved)
-                    } else {
-                        // The shape map's weights at the colour map's pixels (nearest:
-                        // both grids span the crop's NDC corner to corner).
-                        let (a, b) = (l.size - 1, lcol.size - 1);
-                        let near = |i: usize| (i * a + b / 2) / b;
-                        let w = (0..lcol.size * lcol.size)
-                            .map(|p| weights[near(p / lcol.size) * l.size + near(p % lcol.size)])
-                            .collect();
-                        let moved = last.color_taps.set(lcol.size, last.crop, crop);
-                        (w, &last.color_taps, moved)
-                    };
-                    let (old, valid) = resampled(taps, moved, lcol, lc, &mut last.spare_color);
-                    blend(old, valid, lcol, d, &w);
-                    lc.copy_from_slice(d);
+                match (&mut last.color, color.as_mut()) {
+                    (Some((llast, lc)), Some((lcol, d))) if *llast == *lcol => {
+                        let lcol = *lcol;
+                        let (w, taps, moved) = if lcol.size == l.size {
+                            (weights, &last.shape_taps, moved)
+                        } else {
+                            // The shape map's weights at the colour map's pixels (nearest:
+                            // both grids span the crop's NDC corner to corner).
+                            let (a, b) = (l.size - 1, lcol.size - 1);
+                            let near = |i: usize| (i * a + b / 2) / b;
+                            let w = (0..lcol.size * lcol.size)
+                                .map(|p| {
+                                    weights[near(p / lcol.size) * l.size + near(p % lcol.size)]
+                                })
+                                .collect();
+                            let moved = last.color_taps.set(lcol.size, last.crop, crop);
+                            (w, &last.color_taps, moved)
+                        };
+                        let (old, valid) = resampled(taps, moved, lcol, lc, &mut last.spare_color);
+                        blend(old, valid, lcol, d, &w);
+                        lc.copy_from_slice(d);
+                    }
+                    // Colour features again (the view turned away from the camera's: the
+                    // encoder runs again) or of another layout: they start from this frame,
+                    // the shape maps' filter goes on.
+                    (_, Some((lcol, d))) => {
+                        last.color = Some((*lcol, d.to_vec()));
+                        last.color_taps = Taps::default();
+                    }
+                    // None this frame (the camera's own view takes the input's colours and
+                    // the encoder does not run): forgotten.
+                    (_, None) => last.color = None,
                 }
                 // This frame's maps are the next one's last (in the same buffers).
                 last.shape.1.copy_from_slice(shape.1);

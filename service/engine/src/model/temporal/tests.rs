@@ -289,12 +289,10 @@ fn nothing_non_finite_comes_out_and_bad_settings_are_named() {
     assert!(TemporalSettings::default().check().is_ok());
 }
 
-#[test]
-fn colour_features_of_another_size_are_steadied_too() {
-    // The Fourier maps are 128 px, the colour features 64: the colour takes the shape
-    // map's weights at its own pixels.
-    let mut t = Temporal::new(TemporalSettings::default());
-    let (sl, cl) = (
+/// Fourier-like shape maps (interleaved, 16 px) and colour features of half their size
+/// (planar, 8 px), as the models' 128 and 64.
+fn shape_and_colour_layouts() -> (MapLayout, MapLayout) {
+    (
         MapLayout {
             channels: 3,
             size: 16,
@@ -305,7 +303,15 @@ fn colour_features_of_another_size_are_steadied_too() {
             size: 8,
             interleaved: false,
         },
-    );
+    )
+}
+
+#[test]
+fn colour_features_of_another_size_are_steadied_too() {
+    // The Fourier maps are 128 px, the colour features 64: the colour takes the shape
+    // map's weights at its own pixels.
+    let mut t = Temporal::new(TemporalSettings::default());
+    let (sl, cl) = shape_and_colour_layouts();
     let mut m = box_mask(100, 150, 40, 220, 0.95);
     let c = crop_of(&m);
     let (mut lo, mut hi) = (f32::MAX, f32::MIN);
@@ -328,6 +334,55 @@ fn colour_features_of_another_size_are_steadied_too() {
         worst < 0.004,
         "a colour tremor of 0.02 (peak to peak) came through as {worst}"
     );
+}
+
+#[test]
+fn colour_features_that_pause_start_again_without_the_shape_maps() {
+    // The camera's own view runs no colour encoder: frames without colour features keep
+    // the shape maps' filter going, and the features, when the view turns again, start
+    // from their own frame.
+    let mut t = Temporal::new(TemporalSettings::default());
+    let (sl, cl) = shape_and_colour_layouts();
+    let m = box_mask(100, 150, 40, 220, 0.95);
+    let c = crop_of(&m);
+    for k in 0..80 {
+        let mut m2 = m.clone();
+        let crop = t.steady_input(k as f64 / 30.0, 1, &mut m2, c).0.unwrap();
+        let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+        let mut shape = vec![0.5 + sign * 0.01; sl.len()];
+        let raw_color: Vec<f32> = vec![0.4 + sign * 0.01; cl.len()];
+        let mut color = raw_color.clone();
+        // Colour on frames 0..20 and from 40 on; none on 20..40 (the camera's view).
+        let with_color = !(20..40).contains(&k);
+        t.steady_maps(
+            crop,
+            (sl, &mut shape),
+            with_color.then_some((cl, &mut color[..])),
+        );
+        if k >= 10 {
+            // The shape maps' filter never starts again: the tremor stays averaged out,
+            // on the frames without colour and when it comes back.
+            let worst = shape.iter().map(|v| (v - 0.5).abs()).fold(0.0f32, f32::max);
+            assert!(
+                worst < 0.005,
+                "frame {k}: shape tremor of 0.01 came through as {worst}"
+            );
+        }
+        if k == 40 {
+            assert_eq!(
+                color, raw_color,
+                "the first colour frame back passes as it came"
+            );
+        }
+        // A second after it came back (the filter's time constant is ~0.5 s).
+        if k >= 70 {
+            let worst = color.iter().map(|v| (v - 0.4).abs()).fold(0.0f32, f32::max);
+            assert!(
+                worst < 0.005,
+                "frame {k}: colour tremor of 0.01 came through as {worst}"
+            );
+        }
+    }
 }
 
 #[test]
