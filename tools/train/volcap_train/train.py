@@ -505,14 +505,22 @@ def train_fourier(args):
     # the device's losses). The rest of "steps" is the net's forward and backward.
     parts = {"batch": 0.0, "ohem update": 0.0}
 
+    def synced():
+        # --sync-parts: the device's queue drained at a part's edges (asynchronous launches
+        # otherwise land in whichever part next waits for the device).
+        if args.sync_parts and dev.type == "cuda":
+            torch.cuda.synchronize(dev)
+
     def step_fn(step):
         for gparam in opt.param_groups:
             gparam["lr"] = args.lr * 0.5 * (1 + math.cos(math.pi * run.progress(step, sched_total)))
+        synced()
         tb = time.time()
         items = ohem.sample_items(args.batch, gen)
         pidx = ohem.sample_points(items, args.points, gen)
         x = inputs(tr, items, None if args.no_aug else agen)
         target = targets(tr, items)
+        synced()
         parts["batch"] += time.time() - tb
         flips = (torch.rand(len(items), generator=gen) < 0.5).to(dev) if args.flip else None
         pred, d = net(mirror_some(x, flips), with_centre=True)
@@ -537,6 +545,7 @@ def train_fourier(args):
         opt.zero_grad()
         loss.backward()
         opt.step()
+        synced()
         tb = time.time()
         ohem.update(items, pidx, bce.detach().cpu(), occ.detach().cpu(), lab.cpu())
         parts["ohem update"] += time.time() - tb
@@ -584,6 +593,7 @@ def main(argv=None):
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
     ap.add_argument("--seg", type=Path, default=None, help="Fourier: crops and mask channels from this ONNX segmentation model's masks (e.g. ../../models/seg.onnx, the product's) instead of the ground truth's (seg_masks)")
     ap.add_argument("--ckpt-every", type=int, default=100)
+    ap.add_argument("--sync-parts", action="store_true", help="fourier on a GPU: wait for the device before and after each timed part of a step (budget.json time_s), so a part holds its own work and not the device's queue; costs some rate")
     ap.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="fourier: where the net trains (auto: CUDA when present)")
     ap.add_argument("--data-device", default="auto", choices=["auto", "host", "device"], help="fourier: where the training items live (auto: on the --device when it is a GPU and they take at most half its free memory; the batches are made there without the host)")
     ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
