@@ -114,14 +114,20 @@ fn first_hits(grid: &Grid, b: IndexBox, out: &mut Vec<i32>) {
     let mut open = (b.hi[0] - b.lo[0] + 1) * (b.hi[1] - b.lo[1] + 1);
     for k in (b.lo[2]..=b.hi[2]).rev() {
         let base = k * plane;
+        let kk = k as i32;
         for j in b.lo[1]..=b.hi[1] {
             let r = j * n;
-            for (i, h) in out[r + b.lo[0]..=r + b.hi[0]].iter_mut().enumerate() {
-                if *h < 0 && is_inside(grid.values[base + r + b.lo[0] + i]) {
-                    *h = k as i32;
-                    open -= 1;
-                }
+            let (lo, hi) = (r + b.lo[0], r + b.hi[0]);
+            let values = &grid.values[base + lo..=base + hi];
+            // Branch-free (vectorizes): most of the box's columns are background that no
+            // plane closes, so every plane of the box is read.
+            let mut found = 0usize;
+            for (h, &v) in out[lo..=hi].iter_mut().zip(values) {
+                let hit = (*h < 0) & is_inside(v);
+                *h = if hit { kk } else { *h };
+                found += hit as usize;
             }
+            open -= found;
         }
         if open == 0 {
             break;
