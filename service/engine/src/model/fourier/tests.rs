@@ -491,6 +491,32 @@ fn maps_refuse_bad_shapes_and_non_finite_values() {
     v[5] = f32::NAN;
     assert!(FourierMaps::from_planar(&v, 1, 2, 1.0).is_none());
     assert!(FourierMaps::from_planar(&[0.0; 12], 1, 2, 0.0).is_none());
+    // A non-finite value in the last of several chunks is found too.
+    let mut v = vec![0.0f32; 5 * 13 * 13];
+    v[5 * 169 - 1] = f32::INFINITY;
+    assert!(FourierMaps::from_planar(&v, 2, 13, 1.0).is_none());
+}
+
+#[test]
+fn planar_maps_are_interleaved_pixel_by_pixel() {
+    // Sizes whose pixel counts are and are not multiples of the transpose's blocks.
+    for (k, size) in [(2, 13), (15, 8), (15, 16), (3, 2)] {
+        let c = 2 * k + 1;
+        let plane = size * size;
+        let planar: Vec<f32> = (0..c * plane).map(|i| (i as f32 * 0.37).sin()).collect();
+        let maps = FourierMaps::from_planar(&planar, k, size, 1.0).unwrap();
+        let data = maps.coefficients();
+        assert_eq!(data.len(), planar.len());
+        for p in 0..plane {
+            for ch in 0..c {
+                assert_eq!(
+                    data[p * c + ch],
+                    planar[ch * plane + p],
+                    "k {k} size {size} pixel {p} channel {ch}"
+                );
+            }
+        }
+    }
 }
 
 proptest::proptest! {
