@@ -37,6 +37,29 @@ fn model_mode_renders_network_output() {
             .unwrap()
             .contains("trained networks")
     );
+    // Where the field and render stages' time goes, in /state and /metrics: the shape
+    // network and the localization timed; the camera's view runs no colour encoder.
+    let parts = &s["stage_parts"];
+    assert_eq!(parts.as_object().map(|o| o.len()), Some(8), "{s}");
+    assert!(
+        parts["field: shape net"]["p50_ms"].as_f64() > Some(0.0),
+        "{s}"
+    );
+    assert!(
+        parts["render: localize"]["p50_ms"].as_f64() > Some(0.0),
+        "{s}"
+    );
+    assert!(
+        parts["field: colour encoder"]["p99_ms"].as_f64() < Some(0.05),
+        "{s}"
+    );
+    let (st, _, metrics) = request(&d.addr, "GET", "/metrics", "");
+    assert_eq!(st, 200);
+    let metrics = String::from_utf8_lossy(&metrics);
+    assert!(
+        metrics.contains("volcap_stage_part_ms{part=\"field: temporal filter\",quantile=\"0.99\"}"),
+        "{metrics}"
+    );
     let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
     assert_eq!(st, 200);
     let png = image::load_from_memory(&png).unwrap().to_rgba8();

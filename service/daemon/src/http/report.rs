@@ -2,7 +2,7 @@
 //! the token) and `/metrics` (Prometheus text).
 
 use super::{App, peer_ip, token_refusal};
-use crate::pipeline::STAGES;
+use crate::pipeline::{STAGES, part};
 use axum::extract::{ConnectInfo, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
@@ -26,6 +26,22 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
             (n.to_string(), serde_json::json!({"p50_ms": p50, "p99_ms": p99, "frames": s.frames.load(Ordering::Relaxed), "superseded": s.superseded.load(Ordering::Relaxed), "lost": s.lost.load(Ordering::Relaxed)}))
         })
         .collect();
+    // Model mode: where the field and render stages' time goes (`pipeline::part`).
+    let parts: serde_json::Map<String, serde_json::Value> = if sh.mode == "model" {
+        part::NAMES
+            .iter()
+            .zip(&sh.parts)
+            .map(|(n, s)| {
+                let (p50, p99) = s.percentiles();
+                (
+                    n.to_string(),
+                    serde_json::json!({"p50_ms": p50, "p99_ms": p99}),
+                )
+            })
+            .collect()
+    } else {
+        serde_json::Map::new()
+    };
     let (l50, l99) = sh.e2e.percentiles();
     let published = sh.e2e.frames.load(Ordering::Relaxed);
     let up = sh.started.elapsed().as_secs_f64();
@@ -79,6 +95,7 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         "fps": if up > 0.0 { published as f64 / up } else { 0.0 },
         "latency_ms": {"p50": l50, "p99": l99},
         "stages": stages,
+        "stage_parts": parts,
         "stage_notes": {
             "superseded": SUPERSEDED_NOTE,
             "lost": "frames a stage failed on (an error): frames lost",
@@ -125,6 +142,13 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
     for (n, st) in STAGES.iter().zip(&sh.stats) {
         let (p50, p99) = st.percentiles();
         s.push_str(&format!("volcap_stage_ms{{stage=\"{n}\",quantile=\"0.5\"}} {p50}\nvolcap_stage_ms{{stage=\"{n}\",quantile=\"0.99\"}} {p99}\n"));
+    }
+    if sh.mode == "model" {
+        s.push_str("# HELP volcap_stage_part_ms the field and render stages' parts (model mode)\n# TYPE volcap_stage_part_ms summary\n");
+        for (n, st) in part::NAMES.iter().zip(&sh.parts) {
+            let (p50, p99) = st.percentiles();
+            s.push_str(&format!("volcap_stage_part_ms{{part=\"{n}\",quantile=\"0.5\"}} {p50}\nvolcap_stage_part_ms{{part=\"{n}\",quantile=\"0.99\"}} {p99}\n"));
+        }
     }
     s.push_str(&format!(
         "# HELP volcap_stage_superseded_total {SUPERSEDED_NOTE}\n# TYPE volcap_stage_superseded_total counter\n"
