@@ -27,7 +27,7 @@
 
 use super::preprocess::INPUT_SIZE;
 use super::sample::taps;
-use super::{IMG, InputSpec, ModelError, Net, Precision, meta_of, meta_usize};
+use super::{IMG, InputSpec, ModelError, Net, Precision, all_finite, meta_of, meta_usize};
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
@@ -208,11 +208,7 @@ impl FourierMaps {
         if size < 2 || planar.len() != c * plane || !zeta_scale.is_finite() || zeta_scale <= 0.0 {
             return None;
         }
-        // Branch-free within a chunk (vectorizes): every value finite.
-        let finite = planar
-            .chunks(64)
-            .all(|ch| ch.iter().fold(true, |ok, v| ok & v.is_finite()));
-        if !finite {
+        if !all_finite(planar) {
             return None;
         }
         // The transpose in blocks of pixels whose interleaved values stay in the L1 cache

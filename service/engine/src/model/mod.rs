@@ -381,6 +381,13 @@ pub struct FrameInfo {
     pub close_range: bool,
 }
 
+/// Whether every value of `d` is finite: branch-free within chunks of 64 (it vectorizes),
+/// for the maps checked once a frame (`FourierMaps::from_planar`, the temporal filter).
+pub(crate) fn all_finite(d: &[f32]) -> bool {
+    d.chunks(64)
+        .all(|c| c.iter().fold(true, |ok, v| ok & v.is_finite()))
+}
+
 /// The render view relative to the input camera: rotation about the crop centre (yaw about
 /// the vertical axis, then pitch), and a zoom (1 = the crop).
 #[derive(Debug, Clone, Copy, PartialEq)]

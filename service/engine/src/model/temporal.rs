@@ -34,6 +34,7 @@
 //! time (a camera reconnect, a pause) or a frame without a person. Every output is finite
 //! whatever the input (non-finite inputs reset the state and pass through as they came).
 
+use super::all_finite;
 use super::preprocess::Crop;
 
 /// The filter's settings (`[temporal]` in volcapd's config).
@@ -451,13 +452,10 @@ impl Temporal {
         mut color: Option<(MapLayout, &mut [f32])>,
     ) {
         let fits = |l: MapLayout, d: &[f32]| l.size >= 2 && l.channels > 0 && d.len() == l.len();
-        // Branch-free within a chunk (vectorizes): every value finite.
-        let finite = |d: &[f32]| {
-            d.chunks(64)
-                .all(|c| c.iter().fold(true, |ok, v| ok & v.is_finite()))
-        };
-        let shape_ok = fits(shape.0, shape.1) && finite(shape.1);
-        let color_ok = color.as_ref().is_none_or(|(l, d)| fits(*l, d) && finite(d));
+        let shape_ok = fits(shape.0, shape.1) && all_finite(shape.1);
+        let color_ok = color
+            .as_ref()
+            .is_none_or(|(l, d)| fits(*l, d) && all_finite(d));
         if !(shape_ok && color_ok) {
             self.maps = None;
             return;
