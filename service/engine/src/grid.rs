@@ -282,7 +282,15 @@ pub struct Grid {
     /// A box holding every unevaluated point whose value may be non-zero (`None`: unknown,
     /// anywhere). Kept by the sparse methods (see [`Grid::reset_sparse`]).
     written: Option<IndexBox>,
+    /// Within `written`, per row `j + n k` the x span `[lo, hi]` holding its written points
+    /// (`lo > hi`: none), when `spans_exact` (every write recorded by row,
+    /// [`Grid::written_spans`]); otherwise the whole box counts as written.
+    spans: Vec<[u32; 2]>,
+    spans_exact: bool,
 }
+
+/// A row span holding nothing.
+pub const NO_SPAN: [u32; 2] = [u32::MAX, 0];
 
 impl Default for IndexBox {
     fn default() -> Self {
@@ -350,6 +358,8 @@ impl Grid {
             values: vec![0.0; spec.len()],
             evaluated: BitSet::new(spec.len()),
             written: Some(IndexBox::EMPTY),
+            spans: vec![NO_SPAN; spec.n() * spec.n()],
+            spans_exact: true,
         }
     }
 
@@ -360,6 +370,7 @@ impl Grid {
         self.values.resize(spec.len(), 0.0);
         self.evaluated.reset(spec.len());
         self.written = None;
+        self.spans_exact = false;
     }
 
     /// Re-target the grid to `spec` with every value 0.0 and nothing evaluated, at the cost
@@ -377,24 +388,41 @@ impl Grid {
                 // Clears `evaluated` too, touching only its non-zero words.
                 let values = &mut self.values;
                 self.evaluated.drain_ones(|i| values[i] = 0.0);
+                let n = spec.n();
+                let exact = self.spans_exact && self.spans.len() == n * n;
                 if !b.is_empty() {
-                    let n = spec.n();
                     for k in b.lo[2]..=b.hi[2] {
                         for j in b.lo[1]..=b.hi[1] {
-                            let row = n * (j + n * k);
-                            self.values[row + b.lo[0]..=row + b.hi[0]].fill(0.0);
+                            let id = j + n * k;
+                            // The row's written span, or the box's width.
+                            let [lo, hi] = if exact {
+                                std::mem::replace(&mut self.spans[id], NO_SPAN)
+                            } else {
+                                [b.lo[0] as u32, b.hi[0] as u32]
+                            };
+                            let (lo, hi) = ((lo as usize).max(b.lo[0]), (hi as usize).min(b.hi[0]));
+                            if lo <= hi {
+                                self.values[n * id + lo..=n * id + hi].fill(0.0);
+                            }
                         }
                     }
+                }
+                if !exact {
+                    self.spans.clear();
+                    self.spans.resize(n * n, NO_SPAN);
                 }
             }
             _ => {
                 self.values.clear();
                 self.values.resize(spec.len(), 0.0);
                 self.evaluated.reset(spec.len());
+                self.spans.clear();
+                self.spans.resize(spec.n() * spec.n(), NO_SPAN);
             }
         }
         self.spec = spec;
         self.written = Some(IndexBox::EMPTY);
+        self.spans_exact = true;
     }
 
     /// Record that unevaluated values inside `b` may have been written (sparse methods).
@@ -402,6 +430,17 @@ impl Grid {
         if let Some(w) = &mut self.written {
             *w = w.union(&b);
         }
+        self.spans_exact = false;
+    }
+
+    /// For a sparse method about to write unevaluated values inside `b`: the values, and per
+    /// row `j + n k` the span of its written points, which the caller widens to hold every
+    /// point it writes in that row (so that [`Grid::reset_sparse`] clears only those).
+    pub fn written_spans(&mut self, b: IndexBox) -> (&mut [f32], &mut [[u32; 2]]) {
+        if let Some(w) = &mut self.written {
+            *w = w.union(&b);
+        }
+        (&mut self.values, &mut self.spans)
     }
 
     pub fn spec(&self) -> GridSpec {

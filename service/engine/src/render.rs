@@ -143,7 +143,12 @@ impl Renderer {
 
         // 2. Upsample to L, coarse hits per pixel.
         self.hier.upsample(grid, big_l);
-        first_hits(grid, self.hier.inside_box(), &mut self.coarse_hit);
+        first_hits(
+            grid,
+            self.hier.inside_box(),
+            self.hier.row_extents(),
+            &mut self.coarse_hit,
+        );
 
         // 3. Evaluate the candidates in front of (or at) the coarse hit.
         self.hier.dilate(grid, big_l, |_| true);
@@ -607,7 +612,8 @@ mod tests {
                     lo: [0; 3],
                     hi: [n - 1; 3],
                 };
-                first_hits(r.grid.as_ref().unwrap(), all, &mut full);
+                let rows = vec![[0, n as u32 - 1]; n * n];
+                first_hits(r.grid.as_ref().unwrap(), all, &rows, &mut full);
                 assert_eq!(r.hit, full, "{name} at level {level}");
             }
         }

@@ -5,8 +5,11 @@
 use crate::grid::{Grid, GridSpec, IndexBox, is_inside};
 
 /// Per-column first inside node from the front, or -1, given a box `b` that holds every
-/// inside node. Scans the box's planes front to back, row by row, so memory is read in order.
-pub(super) fn first_hits(grid: &Grid, b: IndexBox, out: &mut Vec<i32>) {
+/// inside node and per row `j + n k` an x extent `rows` holding the row's inside nodes
+/// ([`crate::localize::Hierarchical`]'s row extents). Scans the box's planes front to back,
+/// each row over its extent only (most of the box's rows are empty or short), so memory is
+/// read in order.
+pub(super) fn first_hits(grid: &Grid, b: IndexBox, rows: &[[u32; 2]], out: &mut Vec<i32>) {
     let n = grid.spec().n();
     let plane = n * n;
     out.clear();
@@ -14,26 +17,23 @@ pub(super) fn first_hits(grid: &Grid, b: IndexBox, out: &mut Vec<i32>) {
     if b.is_empty() {
         return;
     }
-    let mut open = (b.hi[0] - b.lo[0] + 1) * (b.hi[1] - b.lo[1] + 1);
     for k in (b.lo[2]..=b.hi[2]).rev() {
         let base = k * plane;
         let kk = k as i32;
         for j in b.lo[1]..=b.hi[1] {
+            let [lo, hi] = rows[j + n * k];
+            let (lo, hi) = ((lo as usize).max(b.lo[0]), (hi as usize).min(b.hi[0]));
+            if lo > hi {
+                continue;
+            }
             let r = j * n;
-            let (lo, hi) = (r + b.lo[0], r + b.hi[0]);
+            let (lo, hi) = (r + lo, r + hi);
             let values = &grid.values[base + lo..=base + hi];
-            // Branch-free (vectorizes): most of the box's columns are background that no
-            // plane closes, so every plane of the box is read.
-            let mut found = 0usize;
+            // Branch-free (vectorizes).
             for (h, &v) in out[lo..=hi].iter_mut().zip(values) {
                 let hit = (*h < 0) & is_inside(v);
                 *h = if hit { kk } else { *h };
-                found += hit as usize;
             }
-            open -= found;
-        }
-        if open == 0 {
-            break;
         }
     }
 }

@@ -577,3 +577,85 @@ proptest::proptest! {
         proptest::prop_assert_eq!(maps.decodes(), full);
     }
 }
+
+/// The block evaluation's side-by-side recurrences give each point exactly the basis of
+/// [`basis`] / [`cosine_basis`] (the same operations in the same order), ends included.
+#[test]
+fn basis_of_a_block_equals_the_basis_of_each_point() {
+    for kind in [Basis::Fourier, Basis::Cosine] {
+        for k in [0usize, 1, 3, 7, 15, 31] {
+            let c = 2 * k + 1;
+            let zeta: [f32; LANES] = [-1.0, 1.0, 0.0, 0.3, -0.77, 0.999, -1e-7, 0.5];
+            let mut out = vec![f32::NAN; LANES * c];
+            lane_basis(kind, &zeta, k, c, &mut out);
+            let mut one = vec![0.0f32; c];
+            for (l, z) in zeta.iter().enumerate() {
+                kind.values(*z, k, &mut one);
+                assert_eq!(
+                    &out[l * c..(l + 1) * c],
+                    &one[..],
+                    "{kind:?} k {k} zeta {z}"
+                );
+            }
+        }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(96))]
+
+    /// Occupancy against an f64 sum of the same series (each tap's coefficients times the
+    /// point's basis, blended by the bilinear weights, offset, clamped), for every order,
+    /// both bases, point counts in and off the blocks, and points outside the depth range
+    /// or not finite (0).
+    #[test]
+    fn occupancy_equals_the_series_summed_in_f64(
+        k in proptest::sample::select(vec![0usize, 1, 3, 7, 15, 31]),
+        size in 2usize..7,
+        cosine in proptest::bool::ANY,
+        iso in 0.3f32..0.7,
+        seed in 0u64..1_000_000,
+        n in 0usize..41,
+    ) {
+        let c = 2 * k + 1;
+        let mut s = seed.wrapping_mul(2862933555777941757).wrapping_add(3037000493);
+        let mut rnd = move || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let planar: Vec<f32> = (0..c * size * size).map(|_| rnd() * 0.4).collect();
+        let basis = if cosine { Basis::Cosine } else { Basis::Fourier };
+        let maps = FourierMaps::from_planar(&planar, k, size, 1.25)
+            .unwrap()
+            .with_basis(basis)
+            .with_iso_level(iso);
+        let pts: Vec<Vec3> = (0..n)
+            .map(|i| match i % 11 {
+                5 => Vec3::new(rnd(), rnd(), f32::NAN),
+                7 => Vec3::new(f32::INFINITY, rnd(), 0.1),
+                9 => Vec3::new(rnd(), rnd(), 0.9),
+                _ => Vec3::new(rnd() * 1.2, rnd() * 1.2, rnd() * 0.8),
+            })
+            .collect();
+        let mut out = vec![f32::NAN; n];
+        maps.occupancy(&pts, &mut out, &mut Vec::new());
+        let mut b = vec![0.0f32; c];
+        for (p, o) in pts.iter().zip(&out) {
+            let zeta = p.z * 1.25;
+            if !(p.is_finite() && zeta.abs() <= 1.0) {
+                proptest::prop_assert_eq!(*o, 0.0);
+                continue;
+            }
+            basis.values(zeta, k, &mut b);
+            let (idx, w) = taps(size, size, p.x, p.y);
+            let mut acc = 0.0f64;
+            for t in 0..4 {
+                let m = &maps.coefficients()[idx[t] * c..(idx[t] + 1) * c];
+                let d: f64 = m.iter().zip(&b).map(|(x, y)| *x as f64 * *y as f64).sum();
+                acc += w[t] as f64 * d;
+            }
+            let want = (acc + (0.5 - iso) as f64).clamp(0.0, 1.0);
+            proptest::prop_assert!((*o as f64 - want).abs() < 1e-5, "{} vs {}", o, want);
+        }
+    }
+}
