@@ -174,7 +174,6 @@ impl OccupancyField for ModelField {
         let s = INPUT_SIZE;
         let mut idx = Vec::with_capacity(points.len());
         let mut q = Vec::with_capacity(points.len());
-        let mut m = [0.0f32];
         for (i, p) in points.iter().enumerate() {
             // A non-finite point is refused wherever it falls (inside or outside the
             // silhouette, either shape family): a NaN is never encoded or read as "outside".
@@ -190,9 +189,9 @@ impl OccupancyField for ModelField {
                 });
             }
             let u = self.to_crop(*p);
-            sample::bilinear(&self.mask, 1, s, s, u.x, u.y, &mut m);
+            // Outside the crop's square first: the mask is not read there.
             let outside_cube = u.x.abs() > 1.0 || u.y.abs() > 1.0;
-            if m[0] < 0.5 || outside_cube {
+            if outside_cube || sample::bilinear1(&self.mask, s, s, u.x, u.y) < 0.5 {
                 out[i] = 0.0;
             } else {
                 idx.push(i);

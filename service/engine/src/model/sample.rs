@@ -34,6 +34,14 @@ pub fn taps(h: usize, w: usize, x: f32, y: f32) -> ([usize; 4], [f32; 4]) {
     )
 }
 
+/// [`bilinear`] of a one-channel `[H, W]` map (the same value), inlined where a caller
+/// samples it once per point (the person mask of every field evaluation).
+#[inline]
+pub fn bilinear1(feat: &[f32], h: usize, w: usize, x: f32, y: f32) -> f32 {
+    let ([i00, i10, i01, i11], [w00, w10, w01, w11]) = taps(h, w, x, y);
+    feat[i00] * w00 + feat[i10] * w10 + feat[i01] * w01 + feat[i11] * w11
+}
+
 /// Sample planar features `[C, H, W]` at NDC `(x, y)` (x right, y down) into `out[..C]`.
 /// Non-finite coordinates are treated as the border's centre-most clamp (never NaN out).
 pub fn bilinear(feat: &[f32], c: usize, h: usize, w: usize, x: f32, y: f32, out: &mut [f32]) {
@@ -78,6 +86,7 @@ mod tests {
             let y = -1.3 + 2.6 * ((k * 91 % 200) as f64 / 199.0);
             bilinear(&feat, 1, h, w, x as f32, y as f32, &mut o);
             let r = reference(&feat, h, w, x, y);
+            assert_eq!(bilinear1(&feat, h, w, x as f32, y as f32), o[0]);
             assert!(
                 (o[0] as f64 - r).abs() < 1e-5,
                 "({x}, {y}): {} vs {r}",
