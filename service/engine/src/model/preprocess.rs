@@ -253,26 +253,34 @@ impl Crop {
             let f = px.floor();
             (f as i64, px - f)
         };
-        let xs: Vec<(i64, f32)> = (0..size).map(|x| taps(self.s * ndc(x) + self.tx)).collect();
-        let ys: Vec<(i64, f32)> = (0..size).map(|y| taps(self.s * ndc(y) + self.ty)).collect();
         let n = size as i64;
+        // Per column (and per row) its two taps' indices, clamped into the image, and
+        // weights, 0 for a tap outside it (which reads as 0: the image's values are finite,
+        // so the clamped pixel times 0 adds nothing, and no bounds test is left per pixel).
+        let pair = |(i, w): (i64, f32)| {
+            let inside = |k: i64| (0..n).contains(&k);
+            let clamp = |k: i64| k.clamp(0, n - 1) as usize;
+            (
+                [clamp(i), clamp(i + 1)],
+                [
+                    if inside(i) { 1.0 - w } else { 0.0 },
+                    if inside(i + 1) { w } else { 0.0 },
+                ],
+            )
+        };
+        let xs: Vec<([usize; 2], [f32; 2])> = (0..size)
+            .map(|x| pair(taps(self.s * ndc(x) + self.tx)))
+            .collect();
+        let ys: Vec<([usize; 2], [f32; 2])> = (0..size)
+            .map(|y| pair(taps(self.s * ndc(y) + self.ty)))
+            .collect();
         for c in 0..channels {
             let src = &img[c * plane..(c + 1) * plane];
             let dst = &mut out[c * plane..(c + 1) * plane];
-            for (drow, &(iy, wy)) in dst.chunks_exact_mut(size).zip(&ys) {
-                let row = |yy: i64| {
-                    (0..n)
-                        .contains(&yy)
-                        .then(|| &src[yy as usize * size..][..size])
-                };
-                let (r0, r1) = (row(iy), row(iy + 1));
-                let at = |r: Option<&[f32]>, xx: i64| match r {
-                    Some(r) if (0..n).contains(&xx) => r[xx as usize],
-                    _ => 0.0,
-                };
-                for (o, &(ix, wx)) in drow.iter_mut().zip(&xs) {
-                    *o = (at(r0, ix) * (1.0 - wx) + at(r0, ix + 1) * wx) * (1.0 - wy)
-                        + (at(r1, ix) * (1.0 - wx) + at(r1, ix + 1) * wx) * wy;
+            for (drow, &([y0, y1], [wy0, wy1])) in dst.chunks_exact_mut(size).zip(&ys) {
+                let (r0, r1) = (&src[y0 * size..][..size], &src[y1 * size..][..size]);
+                for (o, &([x0, x1], [wx0, wx1])) in drow.iter_mut().zip(&xs) {
+                    *o = (r0[x0] * wx0 + r0[x1] * wx1) * wy0 + (r1[x0] * wx0 + r1[x1] * wx1) * wy1;
                 }
             }
         }
