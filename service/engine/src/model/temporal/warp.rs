@@ -69,11 +69,7 @@ impl Taps {
             // the four taps' pixels blended channel by channel (vectorizes).
             out.resize(data.len(), 0.0);
             let px = |t: usize| &data[t * c..(t + 1) * c];
-            for ((o, (idx, w)), ok) in out
-                .chunks_exact_mut(c)
-                .zip(&self.taps)
-                .zip(&self.valid)
-            {
+            for ((o, (idx, w)), ok) in out.chunks_exact_mut(c).zip(&self.taps).zip(&self.valid) {
                 if !ok {
                     o.fill(0.0);
                     continue;
