@@ -331,11 +331,21 @@ pub fn composite_over(rgba: &[u8], bg: [f32; 4], pad: bool, out: &mut Vec<u8>) {
     out.clear();
     let n = if pad { 4 } else { 3 };
     out.reserve(rgba.len() / 4 * n);
+    let mix =
+        |p: &[u8], c: usize, a: f32| (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8;
+    // A render's pixels are opaque (the person) or clear (the background): those two take
+    // the pixel or the background as the rule gives them, without its arithmetic per channel.
+    let clear = [0, 1, 2].map(|c| mix(&[0, 0, 0], c, 0.0));
     for p in rgba.chunks_exact(4) {
-        let a = p[3] as f32 / 255.0;
-        for c in 0..3 {
-            out.push((p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8);
-        }
+        let rgb = match p[3] {
+            255 => [p[0], p[1], p[2]],
+            0 => clear,
+            a => {
+                let a = a as f32 / 255.0;
+                [mix(p, 0, a), mix(p, 1, a), mix(p, 2, a)]
+            }
+        };
+        out.extend_from_slice(&rgb);
         if pad {
             out.push(255);
         }
@@ -649,6 +659,44 @@ pub fn start(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Compositing equals the rule `round(p a + bg 255 (1 - a))` at every alpha (the opaque
+    /// and clear pixels' shortcuts included), with and without the padding byte.
+    #[test]
+    fn composite_equals_the_rule_at_every_alpha() {
+        let rgba: Vec<u8> = (0..256usize)
+            .flat_map(|a| {
+                [
+                    (a * 7 % 256) as u8,
+                    (a * 13 % 256) as u8,
+                    255 - a as u8,
+                    a as u8,
+                ]
+            })
+            .collect();
+        for bg in [
+            [0.0f32, 0.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0, 1.0],
+            [0.2, 0.55, 0.9, 0.0],
+        ] {
+            for pad in [false, true] {
+                let mut out = Vec::new();
+                composite_over(&rgba, bg, pad, &mut out);
+                let n = if pad { 4 } else { 3 };
+                assert_eq!(out.len(), 256 * n);
+                for (p, o) in rgba.chunks_exact(4).zip(out.chunks_exact(n)) {
+                    let a = p[3] as f32 / 255.0;
+                    for c in 0..3 {
+                        let want = (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8;
+                        assert_eq!(o[c], want, "alpha {} channel {c}", p[3]);
+                    }
+                    if pad {
+                        assert_eq!(o[3], 255);
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn letterbox_keeps_aspect_and_centres() {
