@@ -208,6 +208,18 @@ impl BitSet {
         (self.words[i >> 6] >> (i & 63)) & 1 == 1
     }
 
+    /// Whether every bit of `mask` (at most 8 bits wide) is set in the bits from `i` on:
+    /// bit `b` of `mask` stands for bit `i + b`. One or two word reads.
+    #[inline]
+    pub fn all_set(&self, i: usize, mask: u64) -> bool {
+        let (w, b) = (i >> 6, i & 63);
+        let mut bits = self.words[w] >> b;
+        if b > 56 {
+            bits |= self.words.get(w + 1).map_or(0, |x| x << (64 - b));
+        }
+        bits & mask == mask
+    }
+
     #[inline]
     pub fn set(&mut self, i: usize) {
         self.words[i >> 6] |= 1u64 << (i & 63);
@@ -514,6 +526,23 @@ pub fn offset(idx: [usize; 3], off: [i32; 3], stride: usize, n: usize) -> Option
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `all_set` agrees with bit-by-bit tests at every offset, across word boundaries and at
+    /// the set's last word.
+    #[test]
+    fn all_set_agrees_with_each_bit() {
+        let len = 200;
+        let mut b = BitSet::new(len);
+        for i in (0..len).filter(|i| i % 7 != 3 && i % 11 != 5) {
+            b.set(i);
+        }
+        for i in 0..len - 3 {
+            for mask in [0b1u64, 0b101, 0b111, 0b110] {
+                let want = (0..3).all(|x| mask >> x & 1 == 0 || b.get(i + x));
+                assert_eq!(b.all_set(i, mask), want, "at {i} mask {mask:b}");
+            }
+        }
+    }
 
     #[test]
     fn unlinear_by_multiplication_equals_division() {

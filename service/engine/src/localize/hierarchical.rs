@@ -280,6 +280,40 @@ impl Hierarchical {
                 let (n, s) = (n as isize, s as isize);
                 s * (o[0] as isize + n * (o[1] as isize + n * o[2] as isize))
             });
+            if s == 1 {
+                // At the finest stride a ring is 9 rows of 3 neighbouring points (the
+                // centre's row without the centre, which comes last, as in `ring`): a row
+                // whose points are all queued already (most of them: neighbouring
+                // candidates share their rings) is passed over with one test of the bits.
+                let rows: [isize; 9] = std::array::from_fn(|r| {
+                    let (n, dy, dz) = (n as isize, r as isize % 3 - 1, r as isize / 3 - 1);
+                    n * (dy + n * dz)
+                });
+                for &c in &self.cand {
+                    for (r, d) in rows.iter().enumerate() {
+                        let first = (c as isize + d - 1) as usize;
+                        let mask = if r == 4 { 0b101 } else { 0b111 };
+                        if self.queued.all_set(first, mask) {
+                            continue;
+                        }
+                        for x in 0..3 {
+                            let ql = first + x;
+                            if mask >> x & 1 == 1 && !self.queued.get(ql) && keep(ql) {
+                                self.queued.set(ql);
+                                self.batch.push(ql as u32);
+                                self.pre.push(grid.values[ql]);
+                            }
+                        }
+                    }
+                    let ql = c as usize;
+                    if !self.queued.get(ql) && keep(ql) {
+                        self.queued.set(ql);
+                        self.batch.push(ql as u32);
+                        self.pre.push(grid.values[ql]);
+                    }
+                }
+                return;
+            }
             for &c in &self.cand {
                 for d in ring {
                     let ql = (c as isize + d) as usize;
@@ -461,6 +495,49 @@ mod tests {
     use super::*;
     use crate::analytic::AnalyticScene;
     use crate::grid::GridSpec;
+
+    /// The dilation lists, in order, each candidate's 26 neighbours and then itself, those
+    /// not yet queued and kept (the rule, point by point), at every stride, with and without
+    /// a filter.
+    #[test]
+    fn dilation_lists_each_ring_in_order() {
+        for name in ["capsule-human", "two-bodies", "thin-plate", "noise"] {
+            let scene = AnalyticScene::by_name(name).unwrap();
+            let spec = GridSpec::new(7).unwrap();
+            for l in 4..=7 {
+                for filtered in [false, true] {
+                    let keep = |q: usize| !filtered || !q.is_multiple_of(3);
+                    let mut grid = Grid::new(spec);
+                    grid.reset_sparse(spec);
+                    let mut h = Hierarchical::default();
+                    let mut ev = Evaluator::new(&scene);
+                    h.run(&mut ev, &mut grid, 3, l - 1, HierarchicalMode::Paper)
+                        .unwrap();
+                    h.upsample(&mut grid, l);
+                    let (n, st) = (spec.n(), spec.stride(l));
+                    let mut queued = h.queued.clone();
+                    let mut want = Vec::new();
+                    for &c in &h.cand {
+                        let ci = spec.unlinear(c as usize);
+                        for off in RING26.iter().chain(std::iter::once(&[0, 0, 0])) {
+                            if let Some(q) = offset(ci, *off, st, n) {
+                                let ql = spec.linear(q);
+                                if !queued.get(ql) && keep(ql) {
+                                    queued.set(ql);
+                                    want.push(ql as u32);
+                                }
+                            }
+                        }
+                    }
+                    h.dilate(&grid, l, keep);
+                    assert!(!want.is_empty(), "{name} level {l}");
+                    assert_eq!(h.batch, want, "{name} level {l} filtered {filtered}");
+                    let pre: Vec<f32> = want.iter().map(|&q| grid.values[q as usize]).collect();
+                    assert_eq!(h.pre, pre);
+                }
+            }
+        }
+    }
 
     /// After frames of different scenes and levels, [`Grid::reset_sparse`] leaves every
     /// value 0 and nothing evaluated, clearing only the rows' written spans; a write recorded
