@@ -295,10 +295,8 @@ pub struct Grid {
     /// anywhere). Kept by the sparse methods (see [`Grid::reset_sparse`]).
     written: Option<IndexBox>,
     /// Within `written`, per row `j + n k` the x span `[lo, hi]` holding its written points
-    /// (`lo > hi`: none), when `spans_exact` (every write recorded by row,
-    /// [`Grid::written_spans`]); otherwise the whole box counts as written.
+    /// (`lo > hi`: none; [`Grid::written_spans`]).
     spans: Vec<[u32; 2]>,
-    spans_exact: bool,
 }
 
 /// A row span holding nothing.
@@ -371,7 +369,6 @@ impl Grid {
             evaluated: BitSet::new(spec.len()),
             written: Some(IndexBox::EMPTY),
             spans: vec![NO_SPAN; spec.n() * spec.n()],
-            spans_exact: true,
         }
     }
 
@@ -382,46 +379,36 @@ impl Grid {
         self.values.resize(spec.len(), 0.0);
         self.evaluated.reset(spec.len());
         self.written = None;
-        self.spans_exact = false;
     }
 
     /// Re-target the grid to `spec` with every value 0.0 and nothing evaluated, at the cost
-    /// of what the previous frame wrote (its evaluated points and its written box) when the
-    /// grid was last filled by a sparse method, of the whole volume otherwise. A sparse
-    /// method then writes values only where they are non-zero and reports where
-    /// ([`Grid::mark_written`]).
+    /// of what the previous frame wrote (its evaluated points and each row's written span)
+    /// when the grid was last filled by a sparse method, of the whole volume otherwise. A
+    /// sparse method then writes values only where they are non-zero and reports where
+    /// ([`Grid::written_spans`]).
     pub fn reset_sparse(&mut self, spec: GridSpec) {
         match self.written {
             Some(b)
                 if spec == self.spec
                     && self.values.len() == spec.len()
-                    && self.evaluated.len() == spec.len() =>
+                    && self.evaluated.len() == spec.len()
+                    && self.spans.len() == spec.n() * spec.n() =>
             {
                 // Clears `evaluated` too, touching only its non-zero words.
                 let values = &mut self.values;
                 self.evaluated.drain_ones(|i| values[i] = 0.0);
                 let n = spec.n();
-                let exact = self.spans_exact && self.spans.len() == n * n;
                 if !b.is_empty() {
                     for k in b.lo[2]..=b.hi[2] {
                         for j in b.lo[1]..=b.hi[1] {
                             let id = j + n * k;
-                            // The row's written span, or the box's width.
-                            let [lo, hi] = if exact {
-                                std::mem::replace(&mut self.spans[id], NO_SPAN)
-                            } else {
-                                [b.lo[0] as u32, b.hi[0] as u32]
-                            };
-                            let (lo, hi) = ((lo as usize).max(b.lo[0]), (hi as usize).min(b.hi[0]));
+                            let [lo, hi] = std::mem::replace(&mut self.spans[id], NO_SPAN);
                             if lo <= hi {
+                                let (lo, hi) = (lo as usize, hi as usize);
                                 self.values[n * id + lo..=n * id + hi].fill(0.0);
                             }
                         }
                     }
-                }
-                if !exact {
-                    self.spans.clear();
-                    self.spans.resize(n * n, NO_SPAN);
                 }
             }
             _ => {
@@ -434,20 +421,12 @@ impl Grid {
         }
         self.spec = spec;
         self.written = Some(IndexBox::EMPTY);
-        self.spans_exact = true;
-    }
-
-    /// Record that unevaluated values inside `b` may have been written (sparse methods).
-    pub fn mark_written(&mut self, b: IndexBox) {
-        if let Some(w) = &mut self.written {
-            *w = w.union(&b);
-        }
-        self.spans_exact = false;
     }
 
     /// For a sparse method about to write unevaluated values inside `b`: the values, and per
     /// row `j + n k` the span of its written points, which the caller widens to hold every
-    /// point it writes in that row (so that [`Grid::reset_sparse`] clears only those).
+    /// point it writes in that row, inside `b` (so that [`Grid::reset_sparse`] clears only
+    /// those).
     pub fn written_spans(&mut self, b: IndexBox) -> (&mut [f32], &mut [[u32; 2]]) {
         if let Some(w) = &mut self.written {
             *w = w.union(&b);

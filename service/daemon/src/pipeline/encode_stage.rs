@@ -42,9 +42,10 @@ pub(super) fn spawn(sh: Arc<Shared>, input: Arc<Slot<Rendered>>) -> std::thread:
         .expect("spawning the encode thread")
 }
 
-/// A published frame's JPEG (quality 85, chroma at full resolution as before) from its RGB pixels, `size x size`; `None`
-/// if the encoder refuses them (a side over 65,535 pixels or a short buffer).
-pub fn encode_jpeg(rgb: &[u8], size: usize) -> Option<Vec<u8>> {
+/// A published frame's JPEG (quality 85, chroma at full resolution, as the `image` crate's
+/// encoder made them before) from its RGB pixels, `size x size`; `None` if the encoder
+/// refuses them (a side over 65,535 pixels or a short buffer).
+pub(super) fn encode_jpeg(rgb: &[u8], size: usize) -> Option<Vec<u8>> {
     let side = u16::try_from(size).ok()?;
     if rgb.len() < size * size * 3 {
         return None;

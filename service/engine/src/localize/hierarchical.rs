@@ -271,73 +271,69 @@ impl Hierarchical {
         let (n, s) = (spec.n(), spec.stride(l));
         self.batch.clear();
         self.pre.clear();
+        // (The candidates are taken out for the loops, which queue through `self`.)
+        let cand = std::mem::take(&mut self.cand);
         let b = self.cand_box;
-        if !b.is_empty() && (0..3).all(|a| b.lo[a] >= s && b.hi[a] + s < n) {
-            // Every candidate is at least a stride from the border: its ring is the same
-            // linear offsets everywhere (same order as below).
+        // Every candidate is at least a stride from the border.
+        let interior = !b.is_empty() && (0..3).all(|a| b.lo[a] >= s && b.hi[a] + s < n);
+        if interior && s == 1 {
+            // Away from the border, and at the finest stride
+            // a ring is 9 rows of 3 neighbouring points (the centre's row without the centre,
+            // which comes last, as below): a row whose points are all queued already (most
+            // of them: neighbouring candidates share their rings) is passed over with one
+            // test of the bits.
+            let rows: [isize; 9] = std::array::from_fn(|r| {
+                let (n, dy, dz) = (n as isize, r as isize % 3 - 1, r as isize / 3 - 1);
+                n * (dy + n * dz)
+            });
+            for &c in &cand {
+                for (r, d) in rows.iter().enumerate() {
+                    let first = (c as isize + d - 1) as usize;
+                    let mask = if r == 4 { 0b101 } else { 0b111 };
+                    if self.queued.all_set(first, mask) {
+                        continue;
+                    }
+                    for x in 0..3 {
+                        if mask >> x & 1 == 1 {
+                            self.queue(grid, first + x, &keep);
+                        }
+                    }
+                }
+                self.queue(grid, c as usize, &keep);
+            }
+        } else if interior {
+            // Away from the border a ring is the same linear offsets everywhere (same order
+            // as below).
             let ring: [isize; 27] = std::array::from_fn(|r| {
                 let o = RING26.get(r).copied().unwrap_or([0, 0, 0]);
                 let (n, s) = (n as isize, s as isize);
                 s * (o[0] as isize + n * (o[1] as isize + n * o[2] as isize))
             });
-            if s == 1 {
-                // At the finest stride a ring is 9 rows of 3 neighbouring points (the
-                // centre's row without the centre, which comes last, as in `ring`): a row
-                // whose points are all queued already (most of them: neighbouring
-                // candidates share their rings) is passed over with one test of the bits.
-                let rows: [isize; 9] = std::array::from_fn(|r| {
-                    let (n, dy, dz) = (n as isize, r as isize % 3 - 1, r as isize / 3 - 1);
-                    n * (dy + n * dz)
-                });
-                for &c in &self.cand {
-                    for (r, d) in rows.iter().enumerate() {
-                        let first = (c as isize + d - 1) as usize;
-                        let mask = if r == 4 { 0b101 } else { 0b111 };
-                        if self.queued.all_set(first, mask) {
-                            continue;
-                        }
-                        for x in 0..3 {
-                            let ql = first + x;
-                            if mask >> x & 1 == 1 && !self.queued.get(ql) && keep(ql) {
-                                self.queued.set(ql);
-                                self.batch.push(ql as u32);
-                                self.pre.push(grid.values[ql]);
-                            }
-                        }
-                    }
-                    let ql = c as usize;
-                    if !self.queued.get(ql) && keep(ql) {
-                        self.queued.set(ql);
-                        self.batch.push(ql as u32);
-                        self.pre.push(grid.values[ql]);
-                    }
-                }
-                return;
-            }
-            for &c in &self.cand {
+            for &c in &cand {
                 for d in ring {
-                    let ql = (c as isize + d) as usize;
-                    if !self.queued.get(ql) && keep(ql) {
-                        self.queued.set(ql);
-                        self.batch.push(ql as u32);
-                        self.pre.push(grid.values[ql]);
+                    self.queue(grid, (c as isize + d) as usize, &keep);
+                }
+            }
+        } else {
+            for &c in &cand {
+                let ci = spec.unlinear(c as usize);
+                for off in RING26.iter().chain(std::iter::once(&[0, 0, 0])) {
+                    if let Some(q) = offset(ci, *off, s, n) {
+                        self.queue(grid, spec.linear(q), &keep);
                     }
                 }
             }
-            return;
         }
-        for &c in &self.cand {
-            let ci = spec.unlinear(c as usize);
-            for off in RING26.iter().chain(std::iter::once(&[0, 0, 0])) {
-                if let Some(q) = offset(ci, *off, s, n) {
-                    let ql = spec.linear(q);
-                    if !self.queued.get(ql) && keep(ql) {
-                        self.queued.set(ql);
-                        self.batch.push(ql as u32);
-                        self.pre.push(grid.values[ql]);
-                    }
-                }
-            }
+        self.cand = cand;
+    }
+
+    /// Point `q` to the batch with its value before evaluation, if not queued yet and kept.
+    #[inline]
+    fn queue(&mut self, grid: &Grid, q: usize, keep: &impl Fn(usize) -> bool) {
+        if !self.queued.get(q) && keep(q) {
+            self.queued.set(q);
+            self.batch.push(q as u32);
+            self.pre.push(grid.values[q]);
         }
     }
 
@@ -549,8 +545,8 @@ mod tests {
     }
 
     /// After frames of different scenes and levels, [`Grid::reset_sparse`] leaves every
-    /// value 0 and nothing evaluated, clearing only the rows' written spans; a write recorded
-    /// only as a box ([`Grid::mark_written`]) is cleared too.
+    /// value 0 and nothing evaluated, clearing only the rows' written spans; a grid a dense
+    /// method left full of values ([`Grid::reset`]) is cleared whole.
     #[test]
     fn sparse_reset_after_row_spans_clears_every_value() {
         let spec = GridSpec::new(7).unwrap();
@@ -566,17 +562,13 @@ mod tests {
                 .unwrap();
             assert!(grid.values.iter().any(|v| *v > 0.0 && *v < 1.0), "{name}");
         }
-        // A box write without spans: the whole box is cleared.
+        // Values a dense method wrote anywhere, spans unrecorded: the whole grid is cleared.
         let n = spec.n();
-        let b = IndexBox {
-            lo: [3, 4, 5],
-            hi: [60, 61, 62],
-        };
-        for k in b.lo[2]..=b.hi[2] {
-            grid.values[spec.linear([b.lo[0], b.lo[1], k])] = 1.0;
-            grid.values[spec.linear([b.hi[0], b.hi[1], k])] = 0.5;
+        grid.reset(spec);
+        for k in 5..=62 {
+            grid.values[spec.linear([3, 4, k])] = 1.0;
+            grid.values[spec.linear([60, 61, k])] = 0.5;
         }
-        grid.mark_written(b);
         grid.reset_sparse(spec);
         assert!(grid.values.iter().all(|v| *v == 0.0));
         assert_eq!(grid.values.len(), n * n * n);
