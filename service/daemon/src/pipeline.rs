@@ -277,11 +277,13 @@ pub mod stage {
 pub mod part {
     /// Field: the image and mask cropped to the networks' input.
     pub const INPUT: usize = 0;
-    /// Field: the shape network.
+    /// Field: the shape network (on the GPU backend's Fourier frames, with its maps'
+    /// temporal filter on the adapter, in the network's submission).
     pub const SHAPE: usize = 1;
     /// Field: the colour encoder.
     pub const COLOR: usize = 2;
-    /// Field: the temporal filter of the maps.
+    /// Field: the temporal filter of the maps (on the GPU backend's Fourier frames, what stays
+    /// on the host: the mask, the crop and the colour features).
     pub const TEMPORAL: usize = 3;
     /// Field: the field made (on the GPU backend, the maps' buffers on the adapter).
     pub const FIELD: usize = 4;

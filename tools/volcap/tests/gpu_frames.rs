@@ -526,3 +526,96 @@ fn the_renderer_on_the_adapter_draws_the_cpus_frames_of_real_photos() {
         }
     }
 }
+
+/// A live stream on the GPU backend: the shape maps stay on the adapter from the network to
+/// the field (nothing of them comes back or goes up again; a frame's read-backs are the
+/// finiteness flag and, in a turned view, the colour encoder's features and the filter's
+/// weights for them), filtered in time there: each frame's maps, read back, are the CPU
+/// path's filtered maps (the astronaut moving across the frame, one view turned by 30
+/// degrees), within the networks' own rounding.
+#[test]
+fn a_live_stream_filters_its_maps_on_the_adapter() {
+    use volcap_engine::model::preprocess::INPUT_SIZE;
+    use volcap_engine::model::temporal::{Temporal, TemporalSettings};
+    let Some(rt) = gpu_runtime() else { return };
+    let Runtime::Wgpu(adapter) = &rt else {
+        unreachable!()
+    };
+    let adapter = adapter.clone();
+    let dir = repo().join("models");
+    let cpu = Models::load_on(&dir, "fourier-small", Precision::F32, &Runtime::Tract).unwrap();
+    let gpu = Models::load_on(&dir, "fourier-small", Precision::F32, &rt).unwrap();
+    let img = image::open(repo().join("tests/data/real/astronaut.jpg"))
+        .unwrap()
+        .to_rgb8();
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let (mut t_cpu, mut t_gpu) = (
+        Temporal::new(TemporalSettings::default()),
+        Temporal::new(TemporalSettings::default()),
+    );
+    let mut maps_bytes = 0usize;
+    for f in 0..6usize {
+        // The person moves right by 4 pixels a frame (the crop follows, the maps are
+        // resampled into it); frame 3 is seen from 30 degrees to the side.
+        let dx = 4 * f;
+        let mut rgb = vec![0u8; w * h * 3];
+        for y in 0..h {
+            for x in 0..w {
+                let sx = x.saturating_sub(dx);
+                let (o, i) = ((y * w + x) * 3, (y * w + sx) * 3);
+                rgb[o..o + 3].copy_from_slice(&img.as_raw()[i..i + 3]);
+            }
+        }
+        let view = ModelView {
+            yaw_deg: if f == 3 { 30.0 } else { 0.0 },
+            pitch_deg: 0.0,
+            zoom: 1.0,
+        };
+        let t_s = f as f64 / 30.0;
+        let steady = |models: &Models, t: &mut Temporal| {
+            let mut info = FrameInfo::default();
+            let (img, mut mask, crop) = models.prepare(&rgb, w, h, &mut info).expect("a person");
+            let (crop, _) = t.steady_input(t_s, 1, &mut mask, crop);
+            let crop = crop.expect("a person");
+            let before = adapter.counters();
+            let field = models
+                .encode_steady(&img, &mask, crop, view, Some(t))
+                .unwrap();
+            let after = adapter.counters();
+            (
+                field,
+                after.bytes_down - before.bytes_down,
+                after.bytes_up - before.bytes_up,
+            )
+        };
+        let (a, _, _) = steady(&cpu, &mut t_cpu);
+        let (b, down, up) = steady(&gpu, &mut t_gpu);
+        assert!(b.maps_on_adapter(), "frame {f}");
+        assert!(!a.maps_on_adapter(), "frame {f}");
+        let ma = a.fourier_maps().unwrap().expect("a Fourier head");
+        let mb = b.fourier_maps().unwrap().expect("a Fourier head");
+        maps_bytes = ma.coefficients().len() * 4;
+        let scale = ma.coefficients().iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let d = ma
+            .coefficients()
+            .iter()
+            .zip(mb.coefficients())
+            .fold(0.0f32, |m, (x, y)| m.max((x - y).abs()));
+        println!(
+            "frame {f}: maps within {d:e} of the CPU's (scale {scale}), {down} bytes down, {up} up"
+        );
+        assert!(
+            d <= 1e-3 * scale,
+            "frame {f}: maps differ by {d} (scale {scale})"
+        );
+        assert_eq!(b.has_color_features(), f == 3);
+        // Down: the flag (and the network's timer); in the turned view the colour features
+        // and the filter's weights for them. Up: the networks' input, nothing else.
+        let limit = if f == 3 { maps_bytes / 2 } else { 1024 };
+        assert!(down <= limit as u64, "frame {f}: {down} bytes came back");
+        let input = (4 * INPUT_SIZE * INPUT_SIZE * 4) as u64;
+        let nets = if f == 3 { 2 } else { 1 };
+        assert!(up <= nets * input, "frame {f}: {up} bytes went up");
+    }
+    assert!(maps_bytes > 1 << 20, "{maps_bytes}");
+}

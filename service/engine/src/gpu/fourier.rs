@@ -112,6 +112,9 @@ pub struct GpuFourier {
     pipeline: Arc<wgpu::ComputePipeline>,
     head: [u32; 5],
     len: usize,
+    /// The maps' buffer when they are on the adapter already ([`Self::on_adapter`]): copied
+    /// there, never written from the host.
+    source: Option<wgpu::Buffer>,
     buffers: Mutex<Option<FieldBuffers>>,
 }
 
@@ -133,32 +136,63 @@ impl GpuFourier {
             pipeline,
             head: series_head(maps),
             len: data.len(),
+            source: None,
             buffers: Mutex::new(None),
         })
     }
 
-    /// The maps' buffers, from the adapter's pool or new, with `maps` written in.
-    fn upload(&self, maps: &FourierMaps) -> FieldBuffers {
-        let data = maps.coefficients();
+    /// The field of maps already on the adapter (the GPU backend's frames): the first query
+    /// copies them into the field's buffers there.
+    pub fn on_adapter(maps: &super::maps::GpuMaps) -> Result<Self, String> {
+        let gpu = maps.gpu().clone();
+        let pipeline = gpu.pipeline("fourier", SOURCE)?;
+        let head = maps.head();
+        Ok(GpuFourier {
+            gpu,
+            pipeline,
+            head: head.series(),
+            len: head.len(),
+            source: Some(maps.buffer().clone()),
+            buffers: Mutex::new(None),
+        })
+    }
+
+    /// The maps' buffers, from the adapter's pool or new, with the maps written in (`maps`,
+    /// or copied from the adapter's buffer for a field made [`Self::on_adapter`]).
+    fn upload(&self, maps: Option<&FourierMaps>) -> FieldBuffers {
+        let len = self.len;
         let pooled = {
             let mut pool = self
                 .gpu
                 .field_pool
                 .lock()
                 .unwrap_or_else(|p| p.into_inner());
-            let i = pool.iter().position(|b| b.maps_cap >= data.len());
+            let i = pool.iter().position(|b| b.maps_cap >= len);
             i.map(|i| pool.swap_remove(i))
         };
-        let b = pooled.unwrap_or_else(|| {
-            FieldBuffers::new(&self.gpu, &self.pipeline, None, data.len(), MIN_POINTS)
-        });
-        self.gpu
-            .queue
-            .write_buffer(&b.maps, 0, bytemuck::cast_slice(data));
-        self.gpu
-            .count()
-            .bytes_up
-            .fetch_add(std::mem::size_of_val(data) as u64, Ordering::Relaxed);
+        let b = pooled
+            .unwrap_or_else(|| FieldBuffers::new(&self.gpu, &self.pipeline, None, len, MIN_POINTS));
+        match (&self.source, maps) {
+            (Some(src), _) => {
+                let mut enc = self
+                    .gpu
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+                enc.copy_buffer_to_buffer(src, 0, &b.maps, 0, (len * 4) as u64);
+                self.gpu.queue.submit([enc.finish()]);
+            }
+            (None, Some(maps)) => {
+                let data = maps.coefficients();
+                self.gpu
+                    .queue
+                    .write_buffer(&b.maps, 0, bytemuck::cast_slice(data));
+                self.gpu
+                    .count()
+                    .bytes_up
+                    .fetch_add(std::mem::size_of_val(data) as u64, Ordering::Relaxed);
+            }
+            (None, None) => {}
+        }
         b
     }
 
@@ -173,6 +207,23 @@ impl GpuFourier {
         if series_head(maps) != self.head || maps.coefficients().len() != self.len {
             return Err("the maps are not the ones this field was made from".into());
         }
+        self.query(Some(maps), points, out)
+    }
+
+    /// [`Self::occupancy`] of a field made [`Self::on_adapter`] (its maps are there).
+    pub fn occupancy_on_adapter(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), String> {
+        if self.source.is_none() {
+            return Err("the maps of this field are on the host".into());
+        }
+        self.query(None, points, out)
+    }
+
+    fn query(
+        &self,
+        maps: Option<&FourierMaps>,
+        points: &[Vec3],
+        out: &mut [f32],
+    ) -> Result<(), String> {
         let n = points.len().min(out.len());
         if n == 0 {
             return Ok(());

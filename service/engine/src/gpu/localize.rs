@@ -61,11 +61,44 @@ pub enum GpuField<'a> {
     /// outside the crop or where the `mask_size` x `mask_size` mask is below 0.5 are 0, the
     /// rest the series (`model/field.rs` `ModelField::occupancy`).
     Fourier {
-        maps: &'a FourierMaps,
+        maps: MapsRef<'a>,
         mask: &'a [f32],
         mask_size: usize,
         to_crop: Mat3,
     },
+}
+
+/// Where a frame's Fourier maps are: on the host (written to the adapter with the field), or
+/// already on the adapter (the GPU backend's frames: copied there, nothing goes up).
+#[derive(Clone, Copy)]
+pub enum MapsRef<'a> {
+    Host(&'a FourierMaps),
+    Adapter(&'a super::maps::GpuMaps),
+}
+
+impl MapsRef<'_> {
+    fn series_head(&self) -> [u32; 5] {
+        match self {
+            MapsRef::Host(m) => super::fourier::series_head(m),
+            MapsRef::Adapter(m) => m.head().series(),
+        }
+    }
+}
+
+/// The field's data as `upload_field` writes it.
+enum FieldData<'a> {
+    Host(&'a [f32]),
+    /// A buffer on the adapter and the floats to copy from its start.
+    Adapter(&'a wgpu::Buffer, usize),
+}
+
+impl FieldData<'_> {
+    fn len(&self) -> usize {
+        match self {
+            FieldData::Host(d) => d.len(),
+            FieldData::Adapter(_, n) => *n,
+        }
+    }
 }
 
 pub(super) struct Pipes {
@@ -352,7 +385,7 @@ impl GpuLocalizer {
 
     /// Write the field's data (grown buffers where needed) and its bind group.
     fn upload_field(&mut self, field: &GpuField<'_>, spec: GridSpec) -> Result<(), String> {
-        let (data, mask, head, to_crop): (&[f32], &[f32], [u32; 6], Mat3) = match field {
+        let (data, mask, head, to_crop): (FieldData<'_>, &[f32], [u32; 6], Mat3) = match field {
             GpuField::Table(t) => {
                 if t.len() != spec.len() {
                     return Err(format!(
@@ -361,7 +394,7 @@ impl GpuLocalizer {
                         spec.len()
                     ));
                 }
-                (t, &[0.0][..], [0; 6], Mat3::IDENTITY)
+                (FieldData::Host(t), &[0.0][..], [0; 6], Mat3::IDENTITY)
             }
             GpuField::Fourier {
                 maps,
@@ -375,16 +408,20 @@ impl GpuLocalizer {
                         mask.len()
                     ));
                 }
-                let s = super::fourier::series_head(maps);
+                let s = maps.series_head();
                 let head = [s[0], s[1], s[2], s[3], s[4], *mask_size as u32];
-                (maps.coefficients(), *mask, head, *to_crop)
+                let data = match maps {
+                    MapsRef::Host(m) => FieldData::Host(m.coefficients()),
+                    MapsRef::Adapter(m) => FieldData::Adapter(m.buffer(), m.head().len()),
+                };
+                (data, *mask, head, *to_crop)
             }
         };
         let limit = self.gpu.device.limits().max_storage_buffer_binding_size as usize;
-        if std::mem::size_of_val(data) > limit {
+        if data.len() * 4 > limit {
             return Err(format!(
                 "the field's data of {} bytes exceed the adapter's {limit} per binding",
-                std::mem::size_of_val(data)
+                data.len() * 4
             ));
         }
         let n = spec.n();
@@ -433,8 +470,23 @@ impl GpuLocalizer {
         }
         let q = &self.gpu.queue;
         q.write_buffer(&f.params, 0, bytemuck::cast_slice(&params));
-        q.write_buffer(&f.maps, 0, bytemuck::cast_slice(data));
-        let mut up = std::mem::size_of_val(data) + std::mem::size_of_val(mask) + 80;
+        let mut up = std::mem::size_of_val(mask) + 80;
+        match data {
+            FieldData::Host(d) => {
+                q.write_buffer(&f.maps, 0, bytemuck::cast_slice(d));
+                up += std::mem::size_of_val(d);
+            }
+            FieldData::Adapter(b, n) => {
+                // On the adapter already: copied there, in a submission of its own ahead of
+                // the localization's (the queue keeps their order).
+                let mut enc = self
+                    .gpu
+                    .device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+                enc.copy_buffer_to_buffer(b, 0, &f.maps, 0, (n * 4) as u64);
+                q.submit([enc.finish()]);
+            }
+        }
         if f.coords_n != n {
             // The coordinates from the host (GridSpec::coord: the same floats as the CPU's
             // points, whatever the adapter's division), when the grid's size changes.

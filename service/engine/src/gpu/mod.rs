@@ -10,12 +10,15 @@
 //! the adapter has it: timestamp queries (the networks' time on the adapter,
 //! `Counters::gpu_ns`); without it nothing is timed there.
 //!
-//! What runs here: [`net::GpuNet`], the ONNX networks (`model::runtime::Runtime::Wgpu`), and
-//! [`fourier::GpuFourier`], the Fourier field at points, and [`localize::GpuLocalizer`], the
-//! hierarchical localization with the grid on the adapter.
+//! What runs here: [`net::GpuNet`], the ONNX networks (`model::runtime::Runtime::Wgpu`),
+//! [`maps::GpuMaps`], a frame's Fourier maps kept here from the shape network on, with their
+//! temporal filter ([`maps::GpuTemporal`]), [`fourier::GpuFourier`], the Fourier field at
+//! points, and [`localize::GpuLocalizer`], the hierarchical localization with the grid on
+//! the adapter.
 
 pub mod fourier;
 pub mod localize;
+pub mod maps;
 pub mod net;
 pub mod render;
 
@@ -158,6 +161,8 @@ pub struct Gpu {
     pipelines: Mutex<HashMap<&'static str, Arc<wgpu::ComputePipeline>>>,
     /// Frames' Fourier field buffers kept for the next frames ([`fourier::GpuFourier`]).
     pub(crate) field_pool: Mutex<Vec<fourier::FieldBuffers>>,
+    /// Frames' coefficient-map buffers kept for the next frames ([`maps::GpuMaps`]).
+    pub(crate) maps_pool: Mutex<Vec<maps::FrameBufs>>,
 }
 
 impl std::fmt::Debug for Gpu {
@@ -230,6 +235,7 @@ impl Gpu {
             counters: Counters::default(),
             pipelines: Mutex::new(HashMap::new()),
             field_pool: Mutex::new(Vec::new()),
+            maps_pool: Mutex::new(Vec::new()),
         }))
     }
 

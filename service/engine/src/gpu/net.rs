@@ -313,6 +313,34 @@ impl GpuNet {
         inputs: &[(&[usize], &[f32])],
         rows: Option<(usize, usize)>,
     ) -> Result<Vec<f32>, String> {
+        self.with_plan(shapes, |r| {
+            let (ob, oshape) = &r.plan.output;
+            let mut len = oshape.iter().product::<usize>();
+            if let Some((n, cap)) = rows {
+                if oshape.first() != Some(&cap) {
+                    return Err(format!(
+                        "not a per-point network: {cap} rows in, output {oshape:?}"
+                    ));
+                }
+                len = len / cap * n;
+            }
+            let enc = self.record(r, inputs)?;
+            let (out, done) = self
+                .gpu
+                .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)?;
+            if let Some(t) = &r.timer {
+                self.gpu.read_timer(t, done);
+            }
+            Ok(out)
+        })
+    }
+
+    /// `f` on the plan for `shapes`, made real when not cached (the cache's most recent).
+    fn with_plan<T>(
+        &self,
+        shapes: &[Vec<usize>],
+        f: impl FnOnce(&Realized) -> Result<T, String>,
+    ) -> Result<T, String> {
         let mut cache = self.realized.lock().unwrap_or_else(|p| p.into_inner());
         match cache.iter().position(|r| r.shapes.as_slice() == shapes) {
             Some(i) => {
@@ -327,25 +355,41 @@ impl GpuNet {
                 cache.truncate(REALIZED);
             }
         }
-        let r = cache.first().ok_or("no plan")?;
-        let (ob, oshape) = &r.plan.output;
-        let mut len = oshape.iter().product::<usize>();
-        if let Some((n, cap)) = rows {
-            if oshape.first() != Some(&cap) {
+        f(cache.first().ok_or("no plan")?)
+    }
+
+    /// Run on `inputs` (as [`Self::run`]) without bringing the output back: `then` gets the
+    /// recorded encoder, the output's buffer on the adapter and its shape, records what reads
+    /// it, submits and waits, and returns its result with the submission (the network's time
+    /// on the adapter is read after it). The output buffer is the plan's: the next run of
+    /// this network overwrites it, so `then` copies out what it keeps.
+    pub fn run_then<T>(
+        &self,
+        inputs: &[(&[usize], &[f32])],
+        then: impl FnOnce(
+            wgpu::CommandEncoder,
+            &wgpu::Buffer,
+            &[usize],
+        ) -> Result<(T, wgpu::SubmissionIndex), String>,
+    ) -> Result<T, String> {
+        let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
+        for (i, ((shape, data), s)) in inputs.iter().zip(&shapes).enumerate() {
+            if data.len() != s.iter().product::<usize>() {
                 return Err(format!(
-                    "not a per-point network: {cap} rows in, output {oshape:?}"
+                    "input {i}: {} values for shape {shape:?}",
+                    data.len()
                 ));
             }
-            len = len / cap * n;
         }
-        let enc = self.record(r, inputs)?;
-        let (out, done) = self
-            .gpu
-            .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)?;
-        if let Some(t) = &r.timer {
-            self.gpu.read_timer(t, done);
-        }
-        Ok(out)
+        self.with_plan(&shapes, |r| {
+            let (ob, oshape) = &r.plan.output;
+            let enc = self.record(r, inputs)?;
+            let (out, done) = then(enc, &r.buffers[*ob], oshape)?;
+            if let Some(t) = &r.timer {
+                self.gpu.read_timer(t, done);
+            }
+            Ok(out)
+        })
     }
 
     /// Plans made real since load: one per new input shape (a per-point network's row

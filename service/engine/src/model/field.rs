@@ -16,6 +16,10 @@ pub enum ShapeState {
         feat: Vec<f32>,
     },
     Fourier(FourierMaps),
+    /// The Fourier maps on the GPU backend's adapter (made there by the shape network and
+    /// filtered there; `GpuMaps::host` brings them back when a caller needs them).
+    #[cfg(feature = "wgpu")]
+    FourierOnAdapter(crate::gpu::maps::GpuMaps),
 }
 
 /// The networks' occupancy and colour over the render view's NDC cube for one frame.
@@ -47,11 +51,14 @@ pub struct ModelField {
 pub struct EncodeTimings {
     /// The image and mask cropped to the networks' input and normalized.
     pub input_ms: f64,
-    /// The shape network, its maps or features back on the host.
+    /// The shape network, its maps or features back on the host (on the GPU backend's
+    /// Fourier frames: the network, its maps interleaved and filtered in time on the
+    /// adapter, in one submission; the maps stay there).
     pub shape_ms: f64,
     /// The colour encoder.
     pub color_ms: f64,
-    /// The temporal filter of the maps (0 when it is off).
+    /// The temporal filter of the maps (0 when it is off; on the GPU backend's Fourier
+    /// frames only the colour features' blend, the maps' filter being in `shape_ms`).
     pub temporal_ms: f64,
     /// The field made from them: the colour MLP's pixel input, and on the GPU backend the
     /// Fourier maps' buffers on the adapter.
@@ -108,16 +115,39 @@ impl ModelField {
     /// query, once; the MLP family stays as it is).
     #[cfg(feature = "wgpu")]
     pub fn on_gpu(mut self, gpu: &Arc<crate::gpu::Gpu>) -> Result<Self, ModelError> {
-        if let ShapeState::Fourier(maps) = &self.shape {
-            let g = crate::gpu::fourier::GpuFourier::new(gpu.clone(), maps).map_err(|msg| {
-                ModelError::Run {
+        let g = match &self.shape {
+            ShapeState::Fourier(maps) => crate::gpu::fourier::GpuFourier::new(gpu.clone(), maps),
+            ShapeState::FourierOnAdapter(maps) => crate::gpu::fourier::GpuFourier::on_adapter(maps),
+            ShapeState::Mlp { .. } => return Ok(self),
+        };
+        let g = g.map_err(|msg| ModelError::Run {
+            path: "(Fourier maps)".into(),
+            msg,
+        })?;
+        self.gpu_fourier = Some(g);
+        Ok(self)
+    }
+
+    /// Whether the shape maps stayed on the adapter (the GPU backend's Fourier frames).
+    #[cfg(feature = "wgpu")]
+    pub fn maps_on_adapter(&self) -> bool {
+        matches!(self.shape, ShapeState::FourierOnAdapter(_))
+    }
+
+    /// The Fourier maps on the host (read back from the adapter once for a frame made
+    /// there), or `None` for the point-MLP family.
+    pub fn fourier_maps(&self) -> Result<Option<&FourierMaps>, ModelError> {
+        match &self.shape {
+            ShapeState::Fourier(maps) => Ok(Some(maps)),
+            #[cfg(feature = "wgpu")]
+            ShapeState::FourierOnAdapter(maps) => {
+                maps.host().map(Some).map_err(|msg| ModelError::Run {
                     path: "(Fourier maps)".into(),
                     msg,
-                }
-            })?;
-            self.gpu_fourier = Some(g);
+                })
+            }
+            ShapeState::Mlp { .. } => Ok(None),
         }
-        Ok(self)
     }
 
     /// The field as the GPU localizer evaluates it on the adapter (the Fourier family: its
@@ -126,7 +156,13 @@ impl ModelField {
     pub fn gpu_field(&self) -> Option<crate::gpu::localize::GpuField<'_>> {
         match &self.shape {
             ShapeState::Fourier(maps) => Some(crate::gpu::localize::GpuField::Fourier {
-                maps,
+                maps: crate::gpu::localize::MapsRef::Host(maps),
+                mask: &self.mask,
+                mask_size: INPUT_SIZE,
+                to_crop: self.to_crop,
+            }),
+            ShapeState::FourierOnAdapter(maps) => Some(crate::gpu::localize::GpuField::Fourier {
+                maps: crate::gpu::localize::MapsRef::Adapter(maps),
                 mask: &self.mask,
                 mask_size: INPUT_SIZE,
                 to_crop: self.to_crop,
@@ -205,6 +241,16 @@ impl OccupancyField for ModelField {
         match &self.shape {
             ShapeState::Mlp { nets, feat } => nets.query(feat, &q, &mut occ)?,
             ShapeState::Fourier(maps) => self.fourier(maps, &q, &mut occ)?,
+            #[cfg(feature = "wgpu")]
+            ShapeState::FourierOnAdapter(maps) => match &self.gpu_fourier {
+                Some(g) => g
+                    .occupancy_on_adapter(&q, &mut occ)
+                    .map_err(FieldError::Backend)?,
+                None => {
+                    let m = maps.host().map_err(FieldError::Backend)?;
+                    m.occupancy(&q, &mut occ, &mut Vec::new());
+                }
+            },
         }
         for (k, &i) in idx.iter().enumerate() {
             out[i] = occ[k];

@@ -109,6 +109,32 @@ impl FourierMaps {
         })
     }
 
+    /// From pixel-interleaved maps `[size * size, 2K + 1]` (the layout the maps keep, as the
+    /// GPU backend's frame maps come back). `None` as [`Self::from_planar`].
+    pub fn from_interleaved(
+        data: Vec<f32>,
+        k: usize,
+        size: usize,
+        zeta_scale: f32,
+    ) -> Option<Self> {
+        let c = 2 * k + 1;
+        if size < 2 || data.len() != c * size * size || !zeta_scale.is_finite() || zeta_scale <= 0.0
+        {
+            return None;
+        }
+        if !all_finite(&data) {
+            return None;
+        }
+        Some(Self {
+            k,
+            size,
+            zeta_scale,
+            data,
+            offset: 0.0,
+            basis: Basis::Fourier,
+        })
+    }
+
     /// The maps hold `basis`'s coefficients (the same 2K + 1 channels).
     pub fn with_basis(mut self, basis: Basis) -> Self {
         self.basis = basis;

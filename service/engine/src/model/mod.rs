@@ -23,6 +23,8 @@ pub use runtime::{Runtime, RuntimeChoice};
 pub mod mlp;
 mod threads;
 pub use threads::with_threads;
+#[cfg(feature = "wgpu")]
+mod on_adapter;
 pub mod preprocess;
 pub mod sample;
 pub mod temporal;
@@ -581,6 +583,12 @@ impl Models {
         let mask_c = crop.apply(mask, 1, s);
         let x = preprocess::encoder_input(&rgb_c, &mask_c, s);
         timings.input_ms = ms(t);
+        #[cfg(feature = "wgpu")]
+        if let ShapeModel::Fourier(net) = self.shape_for(&crop)
+            && let Some(head) = net.adapter_head()
+        {
+            return self.encode_on_adapter(net, head, &x, mask_c, crop, view, temporal, timings);
+        }
         let t = std::time::Instant::now();
         let mut shape = match self.shape_for(&crop) {
             ShapeModel::Mlp(nets) => ShapeState::Mlp {
@@ -622,6 +630,9 @@ impl Models {
                     };
                     t.steady_maps(crop, (l, maps.coefficients_mut()), color);
                 }
+                // Made only by `encode_on_adapter`.
+                #[cfg(feature = "wgpu")]
+                ShapeState::FourierOnAdapter(_) => {}
             }
         }
         timings.temporal_ms = ms(t);

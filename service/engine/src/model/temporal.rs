@@ -285,6 +285,9 @@ pub struct Temporal {
     people: usize,
     close_range: bool,
     maps: Option<LastMaps>,
+    /// The maps' filter on the GPU backend's adapter (`temporal/adapter.rs`).
+    #[cfg(feature = "wgpu")]
+    adapter: Option<adapter::AdapterMaps>,
     /// Frames since the last reset.
     pub continued: u64,
     pub resets: u64,
@@ -304,6 +307,8 @@ impl Temporal {
             people: 0,
             close_range: false,
             maps: None,
+            #[cfg(feature = "wgpu")]
+            adapter: None,
             continued: 0,
             resets: 0,
         }
@@ -322,6 +327,10 @@ impl Temporal {
         self.raw.clear();
         self.last_t = None;
         self.maps = None;
+        #[cfg(feature = "wgpu")]
+        if let Some(a) = &mut self.adapter {
+            a.forget();
+        }
         self.continued = 0;
     }
 
@@ -456,6 +465,10 @@ impl Temporal {
         let color_ok = color
             .as_ref()
             .is_none_or(|(l, d)| fits(*l, d) && all_finite(d));
+        #[cfg(feature = "wgpu")]
+        if let Some(a) = &mut self.adapter {
+            a.forget();
+        }
         if !(shape_ok && color_ok) {
             self.maps = None;
             return;
@@ -480,15 +493,7 @@ impl Temporal {
                         let (w, taps, moved) = if lcol.size == l.size {
                             (weights, &last.shape_taps, moved)
                         } else {
-                            // The shape map's weights at the colour map's pixels (nearest:
-                            // both grids span the crop's NDC corner to corner).
-                            let (a, b) = (l.size - 1, lcol.size - 1);
-                            let near = |i: usize| (i * a + b / 2) / b;
-                            let w = (0..lcol.size * lcol.size)
-                                .map(|p| {
-                                    weights[near(p / lcol.size) * l.size + near(p % lcol.size)]
-                                })
-                                .collect();
+                            let w = weights_at(&weights, l.size, lcol.size);
                             let moved = last.color_taps.set(lcol.size, last.crop, crop);
                             (w, &last.color_taps, moved)
                         };
@@ -597,6 +602,18 @@ impl Temporal {
     }
 }
 
+/// The shape map's per-pixel weights (`shape` pixels a side) at the pixels of a map `size`
+/// a side (nearest: both grids span the crop's NDC corner to corner).
+fn weights_at(weights: &[f32], shape: usize, size: usize) -> Vec<f32> {
+    let (a, b) = (shape - 1, size - 1);
+    let near = |i: usize| (i * a + b / 2) / b;
+    (0..size * size)
+        .map(|p| weights[near(p / size) * shape + near(p % size)])
+        .collect()
+}
+
+#[cfg(feature = "wgpu")]
+mod adapter;
 mod warp;
 use warp::{Taps, blend, resampled};
 

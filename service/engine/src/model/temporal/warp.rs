@@ -4,6 +4,16 @@
 
 use super::{Crop, MapLayout};
 
+/// Whether a `size x size` map made through `from` moves by a hundredth of a map pixel or
+/// more somewhere when taken into `to`'s pixels (else it is used as it is).
+pub(super) fn moved(size: usize, from: Crop, to: Crop) -> bool {
+    let px = 0.5 * (size - 1) as f32;
+    let moved = ((to.tx - from.tx).abs() + (to.ty - from.ty).abs()) / from.s
+        + 2.0 * (to.s / from.s - 1.0).abs();
+    let m = moved * px;
+    m >= 0.01 || m.is_nan()
+}
+
 /// A resampling of a `size x size` map from one crop's pixels into another's: bilinear
 /// taps per pixel, and whether the pixel fell inside the old map.
 #[derive(Default)]
@@ -17,10 +27,7 @@ impl Taps {
     /// (nothing set) when the crop moved less than a hundredth of a map pixel anywhere (a
     /// still person's filtered box): the map as it is.
     pub(super) fn set(&mut self, size: usize, from: Crop, to: Crop) -> bool {
-        let px = 0.5 * (size - 1) as f32;
-        let moved = ((to.tx - from.tx).abs() + (to.ty - from.ty).abs()) / from.s
-            + 2.0 * (to.s / from.s - 1.0).abs();
-        if moved * px < 0.01 {
+        if !moved(size, from, to) {
             return false;
         }
         let n = size * size;
