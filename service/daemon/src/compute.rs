@@ -71,9 +71,11 @@ volcap_compute_backend{{backend=\"{}\"}} 1
         if let Some(serde_json::Value::Object(c)) = self.counters.as_ref().map(|c| c()) {
             for (k, v) in &c {
                 let v = v.as_u64().unwrap_or(0);
-                let (name, value) = match k.as_str() {
-                    "gpu_ns" => ("gpu_seconds".to_string(), v as f64 / 1e9),
-                    other => (other.to_string(), v as f64),
+                // Nanoseconds on the adapter's clock as seconds: `gpu_ns` (the networks') as
+                // `gpu_seconds`, `maps_gpu_ns` as `maps_gpu_seconds`, ...
+                let (name, value) = match k.strip_suffix("_ns") {
+                    Some(stem) => (format!("{stem}_seconds"), v as f64 / 1e9),
+                    None => (k.to_string(), v as f64),
                 };
                 s.push_str(&format!(
                     "# TYPE volcap_adapter_{name}_total counter\nvolcap_adapter_{name}_total {value}\n"

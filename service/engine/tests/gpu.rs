@@ -368,6 +368,7 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
     let mut cpu = Renderer::new();
     let mut on_gpu = Renderer::new();
     let (mut close, mut channels) = (0usize, 0usize);
+    let timed0 = gpu.counters();
     let (mut depth_off, mut pixels) = (0usize, 0usize);
     for (res, cap) in [(65, 1 << 18), (129, 1 << 18), (33, 16)] {
         let mut gr = GpuRenderer::new(gpu.clone())
@@ -434,6 +435,25 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
             }
         }
     }
+    // The adapter's clock on the localizations and renders and on the display images: it
+    // ran where the adapter has timestamps (the timer's read-back in the counters' own),
+    // and nothing is counted where it has none.
+    let timed1 = gpu.counters();
+    let (loc, disp) = (
+        timed1.localize_gpu_ns - timed0.localize_gpu_ns,
+        timed1.display_gpu_ns - timed0.display_gpu_ns,
+    );
+    println!(
+        "on the adapter's clock: localization and render {:.1} ms, display {:.1} ms",
+        loc as f64 / 1e6,
+        disp as f64 / 1e6
+    );
+    assert_eq!(
+        loc > 0,
+        gpu.has_timestamps(),
+        "localization timed: {loc} ns"
+    );
+    assert_eq!(disp > 0, gpu.has_timestamps(), "display timed: {disp} ns");
     println!("display depths within 1e-5 on all but {depth_off} of {pixels} pixels");
     assert!(
         depth_off as f64 <= 1e-3 * pixels as f64,

@@ -210,8 +210,20 @@ fn maps_on_the_adapter_are_the_hosts_interleaved_maps() {
             iso_level: 0.45,
         };
         let maps = planar(head, 3, true);
+        let before = gpu.counters();
         let (m, w) = maps_frame(&gpu, &maps, head, None).expect("a frame");
+        let after = gpu.counters();
         assert!(w.is_none());
+        // One wait (the flag, with the timestamps where the adapter has them); the maps do
+        // not come back.
+        assert_eq!(after.waits - before.waits, 1);
+        let stamps = if gpu.has_timestamps() { 16 } else { 0 };
+        assert_eq!(after.bytes_down - before.bytes_down, 4 + stamps);
+        assert_eq!(
+            after.maps_gpu_ns > before.maps_gpu_ns,
+            gpu.has_timestamps(),
+            "the frame timed on the adapter's clock"
+        );
         let want = FourierMaps::from_planar(&maps, k, size, 0.8)
             .expect("finite")
             .with_iso_level(0.45)

@@ -40,9 +40,10 @@ fn gpu(_adapter: &str) -> anyhow::Result<Runtime> {
 }
 
 /// Host <-> adapter traffic, dispatches, the networks' nanoseconds on the adapter, the
-/// read-backs waited for and the networks planned, so far (zeros off the GPU; the fourth 0
-/// where the adapter has no timestamps).
-pub fn adapter_work(rt: &Runtime) -> [u64; 6] {
+/// read-backs waited for, the networks planned, and the nanoseconds on the adapter of the
+/// frames' maps, of localization and rendering and of the display images, so far (zeros off
+/// the GPU; the nanoseconds 0 where the adapter has no timestamps).
+pub fn adapter_work(rt: &Runtime) -> [u64; 9] {
     #[cfg(feature = "wgpu")]
     if let Some(g) = rt.gpu() {
         let c = g.counters();
@@ -53,10 +54,13 @@ pub fn adapter_work(rt: &Runtime) -> [u64; 6] {
             c.gpu_ns,
             c.waits,
             c.net_plans,
+            c.maps_gpu_ns,
+            c.localize_gpu_ns,
+            c.display_gpu_ns,
         ];
     }
     let _ = rt;
-    [0; 6]
+    [0; 9]
 }
 
 /// Localization and the mesh-free render of a frame's model field: with `--backend wgpu` on

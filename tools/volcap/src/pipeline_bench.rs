@@ -70,6 +70,12 @@ pub struct Row {
     pub net_plans: u64,
     /// The networks' milliseconds on the adapter per frame (timestamp queries; 0 without).
     pub adapter_ms_per_frame: f64,
+    /// The adapter's milliseconds per frame, as `adapter_ms_per_frame`, of the frames'
+    /// Fourier maps (interleave and temporal filter), of localization and the render's final
+    /// level, and of the display image.
+    pub maps_ms_per_frame: f64,
+    pub localize_ms_per_frame: f64,
+    pub display_ms_per_frame: f64,
     /// Why the run produced no frames, if it did not.
     pub error: Option<String>,
 }
@@ -215,6 +221,9 @@ fn measure(
         waits_per_frame: (work1[4] - work0[4]) as f64 / published.max(1) as f64,
         net_plans: work1[5] - work0[5],
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
+        maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
+        localize_ms_per_frame: (work1[7] - work0[7]) as f64 / 1e6 / published.max(1) as f64,
+        display_ms_per_frame: (work1[8] - work0[8]) as f64 / 1e6 / published.max(1) as f64,
         error,
     }
 }
@@ -467,7 +476,13 @@ fn table(rows: &[Row]) -> String {
                     r.waits_per_frame,
                     r.net_plans,
                     if r.adapter_ms_per_frame > 0.0 {
-                        format!(", networks {:.1} ms on the adapter", r.adapter_ms_per_frame)
+                        format!(
+                            "; on the adapter's clock: networks {:.1} ms, maps {:.1} ms, localization and render {:.1} ms, display {:.1} ms",
+                            r.adapter_ms_per_frame,
+                            r.maps_ms_per_frame,
+                            r.localize_ms_per_frame,
+                            r.display_ms_per_frame
+                        )
                     } else {
                         String::new()
                     }

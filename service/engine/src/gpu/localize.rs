@@ -129,7 +129,10 @@ pub(super) struct Bufs {
     /// for rendering.
     pub(super) extra: wgpu::Buffer,
     render: bool,
+    /// The counters' read-back, then the submission's two timestamps (where the adapter has
+    /// them: `timer`).
     counts_staging: wgpu::Buffer,
+    timer: Option<super::Timer>,
     args: wgpu::Buffer,
     args_bind: wgpu::BindGroup,
     /// Per level and list orientation: parameters and bind group.
@@ -329,9 +332,10 @@ impl GpuLocalizer {
         let extra = buf("render lists", extra_bytes, U::STORAGE);
         let counts_staging = buf(
             "counts read-back",
-            COUNTS as u64 * 4,
+            COUNTS as u64 * 4 + 16,
             U::MAP_READ | U::COPY_DST,
         );
+        let timer = self.gpu.timer();
         let args = buf("dispatch args", 12, U::STORAGE | U::INDIRECT);
         let args_bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
@@ -375,6 +379,7 @@ impl GpuLocalizer {
             extra,
             render,
             counts_staging,
+            timer,
             args,
             args_bind,
             params,
@@ -626,6 +631,7 @@ impl GpuLocalizer {
             },
             spec,
             enc: Some(enc),
+            timed: false,
             dispatches: 0,
             rounds_per_wait: self.rounds_per_wait,
         })

@@ -26,6 +26,11 @@ const TEMPORAL: &str = include_str!("maps_temporal.wgsl");
 /// render stage's, a mesh request's) and one spare.
 const POOL: usize = 4;
 
+/// Where a frame's read-back holds its timestamps (after the flag); the filter's weights
+/// follow them.
+const STAMPS_AT: u64 = 4;
+const WEIGHTS_AT: u64 = STAMPS_AT + 16;
+
 /// What a frame's maps hold, as the series reads them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapsHead {
@@ -79,7 +84,10 @@ pub(crate) struct FrameBufs {
     /// Floats the maps part holds.
     cap: usize,
     maps: wgpu::Buffer,
+    /// The flag, then the frame's two timestamps.
     flag_staging: wgpu::Buffer,
+    /// The frame's passes on the adapter's clock, where it has timestamps.
+    timer: Option<super::Timer>,
 }
 
 impl FrameBufs {
@@ -93,7 +101,7 @@ impl FrameBufs {
         });
         let flag_staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("maps flag read-back"),
-            size: 4,
+            size: STAMPS_AT + 16,
             usage: U::MAP_READ | U::COPY_DST,
             mapped_at_creation: false,
         });
@@ -101,6 +109,7 @@ impl FrameBufs {
             cap,
             maps,
             flag_staging,
+            timer: gpu.timer(),
         }
     }
 }
@@ -234,7 +243,7 @@ pub struct GpuTemporal {
     /// speed [n], magnitude [n], weight [n], norm.
     scratch: wgpu::Buffer,
     params: wgpu::Buffer,
-    /// The flag, then the weights.
+    /// The flag, the frame's timestamps, then the weights.
     staging: wgpu::Buffer,
     /// Which of the pairs holds the last frame's.
     cur: usize,
@@ -292,7 +301,11 @@ impl GpuTemporal {
             U::STORAGE | U::COPY_SRC,
         );
         let params = buf("temporal params", 16 * 4, U::STORAGE | U::COPY_DST);
-        let staging = buf("temporal read-back", (n + 1) * 4, U::MAP_READ | U::COPY_DST);
+        let staging = buf(
+            "temporal read-back",
+            WEIGHTS_AT as usize + n * 4,
+            U::MAP_READ | U::COPY_DST,
+        );
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("the maps' temporal filter: {e}"));
         }
@@ -506,8 +519,13 @@ fn frame_from<'a>(
     });
     let flag_at = (len * 4) as u64;
     enc.clear_buffer(maps.buffer(), flag_at, Some(4));
+    let fb = maps.bufs.as_ref().ok_or("no frame buffers")?;
+    let timer = fb.timer.as_ref();
     {
-        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: None,
+            timestamp_writes: timer.map(|t| t.begin()),
+        });
         pass.set_pipeline(&interleave);
         pass.set_bind_group(0, &bind, &[]);
         let (x, y) = groups(len as u32);
@@ -516,31 +534,42 @@ fn frame_from<'a>(
     let mut dispatches = 1;
     let mut flag = [0u8; 4];
     let mut weights = None;
+    // The read-back: the flag, the timestamps (where timed), the weights (where asked).
+    let stamps = if timer.is_some() { 16 } else { 0 };
+    let mut out = vec![0u8; STAMPS_AT as usize + stamps];
     let index = match &filter {
         Some(f) => {
             dispatches += f.state.record(&mut enc, maps.buffer(), f.step.as_ref());
             let t = &*f.state;
             enc.copy_buffer_to_buffer(maps.buffer(), flag_at, &t.staging, 0, 4);
+            if let Some(timer) = timer {
+                timer.end_into(&mut enc, &t.staging, STAMPS_AT);
+            }
             let n = head.pixels();
-            let mut out = vec![0u8; 4];
             if f.weights && f.step.is_some() {
                 let at = (2 * n * 4) as u64;
-                enc.copy_buffer_to_buffer(&t.scratch, at, &t.staging, 4, (n * 4) as u64);
-                out.resize(4 + 4 * n, 0);
+                enc.copy_buffer_to_buffer(&t.scratch, at, &t.staging, WEIGHTS_AT, (n * 4) as u64);
+                out.resize(WEIGHTS_AT as usize + 4 * n, 0);
             }
             let index = gpu.submit_and_read_bytes(enc, &t.staging, &mut out)?;
-            flag.copy_from_slice(&out[..4]);
-            if out.len() > 4 {
-                weights = Some(bytemuck::pod_collect_to_vec::<u8, f32>(&out[4..]));
+            if out.len() > WEIGHTS_AT as usize {
+                let w = &out[WEIGHTS_AT as usize..];
+                weights = Some(bytemuck::pod_collect_to_vec::<u8, f32>(w));
             }
             index
         }
         None => {
-            let b = maps.bufs.as_ref().ok_or("no frame buffers")?;
-            enc.copy_buffer_to_buffer(&b.maps, flag_at, &b.flag_staging, 0, 4);
-            gpu.submit_and_read_bytes(enc, &b.flag_staging, &mut flag)?
+            enc.copy_buffer_to_buffer(&fb.maps, flag_at, &fb.flag_staging, 0, 4);
+            if let Some(timer) = timer {
+                timer.end_into(&mut enc, &fb.flag_staging, STAMPS_AT);
+            }
+            gpu.submit_and_read_bytes(enc, &fb.flag_staging, &mut out)?
         }
     };
+    flag.copy_from_slice(&out[..4]);
+    if stamps > 0 {
+        gpu.add_span(&gpu.count().maps_gpu_ns, &out[STAMPS_AT as usize..]);
+    }
     gpu.count()
         .dispatches
         .fetch_add(dispatches, Ordering::Relaxed);

@@ -133,6 +133,13 @@ pub struct Counters {
     /// Nanoseconds the networks' compute passes took on the adapter (timestamp queries; 0
     /// where the adapter has none).
     pub gpu_ns: AtomicU64,
+    /// Nanoseconds on the adapter, as `gpu_ns`, of the frames' Fourier maps (interleaved
+    /// and filtered in time, `maps::fourier_frame`), of the localizations and the renders'
+    /// final levels (each submission from its first pass to its last), and of the display
+    /// images.
+    pub maps_gpu_ns: AtomicU64,
+    pub localize_gpu_ns: AtomicU64,
+    pub display_gpu_ns: AtomicU64,
 }
 
 /// A snapshot of [`Counters`].
@@ -148,6 +155,9 @@ pub struct CounterValues {
     pub bytes_up: u64,
     pub bytes_down: u64,
     pub gpu_ns: u64,
+    pub maps_gpu_ns: u64,
+    pub localize_gpu_ns: u64,
+    pub display_gpu_ns: u64,
 }
 
 /// An opened adapter: device, queue, compiled kernels, counters.
@@ -287,6 +297,9 @@ impl Gpu {
             bytes_up: c.bytes_up.load(Ordering::Relaxed),
             bytes_down: c.bytes_down.load(Ordering::Relaxed),
             gpu_ns: c.gpu_ns.load(Ordering::Relaxed),
+            maps_gpu_ns: c.maps_gpu_ns.load(Ordering::Relaxed),
+            localize_gpu_ns: c.localize_gpu_ns.load(Ordering::Relaxed),
+            display_gpu_ns: c.display_gpu_ns.load(Ordering::Relaxed),
         }
     }
 
@@ -384,6 +397,18 @@ impl Gpu {
         let ns = ticks as f64 * period as f64;
         self.counters.gpu_ns.fetch_add(ns as u64, Ordering::Relaxed);
         Some(ns)
+    }
+
+    /// Add the span between two timestamps read back (`ticks`: begin, end, as
+    /// [`Timer::end_into`] copied them) to `counter` in nanoseconds; nothing where the
+    /// adapter has no timestamp queries.
+    pub(crate) fn add_span(&self, counter: &AtomicU64, ticks: &[u8]) {
+        let (Some(period), Some(b)) = (self.timestamp_period, ticks.get(..16)) else {
+            return;
+        };
+        let at = |i: usize| b[i..i + 8].try_into().map(u64::from_le_bytes).unwrap_or(0);
+        let ns = at(8).saturating_sub(at(0)) as f64 * period as f64;
+        counter.fetch_add(ns as u64, Ordering::Relaxed);
     }
 
     pub(crate) fn count(&self) -> &Counters {
@@ -511,6 +536,31 @@ impl Timer {
     pub(crate) fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
         enc.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
         enc.copy_buffer_to_buffer(&self.resolved, 0, &self.staging, 0, 16);
+    }
+
+    /// The begin timestamp only, for the first of several passes.
+    pub(crate) fn begin(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: None,
+        }
+    }
+
+    /// Close a span begun by [`Self::begin`] on an earlier pass of `enc`: an empty pass that
+    /// writes the end timestamp, then both timestamps copied to `dst` (MAP_READ | COPY_DST)
+    /// at `offset` (16 bytes), read back with the span's other results ([`Gpu::add_span`]).
+    pub(crate) fn end_into(&self, enc: &mut wgpu::CommandEncoder, dst: &wgpu::Buffer, offset: u64) {
+        drop(enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: None,
+            timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                query_set: &self.queries,
+                beginning_of_pass_write_index: None,
+                end_of_pass_write_index: Some(1),
+            }),
+        }));
+        enc.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
+        enc.copy_buffer_to_buffer(&self.resolved, 0, dst, offset, 16);
     }
 }
 

@@ -73,7 +73,9 @@ struct DisplayBufs {
     params: wgpu::Buffer,
     cols: wgpu::Buffer,
     out: wgpu::Buffer,
+    /// The image, then the pass's two timestamps (where the adapter has them).
     staging: wgpu::Buffer,
+    timer: Option<super::Timer>,
 }
 
 /// The renderer's state on the adapter, reused frame to frame.
@@ -430,7 +432,7 @@ impl GpuRenderer {
             );
             let staging = buf(
                 "display read-back",
-                2 * size * size * 4,
+                2 * size * size * 4 + 16,
                 U::MAP_READ | U::COPY_DST,
             );
             self.display = Some(DisplayBufs {
@@ -440,6 +442,7 @@ impl GpuRenderer {
                 cols,
                 out,
                 staging,
+                timer: self.gpu.timer(),
             });
         }
         let db = self.display.as_ref().expect("made above");
@@ -484,22 +487,39 @@ impl GpuRenderer {
             .fetch_add((cols.len() * 4 + 32) as u64, Ordering::Relaxed);
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
-            let mut pass = enc.begin_compute_pass(&Default::default());
+            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: db.timer.as_ref().map(|t| t.begin()),
+            });
             pass.set_pipeline(&self.pipes.display);
             pass.set_bind_group(0, &bind, &[]);
             let (x, y) = groups((size * size) as u32);
             pass.dispatch_workgroups(x, y, 1);
         }
         c.dispatches.fetch_add(1, Ordering::Relaxed);
-        enc.copy_buffer_to_buffer(&db.out, 0, &db.staging, 0, (2 * size * size * 4) as u64);
+        let image = (2 * size * size * 4) as u64;
+        enc.copy_buffer_to_buffer(&db.out, 0, &db.staging, 0, image);
+        if let Some(t) = &db.timer {
+            t.end_into(&mut enc, &db.staging, image);
+        }
         let raw = &mut self.raw;
-        raw.resize(2 * size * size, 0);
+        // The image's words, then the timestamps' four.
+        let stamps = if db.timer.is_some() { 4 } else { 0 };
+        raw.resize(2 * size * size + stamps, 0);
         self.gpu
             .submit_and_read_bytes(enc, &db.staging, bytemuck::cast_slice_mut(raw))?;
+        if stamps > 0 {
+            let ticks: &[u8] = bytemuck::cast_slice(&raw[2 * size * size..]);
+            self.gpu.add_span(&c.display_gpu_ns, ticks);
+        }
         rgba.clear();
         rgba.extend(raw[..size * size].iter().flat_map(|p| p.to_le_bytes()));
         z.clear();
-        z.extend(raw[size * size..].iter().map(|&b| f32::from_bits(b)));
+        z.extend(
+            raw[size * size..2 * size * size]
+                .iter()
+                .map(|&b| f32::from_bits(b)),
+        );
         Ok(())
     }
 }

@@ -20,6 +20,8 @@ pub(in crate::gpu) struct Rec<'a> {
     pub(super) eval: &'a wgpu::ComputePipeline,
     pub(in crate::gpu) spec: GridSpec,
     pub(super) enc: Option<wgpu::CommandEncoder>,
+    /// Whether a pass of `enc` began the submission's span on the adapter's clock.
+    pub(super) timed: bool,
     pub(in crate::gpu) dispatches: u64,
     /// Conflict rounds per submission at most (`GpuLocalizer::with_rounds_per_wait`).
     pub(super) rounds_per_wait: usize,
@@ -34,7 +36,13 @@ impl<'a> Rec<'a> {
         let enc = self
             .enc
             .get_or_insert_with(|| self.gpu.device.create_command_encoder(&Default::default()));
-        let mut pass = enc.begin_compute_pass(&Default::default());
+        // The submission's first pass starts its span on the adapter's clock.
+        let begin = self.b.timer.as_ref().filter(|_| !self.timed);
+        self.timed |= begin.is_some();
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: None,
+            timestamp_writes: begin.map(|t| t.begin()),
+        });
         for (pipe, l, o, how) in steps {
             pass.set_pipeline(pipe);
             pass.set_bind_group(0, &self.b.binds[*l as usize][*o], &[]);
@@ -88,12 +96,23 @@ impl<'a> Rec<'a> {
             .unwrap_or_else(|| self.gpu.device.create_command_encoder(&Default::default()));
         let b = self.b;
         enc.copy_buffer_to_buffer(&b.counts, 0, &b.counts_staging, 0, (COUNTS * 4) as u64);
+        let timer = b.timer.as_ref().filter(|_| self.timed);
+        self.timed = false;
+        if let Some(t) = timer {
+            t.end_into(&mut enc, &b.counts_staging, (COUNTS * 4) as u64);
+        }
+        let mut raw = [0u8; COUNTS * 4 + 16];
+        let len = COUNTS * 4 + if timer.is_some() { 16 } else { 0 };
+        self.gpu
+            .submit_and_read_bytes(enc, &b.counts_staging, &mut raw[..len])?;
+        if timer.is_some() {
+            let c = &self.gpu.count().localize_gpu_ns;
+            self.gpu.add_span(c, &raw[COUNTS * 4..]);
+        }
         let mut out = [0u32; COUNTS];
-        self.gpu.submit_and_read_bytes(
-            enc,
-            &b.counts_staging,
-            bytemuck::cast_slice_mut(&mut out),
-        )?;
+        for (o, w) in out.iter_mut().zip(raw.chunks_exact(4)) {
+            *o = u32::from_le_bytes([w[0], w[1], w[2], w[3]]);
+        }
         Ok(out)
     }
 
