@@ -20,12 +20,13 @@
 //!    normals from central differences of the occupancy.
 
 use crate::field::{ColorField, Evaluator, FieldError, OccupancyField};
-use crate::grid::{Grid, GridSpec, is_inside};
+use crate::grid::{Grid, GridSpec};
 use crate::localize::{Hierarchical, HierarchicalMode, LocalizeError, check_coarse};
 use columns::{col_k, crossing_depth, first_hits, update_hits};
 use glam::Vec3;
 
 mod columns;
+mod display;
 
 /// How to render.
 #[derive(Debug, Clone, Copy)]
@@ -109,8 +110,9 @@ impl Renderer {
         Self::default()
     }
 
-    /// Threads for field evaluation (1, the default: the calling thread only). The image
-    /// does not depend on it.
+    /// Threads for field evaluation and for the display image's bands of rows
+    /// ([`Self::render_display`]; 1, the default: the calling thread only). The images do
+    /// not depend on it.
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
     }
@@ -449,93 +451,24 @@ impl Renderer {
         let (Some(grid), n) = (self.grid.as_ref().filter(|_| !self.on_gpu), self.size) else {
             return &self.display_rgba;
         };
-        if n < 2 || self.hit.len() != n * n {
+        let plane = n * n;
+        let whole = [self.hit.len(), self.depth.len(), self.col_of.len()] == [plane; 3];
+        if n < 2 || grid.spec().n() != n || !whole {
             return &self.display_rgba;
         }
-        let spec = grid.spec();
-        let plane = n * n;
-        let den = size - 1;
-        let spacing = spec.spacing();
-        let axis = |u: usize| {
-            let num = u * (n - 1);
-            let i0 = num / den;
-            (i0, (i0 + 1).min(n - 1), (num % den) as f32 / den as f32)
+        let columns = display::Columns {
+            grid,
+            hit: &self.hit,
+            depth: &self.depth,
+            color: &self.col_of,
         };
-        for v in 0..size {
-            let (j0, j1, fy) = axis(v);
-            for u in 0..size {
-                let (i0, i1, fx) = axis(u);
-                let cols = [i0 + n * j0, i1 + n * j0, i0 + n * j1, i1 + n * j1];
-                let w = [
-                    (1.0 - fx) * (1.0 - fy),
-                    fx * (1.0 - fy),
-                    (1.0 - fx) * fy,
-                    fx * fy,
-                ];
-                let hits = cols.map(|c| self.hit[c]);
-                let Some(&hmax) = hits.iter().max().filter(|h| **h >= 0) else {
-                    continue;
-                };
-                let hmin = hits
-                    .iter()
-                    .copied()
-                    .filter(|&h| h >= 0)
-                    .min()
-                    .unwrap_or(hmax);
-                let top = (hmax as usize + 1).min(n - 1);
-                let bottom = (hmin as usize).saturating_sub(1);
-                let blend = |k: usize| -> f32 {
-                    cols.iter()
-                        .zip(&w)
-                        .map(|(&c, &wi)| wi * grid.values[c + k * plane])
-                        .sum()
-                };
-                let mut v_out = if top + 1 < n { blend(top + 1) } else { 0.0 };
-                let mut found = None;
-                for k in (bottom..=top).rev() {
-                    let v_in = blend(k);
-                    if is_inside(v_in) {
-                        found = Some(if k + 1 < n {
-                            crossing_depth(spec, k, v_in, v_out)
-                        } else {
-                            1.0
-                        });
-                        break;
-                    }
-                    v_out = v_in;
-                }
-                let Some(z) = found else { continue };
-                let mut acc = [0.0f32; 3];
-                let mut wsum = 0.0f32;
-                for near_only in [true, false] {
-                    for ((&c, &wi), &h) in cols.iter().zip(&w).zip(&hits) {
-                        if h < 0
-                            || wi <= 0.0
-                            || (near_only && (self.depth[c] - z).abs() > 2.0 * spacing)
-                        {
-                            continue;
-                        }
-                        for (a, x) in acc.iter_mut().zip(self.col_of[c]) {
-                            *a += wi * x;
-                        }
-                        wsum += wi;
-                    }
-                    if wsum > 0.0 {
-                        break;
-                    }
-                }
-                if wsum <= 0.0 {
-                    continue;
-                }
-                let o = (v * size + u) * 4;
-                let px = &mut self.display_rgba[o..o + 4];
-                for (p, a) in px.iter_mut().zip(acc) {
-                    *p = to_u8(a / wsum);
-                }
-                px[3] = 255;
-                self.display_depth[v * size + u] = z;
-            }
-        }
+        display::draw(
+            &columns,
+            size,
+            self.threads,
+            &mut self.display_rgba,
+            &mut self.display_depth,
+        );
         &self.display_rgba
     }
 

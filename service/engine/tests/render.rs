@@ -298,3 +298,33 @@ fn display_resolution_follows_the_analytic_silhouette_and_depth() {
     assert!(frac > 0.97, "{frac}");
     assert!(display.chunks_exact(4).all(|p| p[3] == 0 || p[3] == 255));
 }
+
+/// The display image is drawn in bands of rows on the renderer's threads: the same bytes and
+/// depths at 1, 2, 3 and 8 threads (sizes that do and do not split evenly, one under a
+/// band's least rows).
+#[test]
+fn display_image_is_the_same_on_any_number_of_threads() {
+    let scene = AnalyticScene::by_name("capsule-human").unwrap();
+    let spec = GridSpec::new(6).unwrap();
+    let bg = [0.1, 0.2, 0.3, 1.0];
+    let mut one = Renderer::new();
+    one.render(&scene, &scene, spec, &RenderOptions::default())
+        .unwrap();
+    for size in [20, 97, 257, 512] {
+        let want = one.render_display(size, bg).to_vec();
+        let want_depth = one.display_depth().to_vec();
+        assert!(
+            want.chunks_exact(4).any(|p| p[3] == 255),
+            "{size}: a person drawn"
+        );
+        for threads in [2, 3, 8] {
+            let mut r = Renderer::new();
+            r.set_threads(threads);
+            r.render(&scene, &scene, spec, &RenderOptions::default())
+                .unwrap();
+            let got = r.render_display(size, bg).to_vec();
+            assert!(got == want, "{size} px on {threads} threads: image differs");
+            assert_eq!(r.display_depth(), &want_depth[..], "{size} px on {threads}");
+        }
+    }
+}
