@@ -29,7 +29,9 @@ const POOL: usize = 4;
 /// Where a frame's read-back holds its timestamps (after the flag); the filter's weights
 /// follow them.
 const STAMPS_AT: u64 = 4;
-const WEIGHTS_AT: u64 = STAMPS_AT + 16;
+/// Then the shape network's own two timestamps (`fourier_frame`).
+const NET_STAMPS_AT: u64 = STAMPS_AT + 16;
+const WEIGHTS_AT: u64 = NET_STAMPS_AT + 16;
 
 /// What a frame's maps hold, as the series reads them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -101,7 +103,7 @@ impl FrameBufs {
         });
         let flag_staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("maps flag read-back"),
-            size: STAMPS_AT + 16,
+            size: WEIGHTS_AT,
             usage: U::MAP_READ | U::COPY_DST,
             mapped_at_creation: false,
         });
@@ -428,16 +430,15 @@ pub fn fourier_frame(
 ) -> Result<(GpuMaps, Option<Vec<f32>>), FrameError> {
     let gpu = net.gpu().clone();
     let mut out = None;
-    net.run_then(&[input], |enc, src, shape| {
+    net.run_then(&[input], |enc, src, shape, net_timer| {
         let got: usize = shape.iter().product();
         if got != head.len() {
             return Err(format!(
                 "the network's output {shape:?} is not maps of {head:?}"
             ));
         }
-        let (r, index) = frame_from(&gpu, enc, src, head, filter)?;
-        out = Some(r);
-        Ok(((), index))
+        out = Some(frame_from(&gpu, enc, src, head, filter, net_timer)?);
+        Ok(())
     })
     .map_err(FrameError::Backend)?;
     finish(out.ok_or(FrameError::Backend("no frame".into()))?)
@@ -472,8 +473,7 @@ pub fn maps_frame(
     let enc = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    let (r, _) = frame_from(gpu, enc, &src, head, filter).map_err(FrameError::Backend)?;
-    finish(r)
+    finish(frame_from(gpu, enc, &src, head, filter, None).map_err(FrameError::Backend)?)
 }
 
 /// What a frame's submission gave: its maps, the flag's word, the weights, and the filter
@@ -481,14 +481,16 @@ pub fn maps_frame(
 type Frame<'a> = (GpuMaps, [u8; 4], Option<Vec<f32>>, Option<FrameFilter<'a>>);
 
 /// Record the interleave of `src` (planar maps on the adapter) into a new frame buffer and
-/// the filter's passes after `enc`'s work, submit, and read the flag (and the weights).
+/// the filter's passes after `enc`'s work, submit, and read the flag (and the weights, and
+/// the timestamps of these passes and of the network before them, `net_timer`).
 fn frame_from<'a>(
     gpu: &Arc<Gpu>,
     mut enc: wgpu::CommandEncoder,
     src: &wgpu::Buffer,
     head: MapsHead,
     filter: Option<FrameFilter<'a>>,
-) -> Result<(Frame<'a>, wgpu::SubmissionIndex), String> {
+    net_timer: Option<&super::Timer>,
+) -> Result<Frame<'a>, String> {
     let interleave = gpu.pipeline("maps interleave", INTERLEAVE)?;
     if let Some(f) = &filter
         && f.state.head != head
@@ -535,14 +537,22 @@ fn frame_from<'a>(
     let mut flag = [0u8; 4];
     let mut weights = None;
     // The read-back: the flag, the timestamps (where timed), the weights (where asked).
-    let stamps = if timer.is_some() { 16 } else { 0 };
+    // 16 bytes for these passes' span, 16 for the network's.
+    let stamps = match (timer, net_timer) {
+        (Some(_), Some(_)) => 32,
+        (Some(_), None) => 16,
+        _ => 0,
+    };
     let mut out = vec![0u8; STAMPS_AT as usize + stamps];
-    let index = match &filter {
+    match &filter {
         Some(f) => {
             dispatches += f.state.record(&mut enc, maps.buffer(), f.step.as_ref());
             let t = &*f.state;
             enc.copy_buffer_to_buffer(maps.buffer(), flag_at, &t.staging, 0, 4);
-            if let Some(timer) = timer {
+            if let (Some(timer), Some(nt)) = (timer, net_timer) {
+                timer.end_into(&mut enc, &t.staging, STAMPS_AT);
+                nt.copy_into(&mut enc, &t.staging, NET_STAMPS_AT);
+            } else if let Some(timer) = timer {
                 timer.end_into(&mut enc, &t.staging, STAMPS_AT);
             }
             let n = head.pixels();
@@ -551,29 +561,35 @@ fn frame_from<'a>(
                 enc.copy_buffer_to_buffer(&t.scratch, at, &t.staging, WEIGHTS_AT, (n * 4) as u64);
                 out.resize(WEIGHTS_AT as usize + 4 * n, 0);
             }
-            let index = gpu.submit_and_read_bytes(enc, &t.staging, &mut out)?;
+            gpu.submit_and_read_bytes(enc, &t.staging, &mut out)?;
             if out.len() > WEIGHTS_AT as usize {
                 let w = &out[WEIGHTS_AT as usize..];
                 weights = Some(bytemuck::pod_collect_to_vec::<u8, f32>(w));
             }
-            index
         }
         None => {
             enc.copy_buffer_to_buffer(&fb.maps, flag_at, &fb.flag_staging, 0, 4);
             if let Some(timer) = timer {
                 timer.end_into(&mut enc, &fb.flag_staging, STAMPS_AT);
+                if let Some(nt) = net_timer {
+                    nt.copy_into(&mut enc, &fb.flag_staging, NET_STAMPS_AT);
+                }
             }
-            gpu.submit_and_read_bytes(enc, &fb.flag_staging, &mut out)?
+            gpu.submit_and_read_bytes(enc, &fb.flag_staging, &mut out)?;
         }
     };
     flag.copy_from_slice(&out[..4]);
     if stamps > 0 {
-        gpu.add_span(&gpu.count().maps_gpu_ns, &out[STAMPS_AT as usize..]);
+        let c = gpu.count();
+        gpu.add_span(&c.maps_gpu_ns, &out[STAMPS_AT as usize..]);
+        if net_timer.is_some() {
+            gpu.add_span(&c.gpu_ns, &out[NET_STAMPS_AT as usize..]);
+        }
     }
     gpu.count()
         .dispatches
         .fetch_add(dispatches, Ordering::Relaxed);
-    Ok(((maps, flag, weights, filter), index))
+    Ok((maps, flag, weights, filter))
 }
 
 /// The frame's maps once its flag says they are finite; the filter's state advanced then.

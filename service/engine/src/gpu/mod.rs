@@ -327,7 +327,6 @@ impl Gpu {
                 count: 2,
             }),
             resolved: buf("pass time", U::QUERY_RESOLVE | U::COPY_SRC),
-            staging: buf("pass time read-back", U::MAP_READ | U::COPY_DST),
         })
     }
 
@@ -377,26 +376,6 @@ impl Gpu {
             .chunks_exact(2)
             .map(|t| t[1].saturating_sub(t[0]) as f64 * period as f64)
             .collect())
-    }
-
-    /// The pass's time once its work is done (after [`Gpu::submit_and_read`], whose
-    /// submission `done` is), added to [`Counters::gpu_ns`].
-    pub(crate) fn read_timer(&self, t: &Timer, done: wgpu::SubmissionIndex) -> Option<f64> {
-        let period = self.timestamp_period?;
-        self.map_read(&t.staging, 16, done).ok()?;
-        let ticks = {
-            let v = t.staging.get_mapped_range(0..16).ok()?;
-            let at = |i: usize| {
-                v.get(i..i + 8)
-                    .and_then(|b| b.try_into().ok())
-                    .map(u64::from_le_bytes)
-            };
-            at(8)?.saturating_sub(at(0)?)
-        };
-        t.staging.unmap();
-        let ns = ticks as f64 * period as f64;
-        self.counters.gpu_ns.fetch_add(ns as u64, Ordering::Relaxed);
-        Some(ns)
     }
 
     /// Add the span between two timestamps read back (`ticks`: begin, end, as
@@ -500,7 +479,6 @@ impl Gpu {
 pub(crate) struct Timer {
     queries: wgpu::QuerySet,
     resolved: wgpu::Buffer,
-    staging: wgpu::Buffer,
 }
 
 /// Timestamps around many compute passes ([`Gpu::stamps`]): pass `i` writes `2 i` and
@@ -532,10 +510,21 @@ impl Timer {
         }
     }
 
-    /// After the pass: the two timestamps into the read-back buffer.
+    /// After the pass: the two timestamps resolved ([`Self::copy_into`] brings them to a
+    /// read-back).
     pub(crate) fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
         enc.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
-        enc.copy_buffer_to_buffer(&self.resolved, 0, &self.staging, 0, 16);
+    }
+
+    /// After [`Self::resolve`]: the two timestamps copied to `dst` (MAP_READ | COPY_DST) at
+    /// `offset` too, read back with the pass's results ([`Gpu::add_span`]).
+    pub(crate) fn copy_into(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        dst: &wgpu::Buffer,
+        offset: u64,
+    ) {
+        enc.copy_buffer_to_buffer(&self.resolved, 0, dst, offset, 16);
     }
 
     /// The begin timestamp only, for the first of several passes.

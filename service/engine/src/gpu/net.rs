@@ -165,9 +165,10 @@ impl GpuNet {
         } else {
             out_len
         };
+        // The output, then the network's two timestamps (`run_planned`).
         let staging = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("read-back"),
-            size: (staging_len.max(1) * 4) as u64,
+            size: (staging_len.max(1) * 4 + 16) as u64,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -324,12 +325,23 @@ impl GpuNet {
                 }
                 len = len / cap * n;
             }
-            let enc = self.record(r, inputs)?;
-            let (out, done) = self
-                .gpu
-                .submit_and_read(enc, &r.buffers[*ob], &r.staging, len)?;
-            if let Some(t) = &r.timer {
-                self.gpu.read_timer(t, done);
+            let mut enc = self.record(r, inputs)?;
+            // The output and the timestamps (where timed) in one read-back.
+            let bytes = (len * 4) as u64;
+            enc.copy_buffer_to_buffer(&r.buffers[*ob], 0, &r.staging, 0, bytes);
+            let stamps = if let Some(t) = &r.timer {
+                t.copy_into(&mut enc, &r.staging, bytes);
+                4
+            } else {
+                0
+            };
+            let mut out = vec![0.0f32; len + stamps];
+            self.gpu
+                .submit_and_read_bytes(enc, &r.staging, bytemuck::cast_slice_mut(&mut out))?;
+            if stamps > 0 {
+                let ticks: &[u8] = bytemuck::cast_slice(&out[len..]);
+                self.gpu.add_span(&self.gpu.count().gpu_ns, ticks);
+                out.truncate(len);
             }
             Ok(out)
         })
@@ -359,18 +371,20 @@ impl GpuNet {
     }
 
     /// Run on `inputs` (as [`Self::run`]) without bringing the output back: `then` gets the
-    /// recorded encoder, the output's buffer on the adapter and its shape, records what reads
-    /// it, submits and waits, and returns its result with the submission (the network's time
-    /// on the adapter is read after it). The output buffer is the plan's: the next run of
-    /// this network overwrites it, so `then` copies out what it keeps.
-    pub fn run_then<T>(
+    /// recorded encoder, the output's buffer on the adapter, its shape and the network's
+    /// timer (where the adapter has timestamps: `then` reads it back with its own results,
+    /// [`super::Timer::copy_into`], and adds it to the networks' time), records what reads
+    /// the output, submits and waits. The output buffer is the plan's: the next run of this
+    /// network overwrites it, so `then` copies out what it keeps.
+    pub(crate) fn run_then<T>(
         &self,
         inputs: &[(&[usize], &[f32])],
         then: impl FnOnce(
             wgpu::CommandEncoder,
             &wgpu::Buffer,
             &[usize],
-        ) -> Result<(T, wgpu::SubmissionIndex), String>,
+            Option<&super::Timer>,
+        ) -> Result<T, String>,
     ) -> Result<T, String> {
         let shapes: Vec<Vec<usize>> = inputs.iter().map(|(s, _)| s.to_vec()).collect();
         for (i, ((shape, data), s)) in inputs.iter().zip(&shapes).enumerate() {
@@ -384,11 +398,7 @@ impl GpuNet {
         self.with_plan(&shapes, |r| {
             let (ob, oshape) = &r.plan.output;
             let enc = self.record(r, inputs)?;
-            let (out, done) = then(enc, &r.buffers[*ob], oshape)?;
-            if let Some(t) = &r.timer {
-                self.gpu.read_timer(t, done);
-            }
-            Ok(out)
+            then(enc, &r.buffers[*ob], oshape, r.timer.as_ref())
         })
     }
 
