@@ -14,7 +14,8 @@
 # pipeline.md/.png (the daemon's pipeline in-process, CPU and GPU backends side by side, 257^3
 # and 513^3, fourier-small and fourier-medium, the camera replayed fast enough never to cap
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
-# the adapter's with one and up to eight conflict rounds per read-back) and nets.md (the
+# the adapter's with one and up to eight conflict rounds per read-back), rounds/pipeline.md
+# (the GPU backend's pipeline with `compute.rounds_per_wait` 1 and 8) and nets.md (the
 # networks, tract and the GPU kernels, each profiled per node or step), with run.log. The device is named in
 # every table; the CPU rows are that machine's cores, not the appliance's two.
 set -euo pipefail
@@ -82,6 +83,11 @@ case "$mode" in
     # through its row buckets); the camera's own view takes the input pixel's colour.
     "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
       --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
+    echo "== the GPU backend's pipeline with one and up to eight conflict rounds per read-back"
+    # compute.rounds_per_wait: fewer waits on the adapter a frame against rounds over empty
+    # lists, in the pipeline where the stages share the queue (bench localize has it alone).
+    "$bin" bench pipeline --backend wgpu --model fourier-small --res "$res" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --rounds-per-wait 1,8 --out "$out/rounds"
     echo "== localization on the model's field"
     # The adapter's rows twice: one conflict round per read-back, and up to 8.
     "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \

@@ -421,6 +421,12 @@ impl Config {
             " (seconds)",
         )?;
         in_range("compute.threads", self.compute.threads, &THREADS, "")?;
+        in_range(
+            "compute.rounds_per_wait",
+            self.compute.rounds_per_wait,
+            &compute::ROUNDS_PER_WAIT,
+            "",
+        )?;
         if let Err((key, msg)) = self.temporal.values().check() {
             return bad(format!("temporal.{key}"), msg);
         }

@@ -449,6 +449,7 @@ impl AdapterRenderer {
     pub(crate) fn open(
         models: Option<&volcap_engine::model::Models>,
         mode: FieldMode,
+        rounds_per_wait: usize,
     ) -> Option<Self> {
         let volcap_engine::model::Runtime::Wgpu(g) = &models?.runtime else {
             return None;
@@ -458,7 +459,7 @@ impl AdapterRenderer {
         }
         match volcap_engine::gpu::render::GpuRenderer::new(g.clone()) {
             Ok(gpu) => Some(AdapterRenderer {
-                gpu,
+                gpu: gpu.with_rounds_per_wait(rounds_per_wait),
                 cpu_because: None,
             }),
             Err(e) => {
@@ -524,6 +525,7 @@ impl AdapterRenderer {
     pub(crate) fn open(
         _models: Option<&volcap_engine::model::Models>,
         _mode: FieldMode,
+        _rounds_per_wait: usize,
     ) -> Option<Self> {
         None
     }
@@ -599,6 +601,7 @@ pub fn start(
         cfg.render.oracle_voxel_m,
         cfg.field(),
         cfg.compute.threads,
+        cfg.compute.rounds_per_wait,
         models.clone(),
     ));
 

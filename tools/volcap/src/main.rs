@@ -129,6 +129,10 @@ pub struct PipelineArgs {
     /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
     #[arg(long, default_value = "auto")]
     pub adapter: String,
+    /// `compute.rounds_per_wait` values (comma-separated, 1..=64): on the GPU backend, the
+    /// localization levels' conflict rounds recorded per read-back at most.
+    #[arg(long = "rounds-per-wait", value_delimiter = ',', default_value = "1")]
+    pub rounds_per_wait: Vec<usize>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,

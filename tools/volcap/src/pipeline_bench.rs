@@ -70,6 +70,8 @@ pub struct Row {
     pub net_plans: u64,
     /// The networks' milliseconds on the adapter per frame (timestamp queries; 0 without).
     pub adapter_ms_per_frame: f64,
+    /// `compute.rounds_per_wait` (the GPU backend's localization levels).
+    pub rounds_per_wait: usize,
     /// The adapter's milliseconds per frame, as `adapter_ms_per_frame`, of the frames'
     /// Fourier maps (interleave and temporal filter), of localization and the render's final
     /// level, and of the display image.
@@ -125,15 +127,16 @@ type Setup = (
     usize,
     bool,
     f32,
+    usize,
 );
 
 fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyhow::Result<Config> {
-    let (name, prec, res, coarse, threads, split, display, temporal, yaw) = setup;
+    let (name, prec, res, coarse, threads, split, display, temporal, yaw, rounds) = setup;
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
-         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\n\
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\n\
          [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
         match prec {
@@ -221,6 +224,7 @@ fn measure(
         waits_per_frame: (work1[4] - work0[4]) as f64 / published.max(1) as f64,
         net_plans: work1[5] - work0[5],
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
+        rounds_per_wait: cfg.compute.rounds_per_wait,
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
         localize_ms_per_frame: (work1[7] - work0[7]) as f64 / 1e6 / published.max(1) as f64,
         display_ms_per_frame: (work1[8] - work0[8]) as f64 / 1e6 / published.max(1) as f64,
@@ -241,6 +245,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         .find(|v| **v != 0 && ![33, 65, 129, 257, 513].contains(*v))
     {
         bail!("--segment-thread-up-to {v} must be 0 (never) or one of 33, 65, 129, 257, 513");
+    }
+    if let Some(r) = a.rounds_per_wait.iter().find(|r| !(1..=64).contains(*r)) {
+        bail!("--rounds-per-wait {r} must be in 1..=64");
     }
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);
@@ -279,18 +286,21 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     for &d in &a.display_sizes {
                         for &tf in &a.temporal {
                             for &yaw in &a.yaws {
-                                for &t in &a.threads {
-                                    configs.push((
-                                        name.clone(),
-                                        prec,
-                                        res,
-                                        c,
-                                        t,
-                                        split,
-                                        d,
-                                        tf,
-                                        yaw,
-                                    ));
+                                for &rounds in &a.rounds_per_wait {
+                                    for &t in &a.threads {
+                                        configs.push((
+                                            name.clone(),
+                                            prec,
+                                            res,
+                                            c,
+                                            t,
+                                            split,
+                                            d,
+                                            tf,
+                                            yaw,
+                                            rounds,
+                                        ));
+                                    }
                                 }
                             }
                         }
@@ -372,6 +382,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.display_size == r.display_size
                     && b.temporal == r.temporal
                     && b.yaw_deg == r.yaw_deg
+                    && b.rounds_per_wait == r.rounds_per_wait
             })
             .map(|b| r.fps / b.fps.max(1e-9));
     }
@@ -469,11 +480,12 @@ fn table(rows: &[Row]) -> String {
                 (Some(e), _) => e.clone(),
                 // The GPU backend's traffic: what crosses between host and adapter per frame.
                 (None, true) => format!(
-                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for; {} networks planned while measured{}",
+                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for (up to {} conflict rounds each); {} networks planned while measured{}",
                     r.bytes_up_per_frame / 1e6,
                     r.bytes_down_per_frame / 1e6,
                     r.dispatches_per_frame,
                     r.waits_per_frame,
+                    r.rounds_per_wait,
                     r.net_plans,
                     if r.adapter_ms_per_frame > 0.0 {
                         format!(

@@ -73,6 +73,19 @@ pub struct ComputeConfig {
     /// `$VOLCAP_ONNXRUNTIME`, `/usr/lib/volcap/onnxruntime/`, `target/onnxruntime/`.
     #[serde(default)]
     pub onnxruntime_lib: Option<PathBuf>,
+    /// `backend = "wgpu"`: conflict rounds of the localization's levels recorded per
+    /// read-back at most ([`ROUNDS_PER_WAIT`]; default 1). More rounds a submission run over
+    /// empty lists once the loop has converged but wait on the adapter fewer times a frame;
+    /// `volcap bench pipeline --rounds-per-wait` measures the trade on a board's GPU.
+    #[serde(default = "d_rounds_per_wait")]
+    pub rounds_per_wait: usize,
+}
+
+/// Accepted range of `compute.rounds_per_wait`.
+pub const ROUNDS_PER_WAIT: std::ops::RangeInclusive<usize> = 1..=64;
+
+fn d_rounds_per_wait() -> usize {
+    1
 }
 
 /// Default of `compute.segment_thread_up_to`: measured on 2 cores, the split takes 129^3 from
@@ -94,6 +107,7 @@ impl Default for ComputeConfig {
             segment_thread_up_to: d_segment_thread_up_to(),
             runtime: RuntimeChoice::default(),
             onnxruntime_lib: None,
+            rounds_per_wait: d_rounds_per_wait(),
         }
     }
 }

@@ -55,6 +55,23 @@ fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
         e.contains("line 5") && e.contains("compute.threads") && e.contains("1..=64"),
         "{e}"
     );
+    for bad in [0, 65] {
+        let e = Config::parse(
+            &format!("{base}[compute]\nrounds_per_wait = {bad}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("line 5") && e.contains("compute.rounds_per_wait") && e.contains("1..=64"),
+            "{e}"
+        );
+    }
+    let c = Config::parse(
+        &format!("{base}[compute]\nrounds_per_wait = 8\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c.compute.rounds_per_wait, 8);
     let e = Config::parse(
         &format!("{base}[compute]\nsegment_thread_up_to = 100\n"),
         Path::new("b.toml"),

@@ -13,6 +13,7 @@ pub(super) fn spawn(
     voxel: f32,
     mode: FieldMode,
     eval_threads: usize,
+    rounds_per_wait: usize,
     models: Option<Arc<volcap_engine::model::Models>>,
 ) -> std::thread::JoinHandle<()> {
     std::thread::Builder::new()
@@ -21,7 +22,8 @@ pub(super) fn spawn(
             let mut renderer = Renderer::new();
             renderer.set_threads(eval_threads);
             // On the GPU backend the model's frames are localized and drawn on the adapter.
-            let mut on_adapter = super::AdapterRenderer::open(models.as_deref(), mode);
+            let mut on_adapter =
+                super::AdapterRenderer::open(models.as_deref(), mode, rounds_per_wait);
             let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
                 let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
                 sh.set_state(PipelineState::Degraded(why));

@@ -155,6 +155,14 @@ impl GpuRenderer {
         })
     }
 
+    /// Conflict rounds per read-back at most in the levels up to `L - 1`
+    /// ([`GpuLocalizer::with_rounds_per_wait`]; 1 by default); the final level's loop reads
+    /// its counts after each round.
+    pub fn with_rounds_per_wait(mut self, n: usize) -> Self {
+        self.loc = self.loc.with_rounds_per_wait(n);
+        self
+    }
+
     /// Lists of `cap` entries at first (tests make them small to exercise their growth).
     pub fn with_list_capacity(mut self, cap: usize) -> Self {
         self.loc = self.loc.with_list_capacity(cap);
