@@ -76,14 +76,11 @@ impl FourierMaps {
     /// From planar maps `[2K+1, size, size]` (the network's output layout). `None` if the
     /// length does not match or a value is not finite.
     pub fn from_planar(planar: &[f32], k: usize, size: usize, zeta_scale: f32) -> Option<Self> {
+        if !Self::fits(planar, k, size, zeta_scale) {
+            return None;
+        }
         let c = 2 * k + 1;
         let plane = size * size;
-        if size < 2 || planar.len() != c * plane || !zeta_scale.is_finite() || zeta_scale <= 0.0 {
-            return None;
-        }
-        if !all_finite(planar) {
-            return None;
-        }
         // The transpose in blocks of pixels whose interleaved values stay in the L1 cache
         // (64 pixels x 2K + 1 channels): channel by channel over the whole map, each write
         // touched another cache line of the 2 MB result.
@@ -99,14 +96,7 @@ impl FourierMaps {
                 }
             }
         }
-        Some(Self {
-            k,
-            size,
-            zeta_scale,
-            data,
-            offset: 0.0,
-            basis: Basis::Fourier,
-        })
+        Some(Self::checked(data, k, size, zeta_scale))
     }
 
     /// From pixel-interleaved maps `[size * size, 2K + 1]` (the layout the maps keep, as the
@@ -117,22 +107,30 @@ impl FourierMaps {
         size: usize,
         zeta_scale: f32,
     ) -> Option<Self> {
-        let c = 2 * k + 1;
-        if size < 2 || data.len() != c * size * size || !zeta_scale.is_finite() || zeta_scale <= 0.0
-        {
-            return None;
-        }
-        if !all_finite(&data) {
-            return None;
-        }
-        Some(Self {
+        Self::fits(&data, k, size, zeta_scale).then(|| Self::checked(data, k, size, zeta_scale))
+    }
+
+    /// Maps whose `data` passed [`Self::fits`].
+    fn checked(data: Vec<f32>, k: usize, size: usize, zeta_scale: f32) -> Self {
+        Self {
             k,
             size,
             zeta_scale,
             data,
             offset: 0.0,
             basis: Basis::Fourier,
-        })
+        }
+    }
+
+    /// Whether `data` holds maps of order `k` and side `size`, every value finite, with a
+    /// usable depth scale.
+    fn fits(data: &[f32], k: usize, size: usize, zeta_scale: f32) -> bool {
+        let len = (2 * k + 1) * size * size;
+        size >= 2
+            && data.len() == len
+            && zeta_scale.is_finite()
+            && zeta_scale > 0.0
+            && all_finite(data)
     }
 
     /// The maps hold `basis`'s coefficients (the same 2K + 1 channels).
