@@ -150,7 +150,9 @@ fn real_photos_give_the_cpu_paths_mask_surface_and_render() {
 /// the astronaut photo saturated (x3, clipped), nearly black (/12), drowned in noise, cut to
 /// its upper half, and turned on its side (a rare pose), which the segmentation accepts, so
 /// the finiteness checks bite: mask in [0, 1], every grid value and depth finite, the
-/// adapter's localization on the same evaluated points as the CPU's on the same field.
+/// adapter's localization on the same evaluated points as the CPU's on the same field; and
+/// the same frames as one live stream through the maps' temporal filter on the adapter, its
+/// maps finite whatever jump the crop makes.
 #[test]
 fn hard_frames_stay_finite_on_the_gpu() {
     use volcap_engine::gpu::localize::GpuLocalizer;
@@ -210,7 +212,11 @@ fn hard_frames_stay_finite_on_the_gpu() {
         ..Default::default()
     };
     let mut accepted = 0;
-    for (name, rgb, fw, fh, from_photo) in frames {
+    // The same frames as one live stream through the temporal filter on the adapter: each
+    // frame's crop, size and content jump from the last one's (resampled, or started again).
+    let mut temporal = volcap_engine::model::temporal::Temporal::new(Default::default());
+    let mut streamed = 0;
+    for (f, (name, rgb, fw, fh, from_photo)) in frames.into_iter().enumerate() {
         let mut info = FrameInfo::default();
         let (img, mask, crop) = match models.prepare(&rgb, fw, fh, &mut info) {
             Ok(p) => p,
@@ -231,6 +237,26 @@ fn hard_frames_stay_finite_on_the_gpu() {
         let field = models
             .encode(&img, &mask, crop, ModelView::default())
             .unwrap();
+        let mut steady_mask = mask.clone();
+        let t_s = f as f64 / 30.0;
+        if let (Some(c), _) = temporal.steady_input(t_s, info.people, &mut steady_mask, crop) {
+            let live = models
+                .encode_steady(
+                    &img,
+                    &steady_mask,
+                    c,
+                    ModelView::default(),
+                    Some(&mut temporal),
+                )
+                .unwrap();
+            assert!(live.maps_on_adapter(), "{name}");
+            let maps = live.fourier_maps().unwrap().expect("a Fourier head");
+            assert!(
+                maps.coefficients().iter().all(|v| v.is_finite()),
+                "{name}: filtered maps"
+            );
+            streamed += 1;
+        }
         let (cpu_grid, cpu_evals) = localize(&field, spec);
         assert!(
             cpu_grid.values.iter().all(|v| v.is_finite()),
@@ -271,6 +297,7 @@ fn hard_frames_stay_finite_on_the_gpu() {
         accepted >= 3,
         "only {accepted} of the photo's hard frames found a person"
     );
+    assert!(streamed >= accepted, "{streamed} frames through the filter");
 }
 
 #[test]
