@@ -95,12 +95,29 @@ impl FieldBuffers {
 /// The series' parameters as `series.wgsl` takes them: K, map size, basis (1: cosine), the
 /// depth scale and the surface level's offset (the floats as bits).
 pub(super) fn series_head(maps: &FourierMaps) -> [u32; 5] {
+    series_words(
+        maps.k(),
+        maps.size(),
+        maps.basis(),
+        maps.zeta_scale(),
+        maps.iso_level(),
+    )
+}
+
+/// [`series_head`]'s words from the series' parts (`iso_level` as the maps give it back).
+pub(super) fn series_words(
+    k: usize,
+    size: usize,
+    basis: Basis,
+    zeta_scale: f32,
+    iso_level: f32,
+) -> [u32; 5] {
     [
-        maps.k() as u32,
-        maps.size() as u32,
-        (maps.basis() == Basis::Cosine) as u32,
-        maps.zeta_scale().to_bits(),
-        (0.5 - maps.iso_level()).to_bits(),
+        k as u32,
+        size as u32,
+        (basis == Basis::Cosine) as u32,
+        zeta_scale.to_bits(),
+        (0.5 - iso_level).to_bits(),
     ]
 }
 

@@ -175,6 +175,9 @@ pub struct GpuLocalizer {
     params_for: Option<(u64, bool)>,
     /// Conflict rounds per read-back at most ([`Self::with_rounds_per_wait`]).
     rounds_per_wait: usize,
+    /// Maps on the adapter to copy into the field's buffer, recorded ahead of the next
+    /// localization's work ([`Self::recorder`]).
+    pending_copy: Option<(wgpu::Buffer, u64)>,
 }
 
 /// Conflict rounds recorded per read-back at most, unless set: one. Batches (1, 2, 4, up to
@@ -249,6 +252,7 @@ impl GpuLocalizer {
             generation: 0,
             params_for: None,
             rounds_per_wait: DEFAULT_ROUNDS_PER_WAIT,
+            pending_copy: None,
         })
     }
 
@@ -390,6 +394,7 @@ impl GpuLocalizer {
 
     /// Write the field's data (grown buffers where needed) and its bind group.
     fn upload_field(&mut self, field: &GpuField<'_>, spec: GridSpec) -> Result<(), String> {
+        self.pending_copy = None;
         let (data, mask, head, to_crop): (FieldData<'_>, &[f32], [u32; 6], Mat3) = match field {
             GpuField::Table(t) => {
                 if t.len() != spec.len() {
@@ -481,16 +486,9 @@ impl GpuLocalizer {
                 q.write_buffer(&f.maps, 0, bytemuck::cast_slice(d));
                 up += std::mem::size_of_val(d);
             }
-            FieldData::Adapter(b, n) => {
-                // On the adapter already: copied there, in a submission of its own ahead of
-                // the localization's (the queue keeps their order).
-                let mut enc = self
-                    .gpu
-                    .device
-                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-                enc.copy_buffer_to_buffer(b, 0, &f.maps, 0, (n * 4) as u64);
-                q.submit([enc.finish()]);
-            }
+            // On the adapter already: copied there at the start of the localization's first
+            // submission ([`Self::recorder`]).
+            FieldData::Adapter(b, n) => self.pending_copy = Some((b.clone(), (n * 4) as u64)),
         }
         if f.coords_n != n {
             // The coordinates from the host (GridSpec::coord: the same floats as the CPU's
@@ -616,6 +614,9 @@ impl GpuLocalizer {
         }
         self.params_for = Some((self.generation, tight));
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        if let Some((src, bytes)) = self.pending_copy.take() {
+            enc.copy_buffer_to_buffer(&src, 0, &f.maps, 0, bytes);
+        }
         enc.clear_buffer(&b.values, 0, None);
         enc.clear_buffer(&b.queued, 0, None);
         enc.clear_buffer(&b.counts, 0, None);

@@ -68,39 +68,51 @@ impl MapsHead {
     /// The series' parameters as `series.wgsl` takes them: the bits
     /// [`super::fourier::series_head`] gives for host maps of this head.
     pub(crate) fn series(&self) -> [u32; 5] {
-        // As `FourierMaps::with_iso_level` stores it and `iso_level()` gives it back.
-        let offset = 0.5 - self.iso_level;
-        let iso = 0.5 - offset;
-        [
-            self.k as u32,
-            self.size as u32,
-            (self.basis == Basis::Cosine) as u32,
-            self.zeta_scale.to_bits(),
-            (0.5 - iso).to_bits(),
-        ]
+        // The level as `FourierMaps::with_iso_level` stores it and `iso_level()` gives it back.
+        let iso = 0.5 - (0.5 - self.iso_level);
+        super::fourier::series_words(self.k, self.size, self.basis, self.zeta_scale, iso)
     }
 }
 
-/// A frame's map buffer (the maps, then the not-finite flag) and its flag's read-back.
+/// A frame's map buffer (the maps, then the not-finite flag), its flag's read-back and the
+/// interleave's parameters and bind group (kept with the buffer from frame to frame).
 pub(crate) struct FrameBufs {
-    /// Floats the maps part holds.
+    /// Floats the maps part holds, and its channels.
     cap: usize,
+    channels: usize,
     maps: wgpu::Buffer,
     /// The flag, then the frame's two timestamps.
     flag_staging: wgpu::Buffer,
     /// The frame's passes on the adapter's clock, where it has timestamps.
     timer: Option<super::Timer>,
+    /// `maps.wgsl`'s parameters for these maps.
+    params: wgpu::Buffer,
+    /// The interleave's bind group and the network output it reads (remade when another).
+    bind: Option<(wgpu::Buffer, wgpu::BindGroup)>,
 }
 
 impl FrameBufs {
-    fn new(gpu: &Gpu, cap: usize) -> Self {
+    fn new(gpu: &Gpu, head: MapsHead) -> Self {
         use wgpu::BufferUsages as U;
+        let cap = head.len();
         let maps = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame maps"),
             size: ((cap + 1) * 4) as u64,
             usage: U::STORAGE | U::COPY_SRC | U::COPY_DST,
             mapped_at_creation: false,
         });
+        let params = wgpu::util::DeviceExt::create_buffer_init(
+            &gpu.device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some("interleave params"),
+                contents: bytemuck::cast_slice(&[
+                    cap as u32,
+                    head.channels() as u32,
+                    head.pixels() as u32,
+                ]),
+                usage: U::STORAGE,
+            },
+        );
         let flag_staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("maps flag read-back"),
             size: WEIGHTS_AT,
@@ -109,10 +121,31 @@ impl FrameBufs {
         });
         FrameBufs {
             cap,
+            channels: head.channels(),
             maps,
             flag_staging,
             timer: gpu.timer(),
+            params,
+            bind: None,
         }
+    }
+
+    /// The interleave's bind group reading `src` into these maps.
+    fn bind(
+        &mut self,
+        gpu: &Gpu,
+        pipeline: &wgpu::ComputePipeline,
+        src: &wgpu::Buffer,
+    ) -> &wgpu::BindGroup {
+        if self.bind.as_ref().is_none_or(|(b, _)| b != src) {
+            let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &[entry(0, &self.params), entry(1, src), entry(2, &self.maps)],
+            });
+            self.bind = Some((src.clone(), group));
+        }
+        &self.bind.as_ref().expect("set above").1
     }
 }
 
@@ -133,13 +166,15 @@ impl std::fmt::Debug for GpuMaps {
 
 impl GpuMaps {
     fn new(gpu: Arc<Gpu>, head: MapsHead) -> Self {
-        let len = head.len();
+        let (len, channels) = (head.len(), head.channels());
         let pooled = {
             let mut pool = gpu.maps_pool.lock().unwrap_or_else(|p| p.into_inner());
-            let i = pool.iter().position(|b| b.cap == len);
+            let i = pool
+                .iter()
+                .position(|b| b.cap == len && b.channels == channels);
             i.map(|i| pool.swap_remove(i))
         };
-        let bufs = pooled.unwrap_or_else(|| FrameBufs::new(&gpu, len));
+        let bufs = pooled.unwrap_or_else(|| FrameBufs::new(&gpu, head));
         GpuMaps {
             gpu,
             head,
@@ -215,7 +250,6 @@ pub struct TemporalStep {
     pub moved: bool,
     /// The rates' low-pass weight.
     pub a: f32,
-    pub inv_dt: f32,
     pub min_cutoff_hz: f32,
     pub beta: f32,
     pub dt: f32,
@@ -249,7 +283,12 @@ pub struct GpuTemporal {
     staging: wgpu::Buffer,
     /// Which of the pairs holds the last frame's.
     cur: usize,
+    /// Bind groups made, by frame buffer and `cur` (the pool's few buffers, both ways).
+    binds: Vec<(wgpu::Buffer, usize, wgpu::BindGroup)>,
 }
+
+/// Bind groups [`GpuTemporal`] keeps: the maps pool's buffers with either pair read.
+const BINDS: usize = 2 * POOL;
 
 impl std::fmt::Debug for GpuTemporal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -321,6 +360,7 @@ impl GpuTemporal {
             params,
             staging,
             cur: 0,
+            binds: Vec::new(),
         })
     }
 
@@ -331,7 +371,7 @@ impl GpuTemporal {
     /// Record the filter of `maps` (this frame's, in place): `step` continues from the last
     /// frame's maps, `None` starts from this frame's (after a reset).
     fn record(
-        &self,
+        &mut self,
         enc: &mut wgpu::CommandEncoder,
         maps: &wgpu::Buffer,
         step: Option<&TemporalStep>,
@@ -346,7 +386,8 @@ impl GpuTemporal {
             p[3] = s.moved as u32;
             let f = [
                 s.a,
-                s.inv_dt,
+                // As the host's filter divides (its `1 / dt`, not the adapter's division).
+                1.0 / s.dt,
                 s.min_cutoff_hz,
                 s.beta,
                 s.dt,
@@ -366,24 +407,35 @@ impl GpuTemporal {
             .queue
             .write_buffer(&self.params, 0, bytemuck::cast_slice(&p));
         let (r, w) = (self.cur, 1 - self.cur);
-        let bind = self
-            .gpu
-            .device
-            .create_bind_group(&wgpu::BindGroupDescriptor {
-                label: None,
-                layout: &self.pipes.layout,
-                entries: &[
-                    entry(0, &self.params),
-                    entry(1, maps),
-                    entry(2, &self.last[r]),
-                    entry(3, &self.last[w]),
-                    entry(4, &self.rate[r]),
-                    entry(5, &self.rate[w]),
-                    entry(6, &self.scratch),
-                ],
-            });
+        let known = self.binds.iter().position(|(b, c, _)| b == maps && *c == r);
+        let i = match known {
+            Some(i) => i,
+            None => {
+                let group = self
+                    .gpu
+                    .device
+                    .create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: None,
+                        layout: &self.pipes.layout,
+                        entries: &[
+                            entry(0, &self.params),
+                            entry(1, maps),
+                            entry(2, &self.last[r]),
+                            entry(3, &self.last[w]),
+                            entry(4, &self.rate[r]),
+                            entry(5, &self.rate[w]),
+                            entry(6, &self.scratch),
+                        ],
+                    });
+                if self.binds.len() == BINDS {
+                    self.binds.remove(0);
+                }
+                self.binds.push((maps.clone(), r, group));
+                self.binds.len() - 1
+            }
+        };
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-        pass.set_bind_group(0, &bind, &[]);
+        pass.set_bind_group(0, &self.binds[i].2, &[]);
         let mut dispatch = |pipe: &wgpu::ComputePipeline, (x, y): (u32, u32)| {
             pass.set_pipeline(pipe);
             pass.dispatch_workgroups(x, y, 1);
@@ -488,7 +540,7 @@ fn frame_from<'a>(
     mut enc: wgpu::CommandEncoder,
     src: &wgpu::Buffer,
     head: MapsHead,
-    filter: Option<FrameFilter<'a>>,
+    mut filter: Option<FrameFilter<'a>>,
     net_timer: Option<&super::Timer>,
 ) -> Result<Frame<'a>, String> {
     let interleave = gpu.pipeline("maps interleave", INTERLEAVE)?;
@@ -500,28 +552,11 @@ fn frame_from<'a>(
             f.state.head
         ));
     }
-    let maps = GpuMaps::new(gpu.clone(), head);
+    let mut maps = GpuMaps::new(gpu.clone(), head);
     let len = head.len();
-    let params = wgpu::util::DeviceExt::create_buffer_init(
-        &gpu.device,
-        &wgpu::util::BufferInitDescriptor {
-            label: None,
-            contents: bytemuck::cast_slice(&[
-                len as u32,
-                head.channels() as u32,
-                head.pixels() as u32,
-            ]),
-            usage: wgpu::BufferUsages::STORAGE,
-        },
-    );
-    let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: None,
-        layout: &interleave.get_bind_group_layout(0),
-        entries: &[entry(0, &params), entry(1, src), entry(2, maps.buffer())],
-    });
     let flag_at = (len * 4) as u64;
-    enc.clear_buffer(maps.buffer(), flag_at, Some(4));
-    let fb = maps.bufs.as_ref().ok_or("no frame buffers")?;
+    let fb = maps.bufs.as_mut().ok_or("no frame buffers")?;
+    enc.clear_buffer(&fb.maps, flag_at, Some(4));
     let timer = fb.timer.as_ref();
     {
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -529,55 +564,46 @@ fn frame_from<'a>(
             timestamp_writes: timer.map(|t| t.begin()),
         });
         pass.set_pipeline(&interleave);
-        pass.set_bind_group(0, &bind, &[]);
         let (x, y) = groups(len as u32);
+        pass.set_bind_group(0, fb.bind(gpu, &interleave, src), &[]);
         pass.dispatch_workgroups(x, y, 1);
     }
+    let fb = maps.bufs.as_ref().ok_or("no frame buffers")?;
+    let timer = fb.timer.as_ref();
     let mut dispatches = 1;
-    let mut flag = [0u8; 4];
-    let mut weights = None;
-    // The read-back: the flag, the timestamps (where timed), the weights (where asked).
-    // 16 bytes for these passes' span, 16 for the network's.
-    let stamps = match (timer, net_timer) {
-        (Some(_), Some(_)) => 32,
-        (Some(_), None) => 16,
-        _ => 0,
+    // The filter's passes; the read-back (the flag, the timestamps where timed, 16 bytes for
+    // these passes' span and 16 for the network's, the weights where asked) into the
+    // filter's staging, which has room for the weights, or the frame's.
+    let n = head.pixels();
+    let mut want_weights = false;
+    if let Some(f) = filter.as_mut() {
+        dispatches += f.state.record(&mut enc, &fb.maps, f.step.as_ref());
+        want_weights = f.weights && f.step.is_some();
+    }
+    let (staging, scratch) = match filter.as_ref() {
+        Some(f) => (&f.state.staging, Some(&f.state.scratch)),
+        None => (&fb.flag_staging, None),
     };
+    enc.copy_buffer_to_buffer(&fb.maps, flag_at, staging, 0, 4);
+    let mut stamps = 0;
+    if let Some(timer) = timer {
+        timer.end_into(&mut enc, staging, STAMPS_AT);
+        stamps = 16;
+        if let Some(nt) = net_timer {
+            nt.copy_into(&mut enc, staging, NET_STAMPS_AT);
+            stamps = 32;
+        }
+    }
     let mut out = vec![0u8; STAMPS_AT as usize + stamps];
-    match &filter {
-        Some(f) => {
-            dispatches += f.state.record(&mut enc, maps.buffer(), f.step.as_ref());
-            let t = &*f.state;
-            enc.copy_buffer_to_buffer(maps.buffer(), flag_at, &t.staging, 0, 4);
-            if let (Some(timer), Some(nt)) = (timer, net_timer) {
-                timer.end_into(&mut enc, &t.staging, STAMPS_AT);
-                nt.copy_into(&mut enc, &t.staging, NET_STAMPS_AT);
-            } else if let Some(timer) = timer {
-                timer.end_into(&mut enc, &t.staging, STAMPS_AT);
-            }
-            let n = head.pixels();
-            if f.weights && f.step.is_some() {
-                let at = (2 * n * 4) as u64;
-                enc.copy_buffer_to_buffer(&t.scratch, at, &t.staging, WEIGHTS_AT, (n * 4) as u64);
-                out.resize(WEIGHTS_AT as usize + 4 * n, 0);
-            }
-            gpu.submit_and_read_bytes(enc, &t.staging, &mut out)?;
-            if out.len() > WEIGHTS_AT as usize {
-                let w = &out[WEIGHTS_AT as usize..];
-                weights = Some(bytemuck::pod_collect_to_vec::<u8, f32>(w));
-            }
-        }
-        None => {
-            enc.copy_buffer_to_buffer(&fb.maps, flag_at, &fb.flag_staging, 0, 4);
-            if let Some(timer) = timer {
-                timer.end_into(&mut enc, &fb.flag_staging, STAMPS_AT);
-                if let Some(nt) = net_timer {
-                    nt.copy_into(&mut enc, &fb.flag_staging, NET_STAMPS_AT);
-                }
-            }
-            gpu.submit_and_read_bytes(enc, &fb.flag_staging, &mut out)?;
-        }
-    };
+    if let (true, Some(scratch)) = (want_weights, scratch) {
+        let at = (2 * n * 4) as u64;
+        enc.copy_buffer_to_buffer(scratch, at, staging, WEIGHTS_AT, (n * 4) as u64);
+        out.resize(WEIGHTS_AT as usize + 4 * n, 0);
+    }
+    gpu.submit_and_read_bytes(enc, staging, &mut out)?;
+    let weights =
+        want_weights.then(|| bytemuck::pod_collect_to_vec::<u8, f32>(&out[WEIGHTS_AT as usize..]));
+    let mut flag = [0u8; 4];
     flag.copy_from_slice(&out[..4]);
     if stamps > 0 {
         let c = gpu.count();

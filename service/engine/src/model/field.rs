@@ -19,7 +19,7 @@ pub enum ShapeState {
     /// The Fourier maps on the GPU backend's adapter (made there by the shape network and
     /// filtered there; `GpuMaps::host` brings them back when a caller needs them).
     #[cfg(feature = "wgpu")]
-    FourierOnAdapter(crate::gpu::maps::GpuMaps),
+    FourierOnAdapter(Box<crate::gpu::maps::GpuMaps>),
 }
 
 /// The networks' occupancy and colour over the render view's NDC cube for one frame.

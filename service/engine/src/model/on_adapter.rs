@@ -99,7 +99,7 @@ impl Models {
         let image: Vec<f32> = x[..3 * s * s].iter().map(|v| v * 0.5 + 0.5).collect();
         let mut field = ModelField::new(
             mask_c,
-            ShapeState::FourierOnAdapter(maps),
+            ShapeState::FourierOnAdapter(Box::new(maps)),
             color_feat.map(|f| (self.color.clone(), f)),
             image,
             crop,

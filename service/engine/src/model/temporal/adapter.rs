@@ -15,8 +15,6 @@ pub(super) struct AdapterMaps {
     state: GpuTemporal,
     /// The crop of the last frame whose maps the state holds (`None`: none since a reset).
     last: Option<Crop>,
-    /// Whether the frame under way continues from `last` ([`Temporal::adapter_filter`]).
-    stepping: bool,
     color: Option<(MapLayout, Vec<f32>)>,
     color_taps: Taps,
     spare_color: Vec<f32>,
@@ -48,7 +46,6 @@ impl Temporal {
             self.adapter = Some(AdapterMaps {
                 state: GpuTemporal::new(gpu.clone(), head)?,
                 last: None,
-                stepping: false,
                 color: None,
                 color_taps: Taps::default(),
                 spare_color: Vec::new(),
@@ -63,7 +60,6 @@ impl Temporal {
             Some(from) if dt > 0.0 && color_ok => Some(TemporalStep {
                 moved: moved(head.size, from, crop),
                 a: one_euro_alpha(s.map_change_cutoff_hz, dt),
-                inv_dt: 1.0 / dt,
                 min_cutoff_hz: s.map_min_cutoff_hz,
                 beta: s.map_beta,
                 dt,
@@ -73,7 +69,6 @@ impl Temporal {
             }),
             _ => None,
         };
-        a.stepping = step.is_some();
         if !color_ok {
             a.color = None;
         }
@@ -98,8 +93,9 @@ impl Temporal {
         };
         let from = a.last.replace(crop);
         let shape = a.state.head().size;
-        match (a.stepping, from, weights, &mut a.color, color) {
-            (true, Some(from), Some(w), Some((llast, lc)), Some((lcol, d)))
+        // Weights come back only for a frame that continued from the last one.
+        match (from, weights, &mut a.color, color) {
+            (Some(from), Some(w), Some((llast, lc)), Some((lcol, d)))
                 if *llast == lcol && all_finite(d) =>
             {
                 let w = if lcol.size == shape {
@@ -121,6 +117,5 @@ impl Temporal {
             // None this frame (the camera's own view takes the input's colours): forgotten.
             _ => a.color = None,
         }
-        a.stepping = false;
     }
 }
