@@ -12,10 +12,12 @@ use volcap_engine::gpu::Gpu;
 use volcap_engine::model::Runtime;
 use volcap_engine::model::preprocess::INPUT_SIZE;
 
-/// The device is opened with the adapter's own buffer sizes where they are larger than
-/// wgpu's defaults (a GPU's binding holds a 513^3 grid), everything else at the defaults.
+/// The device is opened with the adapter's own buffer sizes and storage buffers per stage
+/// where they are larger than wgpu's defaults (a GPU's binding holds a 513^3 grid; where a
+/// binding is smaller, the grid's tiles take more bindings), everything else at the
+/// defaults.
 #[test]
-fn the_device_takes_the_adapters_buffer_sizes_and_default_limits_otherwise() {
+fn the_device_takes_the_adapters_buffer_sizes_and_bindings_and_default_limits_otherwise() {
     let d = wgpu::Limits::default();
     let gpu_like = wgpu::Limits {
         max_buffer_size: 1 << 40,
@@ -31,18 +33,21 @@ fn the_device_takes_the_adapters_buffer_sizes_and_default_limits_otherwise() {
         l.max_compute_workgroup_size_x,
         d.max_compute_workgroup_size_x
     );
-    assert_eq!(
-        l.max_storage_buffers_per_shader_stage,
-        d.max_storage_buffers_per_shader_stage
-    );
+    assert_eq!(l.max_storage_buffers_per_shader_stage, 64);
     // Never below the defaults (what every adapter must offer).
     let small = wgpu::Limits {
         max_storage_buffer_binding_size: 1 << 20,
+        max_storage_buffers_per_shader_stage: 4,
         ..d.clone()
     };
+    let l = volcap_engine::gpu::buffer_limits(&small);
     assert_eq!(
-        volcap_engine::gpu::buffer_limits(&small).max_storage_buffer_binding_size,
+        l.max_storage_buffer_binding_size,
         d.max_storage_buffer_binding_size
+    );
+    assert_eq!(
+        l.max_storage_buffers_per_shader_stage,
+        d.max_storage_buffers_per_shader_stage
     );
     // The opened device has them: its adapter's, as the instance lists it.
     if let Some(gpu) = gpu() {
@@ -60,6 +65,10 @@ fn the_device_takes_the_adapters_buffer_sizes_and_default_limits_otherwise() {
             want.max_storage_buffer_binding_size
         );
         assert_eq!(got.max_buffer_size, want.max_buffer_size);
+        assert_eq!(
+            got.max_storage_buffers_per_shader_stage,
+            want.max_storage_buffers_per_shader_stage
+        );
     }
 }
 
@@ -260,7 +269,9 @@ fn analytic_tables(
 /// analytic scene (the field tabulated on the host, so both sides see the same values): the
 /// same value at every grid point, the same evaluated set, evaluations and conflict rounds,
 /// for the paper's method, its no-conflict variant and the tight one, from two coarse levels,
-/// and with lists too small at first (grown, the frame run again).
+/// with lists too small at first (grown, the frame run again), and with the grid's values
+/// tiled over several bindings (as where one binding cannot hold a grid: 513^3 on lavapipe)
+/// in tiles of 2^16 and 2^12 floats.
 #[test]
 fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
     use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
@@ -271,12 +282,37 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
     let mut checked = 0;
     // Conflict rounds one per read-back (the default), and in batches of up to 8 and 4 (the
     // empty rounds after the last one must change nothing; with tiny lists, overflowing).
-    for (res, cap, per_wait) in [(33, 1 << 18, 1), (129, 1 << 18, 8), (65, 64, 4)] {
-        let mut gl = GpuLocalizer::new(gpu.clone())
+    // Tiles: 65^3 in 5 of 2^16 floats, 33^3 in 9 of 2^12.
+    let tiled = |gl: GpuLocalizer, tile: usize| {
+        if tile > 0 {
+            gl.with_tile_floats(tile)
+        } else {
+            gl
+        }
+    };
+    let mut tiles_seen = Vec::new();
+    for (res, cap, per_wait, tile) in [
+        (33, 1 << 18, 1, 0),
+        (129, 1 << 18, 8, 0),
+        (65, 64, 4, 0),
+        (65, 1 << 18, 1, 1 << 16),
+        (33, 1000, 2, 1 << 12),
+    ] {
+        let gl = GpuLocalizer::new(gpu.clone())
             .unwrap()
             .with_list_capacity(cap)
             .with_rounds_per_wait(per_wait);
+        let mut gl = tiled(gl, tile);
         let spec = GridSpec::from_resolution(res).unwrap();
+        let tiling = gl.tiling(spec);
+        if tile > 0 {
+            assert_eq!(
+                tiling.tiles as usize,
+                spec.len().div_ceil(tile),
+                "{res}^3 tiles"
+            );
+            tiles_seen.push(tiling.tiles);
+        }
         for (name, scene, table) in analytic_tables(spec) {
             for (method, mode) in [
                 (Method::Hierarchical, HierarchicalMode::Paper),
@@ -292,8 +328,10 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
                     let mut g = Grid::new(spec);
                     gl.read_grid(&mut g).unwrap();
                     let what = format!(
-                        "{name} {res}^3 {} from level {coarse}, {per_wait} rounds per wait",
-                        method.name()
+                        "{name} {res}^3 {} from level {coarse}, {per_wait} rounds per wait, \
+                         {} tile(s)",
+                        method.name(),
+                        tiling.tiles
                     );
                     assert_eq!(got.evaluations, want.evaluations, "{what}: evaluations");
                     assert_eq!(got.conflict_rounds, want.conflict_rounds, "{what}: rounds");
@@ -316,44 +354,107 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
                 }
             }
         }
-        if cap < 1 << 18 {
+        if cap < 1000 {
             assert!(gl.list_capacity() > cap, "the small lists grew");
         }
     }
+    assert_eq!(tiles_seen, [5, 9]);
     println!("{checked} runs equal to the CPU's");
 }
 
-/// A grid whose values do not fit one storage binding at default limits is refused with
-/// the sizes named (and nothing is allocated for it).
+/// A grid whose values do not fit one storage binding is tiled: 513^3 (540 MB of values)
+/// takes as many bindings of the adapter's size as it needs (five of 128 MiB on lavapipe; one
+/// on a GPU whose binding holds it). One whose tiles need more storage bindings than the
+/// adapter has per stage is refused with the sizes named, before anything is allocated; and
+/// one localizer moves between tilings as its grids change size, each run the CPU's.
 #[test]
-fn a_grid_over_the_adapters_binding_limit_is_refused_with_its_size() {
+fn a_grid_over_one_binding_is_tiled_and_refused_only_past_the_adapters_bindings() {
     use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
-    use volcap_engine::grid::GridSpec;
-    use volcap_engine::localize::HierarchicalMode;
+    use volcap_engine::grid::{Grid, GridSpec};
+    use volcap_engine::localize::{HierarchicalMode, Localizer, Method};
     let Some(gpu) = gpu() else { return };
-    let limit = gpu.device.limits().max_storage_buffer_binding_size;
-    let mut gl = GpuLocalizer::new(gpu).unwrap();
+    let limits = gpu.device.limits();
+    let binding = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let per_stage = limits.max_storage_buffers_per_shader_stage;
+    let gl = GpuLocalizer::new(gpu.clone()).unwrap();
     let spec = GridSpec::from_resolution(513).unwrap();
-    if limit >= 513 * 513 * 513 * 4 {
-        // An adapter whose own limit holds the grid (a GPU's; lavapipe's is 128 MiB).
-        assert!(gl.check_size(spec).is_ok());
+    let t = gl.tiling(spec);
+    let bytes = spec.len() as u64 * 4;
+    if bytes <= binding {
+        assert_eq!(t.tiles, 1);
     } else {
-        let e = gl
-            .run(&GpuField::Table(&[]), spec, 3, HierarchicalMode::Paper)
-            .unwrap_err();
-        assert!(e.contains("513^3") && e.contains("MiB"), "{e}");
-        assert!(e.contains(&format!("{} MiB", limit >> 20)), "{e}");
+        assert!(
+            4u64 << t.shift <= binding && 8u64 << t.shift > binding,
+            "{t:?}"
+        );
+        assert_eq!(t.tiles as u64, bytes.div_ceil(4 << t.shift), "{t:?}");
     }
-    let small = GridSpec::from_resolution(33).unwrap();
-    let e = gl
+    println!(
+        "513^3 on {}: {} tile(s) of at most {} MiB; {per_stage} storage buffers per stage",
+        gpu.adapter.label(),
+        t.tiles,
+        (4u64 << t.shift).min(bytes) >> 20
+    );
+    // Seven storage buffers besides the values' in the busiest kernels.
+    assert_eq!(
+        gl.check_size(spec).is_ok(),
+        t.tiles + 7 <= per_stage,
+        "{t:?}"
+    );
+
+    // One float a tile: more tiles than any adapter's bindings, refused with the sizes.
+    let small = GridSpec::from_resolution(129).unwrap();
+    let mut tiny = GpuLocalizer::new(gpu.clone()).unwrap().with_tile_floats(1);
+    let tiles = small.len();
+    assert_eq!(tiny.tiling(small).tiles as usize, tiles);
+    if tiles as u64 + 7 > u64::from(per_stage) {
+        let e = tiny
+            .run(&GpuField::Table(&[]), small, 3, HierarchicalMode::Paper)
+            .unwrap_err();
+        assert!(
+            e.contains("129^3") && e.contains(&format!("in {tiles} storage bindings")),
+            "{e}"
+        );
+        assert!(e.contains(&format!("adapter's {per_stage} storage")), "{e}");
+    }
+    let e = GpuLocalizer::new(gpu.clone())
+        .unwrap()
         .run(
             &GpuField::Table(&[0.0; 10]),
-            small,
+            GridSpec::from_resolution(33).unwrap(),
             3,
             HierarchicalMode::Paper,
         )
         .unwrap_err();
     assert!(e.contains("10 values"), "{e}");
+
+    // 65^3 in five tiles, 33^3 in one (it fits 2^16 floats), 65^3 again: the kernels and
+    // buffers follow the tiling, the values and evaluated sets stay the CPU's.
+    let mut gl = gl.with_tile_floats(1 << 16);
+    let mut cpu_loc = Localizer::new();
+    for (res, tiles) in [(65, 5), (33, 1), (65, 5)] {
+        let spec = GridSpec::from_resolution(res).unwrap();
+        assert_eq!(gl.tiling(spec).tiles, tiles, "{res}^3");
+        for (name, scene, table) in analytic_tables(spec).into_iter().take(3) {
+            let mut cpu = Grid::new(spec);
+            let want = cpu_loc
+                .run(Method::Hierarchical, &scene, spec, 3, &mut cpu)
+                .unwrap();
+            let got = gl
+                .run(&GpuField::Table(&table), spec, 3, HierarchicalMode::Paper)
+                .unwrap();
+            let mut g = Grid::new(spec);
+            gl.read_grid(&mut g).unwrap();
+            assert_eq!(got.evaluations, want.evaluations, "{name} {res}^3");
+            assert!(
+                (0..spec.len()).all(|q| g.evaluated.get(q) == cpu.evaluated.get(q)
+                    && g.values[q].to_bits() == cpu.values[q].to_bits()),
+                "{name} {res}^3 in {tiles} tile(s): the grid differs from the CPU's"
+            );
+        }
+    }
 }
 
 /// The mesh-free renderer with its grid on the adapter (`Renderer::render_gpu`: localization
@@ -374,13 +475,23 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
     let (mut close, mut channels) = (0usize, 0usize);
     let timed0 = gpu.counters();
     let (mut depth_off, mut pixels) = (0usize, 0usize);
-    for (res, cap) in [(65, 1 << 18), (129, 1 << 18), (33, 16)] {
+    // The last row tiles the grid's values over five bindings (as 513^3 on lavapipe): the
+    // render's kernels and the display's read them through the tiles.
+    for (res, cap, tile) in [
+        (65, 1 << 18, 0),
+        (129, 1 << 18, 0),
+        (33, 16, 0),
+        (65, 1 << 18, 1 << 16),
+    ] {
         // At 129^3 the levels' conflict rounds go to the adapter 4 at a time (the rounds after
         // the loop converged run over empty lists): the same frames.
         let mut gr = GpuRenderer::new(gpu.clone())
             .unwrap()
             .with_list_capacity(cap)
             .with_rounds_per_wait(if res == 129 { 4 } else { 1 });
+        if tile > 0 {
+            gr = gr.with_tile_floats(tile);
+        }
         let spec = GridSpec::from_resolution(res).unwrap();
         for (name, scene, table) in analytic_tables(spec) {
             for (shade, coarse) in [(false, 3), (true, 2)] {
@@ -389,7 +500,8 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
                     background: [0.1, 0.2, 0.3, 1.0],
                     shade,
                 };
-                let what = format!("{name} {res}^3 shade {shade} from level {coarse}");
+                let what =
+                    format!("{name} {res}^3 shade {shade} from level {coarse}, tiles of {tile}");
                 let want = cpu.render(&scene, &scene, spec, &opts).unwrap();
                 let got = on_gpu
                     .render_gpu(

@@ -11,7 +11,8 @@
 // out: RGBA8 per pixel, then the depth per pixel (f32 bits; -1 where there is none).
 
 @group(0) @binding(0) var<uniform> d: array<vec4<u32>, 2>;
-@group(0) @binding(1) var<storage, read> values: array<f32>;
+// values (binding 1 and further tiles): vget, declared ahead of this source
+// (gpu/localize.rs `Tiling::wgsl`).
 @group(0) @binding(2) var<storage, read> hits: array<u32>;
 @group(0) @binding(3) var<storage, read> cols: array<f32>;
 @group(0) @binding(4) var<storage, read_write> out: array<u32>;
@@ -61,14 +62,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let bottom = u32(max(hmin - 1, 0));
     var v_out = 0.0;
     if top + 1u < n {
-        for (var t = 0u; t < 4u; t = t + 1u) { v_out = v_out + w[t] * values[c[t] + (top + 1u) * plane]; }
+        for (var t = 0u; t < 4u; t = t + 1u) { v_out = v_out + w[t] * vget(c[t] + (top + 1u) * plane); }
     }
     var found = false;
     var z = 0.0;
     for (var k = top + 1u; k > bottom; k = k - 1u) {
         let kk = k - 1u;
         var v_in = 0.0;
-        for (var t = 0u; t < 4u; t = t + 1u) { v_in = v_in + w[t] * values[c[t] + kk * plane]; }
+        for (var t = 0u; t < 4u; t = t + 1u) { v_in = v_in + w[t] * vget(c[t] + kk * plane); }
         if v_in > 0.5 {
             if kk + 1u < n {
                 let dv = v_in - v_out;

@@ -14,9 +14,11 @@
 //! The values stay on the adapter for the stages that read them there;
 //! [`GpuLocalizer::read_grid`] brings them (and the evaluated set) back into a CPU [`Grid`].
 //! The lists start at [`START_CAP`] entries and grow (the frame run again) when a level
-//! needs more. The whole grid is one storage buffer: grids over the adapter's binding limit
-//! (513^3 where a binding holds 128 MiB, as on lavapipe; a GPU's holds it, see
-//! [`super::buffer_limits`]) are refused with the sizes named.
+//! needs more. The grid's values are one storage buffer where one binding holds them (a
+//! GPU's: [`super::buffer_limits`]), else tiles of a power of two floats each, in bindings
+//! of their own ([`Tiling`]: 513^3, 540 MB, is five tiles where a binding holds 128 MiB, as
+//! on lavapipe); the kernels read and write them through `vget` / `vset`. A grid whose tiles
+//! need more storage bindings than the adapter has is refused with the sizes named.
 
 use super::Gpu;
 use super::kit::entry;
@@ -38,6 +40,126 @@ const EVAL: &str = concat!(
 
 /// Entries each index list holds at first.
 pub const START_CAP: usize = 1 << 18;
+
+const MIB: f64 = (1u64 << 20) as f64;
+
+/// The binding of the values' second tile (the first is binding 1), then one each.
+const TILE_BINDING: u32 = 16;
+
+/// Storage bindings per stage that the localization's kernels take besides the values'
+/// (the lists, bits and counts, and the field's maps and mask in the evaluation kernels).
+const OTHER_STORAGE: u32 = 7;
+
+/// How a grid's values are laid over storage bindings: `tiles` buffers of `1 << shift`
+/// floats (the last one shorter), point `q` at `q & ((1 << shift) - 1)` of tile
+/// `q >> shift`. One tile is the whole grid in one binding, as before tiling.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Tiling {
+    pub shift: u32,
+    pub tiles: u32,
+}
+
+impl Tiling {
+    /// The whole grid in one binding.
+    pub const ONE: Tiling = Tiling {
+        shift: 31,
+        tiles: 1,
+    };
+
+    /// Tiles for `len` floats where a binding holds `max_floats` at most: one tile if it
+    /// fits, else tiles of the largest power of two floats within the limit.
+    pub fn new(len: usize, max_floats: u64) -> Tiling {
+        if len as u64 <= max_floats {
+            return Tiling::ONE;
+        }
+        let shift = 63 - max_floats.max(1).leading_zeros();
+        Tiling {
+            shift,
+            tiles: (len as u64).div_ceil(1 << shift) as u32,
+        }
+    }
+
+    /// Floats in tile `t` of a grid of `len`.
+    fn tile_len(&self, t: u32, len: usize) -> usize {
+        if self.tiles == 1 {
+            return len;
+        }
+        let per = 1usize << self.shift;
+        len.saturating_sub(t as usize * per).min(per)
+    }
+
+    fn binding(t: u32) -> u32 {
+        if t == 0 { 1 } else { TILE_BINDING + t - 1 }
+    }
+
+    /// The layout entries of the tiles (binding 1, then [`TILE_BINDING`] on).
+    pub(super) fn layout_entries(&self, read_only: bool) -> Vec<wgpu::BindGroupLayoutEntry> {
+        (0..self.tiles)
+            .map(|t| super::kit::storage(Self::binding(t), read_only))
+            .collect()
+    }
+
+    /// Bind group entries of `tiles` (one buffer per tile).
+    pub(super) fn entries<'b>(&self, tiles: &'b [wgpu::Buffer]) -> Vec<wgpu::BindGroupEntry<'b>> {
+        tiles
+            .iter()
+            .enumerate()
+            .map(|(t, b)| entry(Self::binding(t as u32), b))
+            .collect()
+    }
+
+    /// WGSL ahead of a kernel source: the tiles' bindings, `vget(q)` and (`writable`)
+    /// `vset(q, v)`.
+    pub(super) fn wgsl(&self, writable: bool) -> String {
+        use std::fmt::Write;
+        let access = if writable { "read_write" } else { "read" };
+        let name = |t: u32| {
+            if t == 0 {
+                "values".to_string()
+            } else {
+                format!("values_{t}")
+            }
+        };
+        let mut w = String::new();
+        for t in 0..self.tiles {
+            let _ = writeln!(
+                w,
+                "@group(0) @binding({}) var<storage, {access}> {}: array<f32>;",
+                Self::binding(t),
+                name(t)
+            );
+        }
+        if self.tiles == 1 {
+            w.push_str("fn vget(q: u32) -> f32 { return values[q]; }\n");
+            if writable {
+                w.push_str("fn vset(q: u32, v: f32) { values[q] = v; }\n");
+            }
+            return w;
+        }
+        let (shift, mask) = (self.shift, (1u64 << self.shift) - 1);
+        let cases = |body: &dyn Fn(&str) -> String| {
+            let mut c = String::new();
+            for t in 1..self.tiles {
+                let _ = writeln!(c, "        case {t}u: {{ {} }}", body(&name(t)));
+            }
+            let _ = writeln!(c, "        default: {{ {} }}", body("values"));
+            c
+        };
+        let _ = write!(
+            w,
+            "fn vget(q: u32) -> f32 {{\n    let o = q & {mask}u;\n    switch q >> {shift}u {{\n{}    }}\n}}\n",
+            cases(&|v| format!("return {v}[o];"))
+        );
+        if writable {
+            let _ = write!(
+                w,
+                "fn vset(q: u32, x: f32) {{\n    let o = q & {mask}u;\n    switch q >> {shift}u {{\n{}    }}\n}}\n",
+                cases(&|v| format!("{v}[o] = x;"))
+            );
+        }
+        w
+    }
+}
 
 /// Counter slots (`localize.wgsl`; slot 0 counts the candidates).
 pub(super) const LIST: [usize; 2] = [1, 2];
@@ -102,6 +224,8 @@ impl FieldData<'_> {
 }
 
 pub(super) struct Pipes {
+    /// The values' tiling the kernels and `layout0` are made for.
+    pub(super) tiling: Tiling,
     pub(super) layout0: wgpu::BindGroupLayout,
     pub(super) layout_args: wgpu::BindGroupLayout,
     pub(super) layout_field: wgpu::BindGroupLayout,
@@ -122,7 +246,8 @@ pub(super) struct Pipes {
 pub(super) struct Bufs {
     spec: GridSpec,
     pub(super) cap: usize,
-    pub(super) values: wgpu::Buffer,
+    /// The values, one buffer per tile (`Pipes::tiling`).
+    pub(super) values: Vec<wgpu::Buffer>,
     queued: wgpu::Buffer,
     pub(super) counts: wgpu::Buffer,
     /// The renderer's lists ([`LOG`], [`CULLED`]): three regions of `cap` pairs, made only
@@ -178,6 +303,9 @@ pub struct GpuLocalizer {
     /// Maps on the adapter to copy into the field's buffer, recorded ahead of the next
     /// localization's work ([`Self::recorder`]).
     pending_copy: Option<(wgpu::Buffer, u64)>,
+    /// Floats per tile of the values at most, below the adapter's binding limit
+    /// ([`Self::with_tile_floats`]).
+    tile_floats: Option<u64>,
 }
 
 /// Conflict rounds recorded per read-back at most, unless set: one. Batches (1, 2, 4, up to
@@ -188,13 +316,14 @@ pub struct GpuLocalizer {
 pub const DEFAULT_ROUNDS_PER_WAIT: usize = 1;
 
 impl Pipes {
-    fn new(gpu: &Gpu) -> Result<Self, String> {
+    fn new(gpu: &Gpu, tiling: Tiling) -> Result<Self, String> {
         use super::kit::{bind_layout, module, pipeline_layout, storage, uniform};
         let d = &gpu.device;
-        // Six storage buffers here and two in the field's group: the default limit of eight
-        // per stage.
+        // Six storage buffers here (one more per further tile of the values) and two in the
+        // field's group: the default limit of eight per stage, untiled.
         let mut e0 = vec![uniform(0)];
-        e0.extend((1..7).map(|b| storage(b, false)));
+        e0.extend(tiling.layout_entries(false));
+        e0.extend((2..7).map(|b| storage(b, false)));
         let layout0 = bind_layout(d, "localize", &e0);
         let layout_args = bind_layout(d, "localize args", &[storage(0, false)]);
         let layout_field = bind_layout(
@@ -203,8 +332,9 @@ impl Pipes {
             &[uniform(0), storage(1, true), storage(2, true)],
         );
         let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
-        let book = module(d, "localize", BOOK);
-        let eval = module(d, "localize eval", EVAL);
+        let values = tiling.wgsl(true);
+        let book = module(d, "localize", &format!("{values}{BOOK}"));
+        let eval = module(d, "localize eval", &format!("{values}{EVAL}"));
         let plain = pipeline_layout(d, &[&layout0]);
         let with_args = pipeline_layout(d, &[&layout0, &layout_args]);
         let with_field = pipeline_layout(d, &[&layout0, &layout_field]);
@@ -221,6 +351,7 @@ impl Pipes {
             conflict: pipe(&book, &plain, "conflict"),
             eval_table: pipe(&eval, &with_field, "table"),
             eval_fourier: pipe(&eval, &with_field, "fourier"),
+            tiling,
             layout0,
             layout_args,
             layout_field,
@@ -239,7 +370,7 @@ fn grid_bytes(spec: GridSpec) -> u64 {
 
 impl GpuLocalizer {
     pub fn new(gpu: Arc<Gpu>) -> Result<Self, String> {
-        let pipes = Pipes::new(&gpu)?;
+        let pipes = Pipes::new(&gpu, Tiling::ONE)?;
         Ok(GpuLocalizer {
             gpu,
             pipes,
@@ -253,7 +384,27 @@ impl GpuLocalizer {
             params_for: None,
             rounds_per_wait: DEFAULT_ROUNDS_PER_WAIT,
             pending_copy: None,
+            tile_floats: None,
         })
+    }
+
+    /// Tiles of the values of at most `n` floats (a power of two at most; the adapter's
+    /// binding limit bounds them anyway): the tests tile small grids with it, so that the
+    /// tiled kernels run where a binding would hold the whole grid.
+    pub fn with_tile_floats(mut self, n: usize) -> Self {
+        self.tile_floats = Some(n.max(1) as u64);
+        self.bufs = None;
+        self
+    }
+
+    /// How a grid of `spec` lays its values over storage bindings here.
+    pub fn tiling(&self, spec: GridSpec) -> Tiling {
+        let limits = self.gpu.device.limits();
+        let bytes = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let floats = (bytes / 4).min(self.tile_floats.unwrap_or(u64::MAX));
+        Tiling::new(spec.len(), floats)
     }
 
     /// Conflict rounds recorded per read-back at most (default
@@ -277,40 +428,55 @@ impl GpuLocalizer {
         self.cap
     }
 
-    /// Whether a grid of `spec` fits the adapter's limits (one storage binding for its
-    /// values); the error names the sizes.
+    /// Whether a grid of `spec` fits the adapter's limits: its values in as many storage
+    /// bindings as the adapter's binding size needs ([`Self::tiling`]), with the kernels'
+    /// other storage buffers, within the adapter's storage buffers per stage. The error
+    /// names the sizes.
     pub fn check_size(&self, spec: GridSpec) -> Result<(), String> {
+        let t = self.tiling(spec);
         let limits = self.gpu.device.limits();
-        let need = grid_bytes(spec);
-        let max = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        if need > max {
+        let per_stage = limits.max_storage_buffers_per_shader_stage;
+        // Bindings are numbered below the group's limit too (tile t > 0 at 15 + t).
+        let max_tiles = per_stage.saturating_sub(OTHER_STORAGE).min(
+            limits
+                .max_bindings_per_bind_group
+                .saturating_sub(TILE_BINDING - 1),
+        );
+        if t.tiles > max_tiles {
             let n = spec.n();
             return Err(format!(
-                "a {n}^3 grid needs {} MiB of values in one buffer, over the adapter's {} MiB \
-                 per binding (localize it on the CPU: tiling the grid is not built yet)",
-                need >> 20,
-                max >> 20
+                "a {n}^3 grid needs {:.1} MiB of values in {} storage bindings of at most \
+                 {:.1} MiB, more than the {max_tiles} that the adapter's {per_stage} storage \
+                 buffers per stage leave beside the localization's other {OTHER_STORAGE} \
+                 (localize it on the CPU)",
+                grid_bytes(spec) as f64 / MIB,
+                t.tiles,
+                (4u64 << t.shift).min(grid_bytes(spec)) as f64 / MIB,
             ));
         }
         Ok(())
     }
 
-    fn buffers(&mut self, spec: GridSpec) -> &Bufs {
+    fn buffers(&mut self, spec: GridSpec) -> Result<&Bufs, String> {
         let cap = self.cap.min(spec.len());
         let render = self.render;
+        let tiling = self.tiling(spec);
         let fits = self
             .bufs
             .as_ref()
-            .is_some_and(|b| b.spec == spec && b.cap == cap && (b.render || !render));
+            .is_some_and(|b| b.spec == spec && b.cap == cap && (b.render || !render))
+            && self.pipes.tiling == tiling;
         if !fits {
             self.bufs = None;
+            if self.pipes.tiling != tiling {
+                // Kernels for this tiling (a grid size of another tiling than the last).
+                self.pipes = Pipes::new(&self.gpu, tiling)?;
+            }
             let b = self.make_bufs(spec, cap, render);
             self.generation += 1;
             self.bufs = Some(b);
         }
-        self.bufs.as_ref().expect("made above")
+        Ok(self.bufs.as_ref().expect("made above"))
     }
 
     fn make_bufs(&self, spec: GridSpec, cap: usize, render: bool) -> Bufs {
@@ -325,7 +491,10 @@ impl GpuLocalizer {
             })
         };
         let rw = U::STORAGE | U::COPY_DST | U::COPY_SRC;
-        let values = buf("grid values", grid_bytes(spec), rw);
+        let tiling = self.pipes.tiling;
+        let values: Vec<wgpu::Buffer> = (0..tiling.tiles)
+            .map(|t| buf("grid values", tiling.tile_len(t, spec.len()) as u64 * 4, rw))
+            .collect();
         let words = spec.len().div_ceil(32) as u64;
         let queued = buf("grid handled bits", words * 4, rw);
         let cand = buf("candidates", cap as u64 * 4, U::STORAGE);
@@ -357,18 +526,19 @@ impl GpuLocalizer {
                     2 => (&extra, &lists[0]),
                     _ => (&lists[0], &lists[1]),
                 };
+                let mut entries = tiling.entries(&values);
+                entries.extend([
+                    entry(0, &ps[o]),
+                    entry(2, &queued),
+                    entry(3, &cand),
+                    entry(4, src),
+                    entry(5, dst),
+                    entry(6, &counts),
+                ]);
                 d.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: None,
                     layout: &self.pipes.layout0,
-                    entries: &[
-                        entry(0, &ps[o]),
-                        entry(1, &values),
-                        entry(2, &queued),
-                        entry(3, &cand),
-                        entry(4, src),
-                        entry(5, dst),
-                        entry(6, &counts),
-                    ],
+                    entries: &entries,
                 })
             });
             params.push(ps);
@@ -534,15 +704,16 @@ impl GpuLocalizer {
     }
 
     /// The buffers for `spec` made (for the renderer's bind groups).
-    pub(super) fn ensure_buffers(&mut self, spec: GridSpec) {
-        self.buffers(spec);
+    pub(super) fn ensure_buffers(&mut self, spec: GridSpec) -> Result<(), String> {
+        self.buffers(spec).map(|_| ())
     }
 
-    /// The buffers' generation, the renderer's lists and the grid's values, once made.
-    pub(super) fn render_buffers(&self) -> Option<(u64, &wgpu::Buffer, &wgpu::Buffer)> {
+    /// The buffers' generation, the renderer's lists and the grid's values (a buffer per
+    /// tile), once made.
+    pub(super) fn render_buffers(&self) -> Option<(u64, &wgpu::Buffer, &[wgpu::Buffer])> {
         self.bufs
             .as_ref()
-            .map(|b| (self.generation, &b.extra, &b.values))
+            .map(|b| (self.generation, &b.extra, &b.values[..]))
     }
 
     /// Checks and the field's upload before a frame.
@@ -576,7 +747,7 @@ impl GpuLocalizer {
         spec: GridSpec,
         mode: HierarchicalMode,
     ) -> Result<Rec<'_>, String> {
-        self.buffers(spec);
+        self.buffers(spec)?;
         let b = self.bufs.as_ref().expect("made by buffers");
         let f = self.field.as_ref().ok_or("no field uploaded")?;
         let p = &self.pipes;
@@ -617,7 +788,9 @@ impl GpuLocalizer {
         if let Some((src, bytes)) = self.pending_copy.take() {
             enc.copy_buffer_to_buffer(&src, 0, &f.maps, 0, bytes);
         }
-        enc.clear_buffer(&b.values, 0, None);
+        for v in &b.values {
+            enc.clear_buffer(v, 0, None);
+        }
         enc.clear_buffer(&b.queued, 0, None);
         enc.clear_buffer(&b.counts, 0, None);
         Ok(Rec {
@@ -646,20 +819,30 @@ impl GpuLocalizer {
         let gpu = self.gpu.clone();
         let b = self.bufs.as_mut().ok_or("no buffers")?;
         let spec = b.spec;
-        let bytes = grid_bytes(spec);
         let words = spec.len().div_ceil(32);
+        // One tile at a time through a read-back of the largest tile's size (or the bits').
+        let tile_bytes = b.values.iter().map(|v| v.size()).max().unwrap_or(4);
         let staging = b.staging.get_or_insert_with(|| {
             gpu.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("grid read-back"),
-                size: bytes,
+                size: tile_bytes.max(words as u64 * 4),
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             })
         });
         grid.reset(spec);
-        let mut enc = gpu.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(&b.values, 0, staging, 0, bytes);
-        gpu.submit_and_read_bytes(enc, staging, bytemuck::cast_slice_mut(&mut grid.values))?;
+        let mut at = 0;
+        for v in &b.values {
+            let floats = (v.size() / 4) as usize;
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(v, 0, staging, 0, v.size());
+            let dst = grid
+                .values
+                .get_mut(at..at + floats)
+                .ok_or("the grid's tiles exceed its size")?;
+            gpu.submit_and_read_bytes(enc, staging, bytemuck::cast_slice_mut(dst))?;
+            at += floats;
+        }
         let mut bits = vec![0u32; words];
         let mut enc = gpu.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(&b.queued, 0, staging, 0, (words * 4) as u64);
@@ -675,5 +858,69 @@ impl GpuLocalizer {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Tiling;
+
+    #[test]
+    fn tiles_are_the_largest_power_of_two_within_the_binding_and_cover_the_grid() {
+        let len = 513usize * 513 * 513;
+        // A 128 MiB binding (lavapipe's): five tiles of 2^25 floats, the last one short.
+        let t = Tiling::new(len, (128 << 20) / 4);
+        assert_eq!(
+            t,
+            Tiling {
+                shift: 25,
+                tiles: 5
+            }
+        );
+        let lens: Vec<usize> = (0..t.tiles).map(|i| t.tile_len(i, len)).collect();
+        assert_eq!(lens.iter().sum::<usize>(), len);
+        assert!(lens[..4].iter().all(|&l| l == 1 << 25));
+        assert_eq!(lens[4], len - 4 * (1 << 25));
+        // A limit that is not a power of two: tiles of the power of two below it.
+        assert_eq!(
+            Tiling::new(1000, 100),
+            Tiling {
+                shift: 6,
+                tiles: 16
+            }
+        );
+        assert_eq!(Tiling::new(1000, 100).tile_len(15, 1000), 1000 - 15 * 64);
+        // A grid that fits: one tile, the whole grid.
+        assert_eq!(Tiling::new(len, len as u64), Tiling::ONE);
+        assert_eq!(Tiling::ONE.tile_len(0, len), len);
+    }
+
+    #[test]
+    fn the_tiles_wgsl_declares_each_binding_and_routes_by_the_high_bits() {
+        let one = Tiling::ONE.wgsl(true);
+        assert!(one.contains("@binding(1) var<storage, read_write> values: array<f32>;"));
+        assert!(one.contains("fn vset"));
+        assert!(!Tiling::ONE.wgsl(false).contains("fn vset"));
+        let t = Tiling {
+            shift: 16,
+            tiles: 3,
+        };
+        let w = t.wgsl(false);
+        assert!(
+            w.contains("@binding(1) var<storage, read> values: array<f32>;"),
+            "{w}"
+        );
+        assert!(
+            w.contains("@binding(16) var<storage, read> values_1"),
+            "{w}"
+        );
+        assert!(
+            w.contains("@binding(17) var<storage, read> values_2"),
+            "{w}"
+        );
+        assert!(w.contains("q & 65535u") && w.contains("q >> 16u"), "{w}");
+        assert!(w.contains("case 2u: { return values_2[o]; }"), "{w}");
+        assert!(!w.contains("fn vset"), "{w}");
+        // (Compiled with the kernels by the adapter in tests/gpu.rs.)
     }
 }

@@ -11,9 +11,11 @@
 // args: indirect dispatch arguments [x, y, z] of the next list-driven kernel.
 
 // The lists hold pairs (point, its value before evaluation as bits). Eight storage buffers
-// per stage is the default limit: the evaluation kernels add two to these six.
+// per stage is the default limit: the evaluation kernels add two to these six (and a grid
+// tiled over several bindings one per further tile, where the adapter allows them).
 @group(0) @binding(0) var<uniform> p: array<vec4<u32>, 2>;
-@group(0) @binding(1) var<storage, read_write> values: array<f32>;
+// values (binding 1, and more tiles where one binding cannot hold a grid): declared with
+// vget / vset by the host (gpu/localize.rs `Tiling::wgsl`) ahead of this source.
 @group(0) @binding(2) var<storage, read_write> queued: array<atomic<u32>>;
 @group(0) @binding(3) var<storage, read_write> cand: array<u32>;
 @group(0) @binding(4) var<storage, read_write> src_list: array<u32>;
@@ -162,11 +164,11 @@ fn upsample(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: 
         let x = select(lo.x, hi.x, b.x == 1u);
         let y = select(lo.y, hi.y, b.y == 1u);
         let z = select(lo.z, hi.z, b.z == 1u);
-        sum = sum + bin(values[linear(x, y, z)]);
+        sum = sum + bin(vget(linear(x, y, z)));
     }
     let m = sum / f32(1u << (odd.x + odd.y + odd.z));
     let q = linear(a.x * s, a.y * s, a.z * s);
-    values[q] = m;
+    vset(q, m);
     if m > 0.0 && m < 1.0 {
         let at = atomicAdd(&counts[CAND], 1u);
         if at < pp(3u) {
@@ -186,7 +188,7 @@ fn dilate(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: ve
     if t >= min(atomicLoad(&counts[CAND]), pp(3u)) { return; }
     let c = cand[t];
     if pp(7u) != 0u {
-        if claim(c) { push(c, values[c]); }
+        if claim(c) { push(c, vget(c)); }
         return;
     }
     let n = pp(0u);
@@ -197,7 +199,7 @@ fn dilate(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: ve
         let qi = ci + o;
         if any(qi < vec3<i32>(0)) || any(qi >= vec3<i32>(i32(n))) { continue; }
         let q = linear(u32(qi.x), u32(qi.y), u32(qi.z));
-        if claim(q) { push(q, values[q]); }
+        if claim(q) { push(q, vget(q)); }
     }
 }
 
@@ -212,7 +214,7 @@ fn conflict(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: 
     let t = index(wg, nwg, lid);
     if t >= list_len(pp(4u)) { return; }
     let q0 = src_list[2u * t];
-    let v = values[q0];
+    let v = vget(q0);
     let interp = bitcast<f32>(src_list[2u * t + 1u]);
     let conflict = (interp - 0.5) * (v - 0.5) < 0.0;
     let closure = pp(6u) != 0u;
@@ -227,7 +229,7 @@ fn conflict(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: 
         if any(qi < vec3<i32>(0)) || any(qi >= vec3<i32>(i32(n))) { continue; }
         let q = linear(u32(qi.x), u32(qi.y), u32(qi.z));
         if is_queued(q) { continue; }
-        let assumed = values[q];
+        let assumed = vget(q);
         if conflict || bin(assumed) != bin(v) {
             if claim(q) { push(q, assumed); }
         }

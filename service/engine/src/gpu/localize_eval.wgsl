@@ -9,7 +9,7 @@
 // the mask [S, S]; maps: the table (one value per grid point) or the coefficient maps.
 
 @group(0) @binding(0) var<uniform> p: array<vec4<u32>, 2>;
-@group(0) @binding(1) var<storage, read_write> values: array<f32>;
+// values: vget / vset, declared ahead of this source (gpu/localize.rs `Tiling::wgsl`).
 @group(0) @binding(4) var<storage, read_write> src_list: array<u32>;
 @group(0) @binding(6) var<storage, read_write> counts: array<atomic<u32>>;
 @group(1) @binding(0) var<uniform> f: array<vec4<u32>, 5>;
@@ -36,7 +36,7 @@ fn table(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec
          @builtin(local_invocation_id) lid: vec3<u32>) {
     let q = point(wg, nwg, lid);
     if q == 0xffffffffu { return; }
-    values[q] = maps[q];
+    vset(q, maps[q]);
 }
 
 // Bilinear sample of the mask (model/sample.rs `bilinear`, one channel; the sum in its order).
@@ -64,5 +64,5 @@ fn fourier(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: v
     if inside_cube && mask_at(u.x, u.y, ff(5u)) >= 0.5 {
         v = series(u.x, u.y, u.z, ff(0u), ff(1u), ff(2u) == 1u, bitcast<f32>(ff(3u)), bitcast<f32>(ff(4u)));
     }
-    values[q] = v;
+    vset(q, v);
 }

@@ -4,9 +4,11 @@
 //! Adapters are Vulkan's (`WGPU_BACKEND` may narrow the search, as wgpu reads it): a board's
 //! GPU, or Mesa's lavapipe, Vulkan on the CPU, which runs the same shaders here and in CI
 //! for the parity tests (its times say nothing about a GPU). Default limits are asked for
-//! except the two sizes of a buffer (`max_buffer_size`, `max_storage_buffer_binding_size`),
-//! which are the adapter's own ([`buffer_limits`]: a 513^3 grid's 540 MB of values is one
-//! binding, over the default 128 MiB and within a GPU's), and one optional feature where
+//! except the two sizes of a buffer (`max_buffer_size`, `max_storage_buffer_binding_size`)
+//! and the storage buffers per stage, which are the adapter's own where larger
+//! ([`buffer_limits`]: a 513^3 grid's 540 MB of values is one binding on a GPU, over the
+//! default 128 MiB; where a binding holds less, as on lavapipe, the values are tiled over
+//! several bindings, `localize::Tiling`), and one optional feature where
 //! the adapter has it: timestamp queries (the networks' time on the adapter,
 //! `Counters::gpu_ns`); without it nothing is timed there.
 //!
@@ -83,8 +85,10 @@ pub fn adapters() -> Vec<AdapterSummary> {
 }
 
 /// The limits the device is opened with: wgpu's defaults (what every adapter has), except the
-/// sizes of one buffer and of one storage binding, which are the adapter's (never below the
-/// defaults), so that the grid of a fine level fits in one binding where the adapter allows.
+/// sizes of one buffer and of one storage binding, and the storage buffers per shader stage,
+/// which are the adapter's (never below the defaults): the grid of a fine level fits in one
+/// binding where the adapter allows, and in tiles of its own bindings where a binding is
+/// smaller (`localize::Tiling`; every kernel fits the default eight when untiled).
 pub fn buffer_limits(adapter: &wgpu::Limits) -> wgpu::Limits {
     let d = wgpu::Limits::default();
     wgpu::Limits {
@@ -92,6 +96,9 @@ pub fn buffer_limits(adapter: &wgpu::Limits) -> wgpu::Limits {
         max_storage_buffer_binding_size: adapter
             .max_storage_buffer_binding_size
             .max(d.max_storage_buffer_binding_size),
+        max_storage_buffers_per_shader_stage: adapter
+            .max_storage_buffers_per_shader_stage
+            .max(d.max_storage_buffers_per_shader_stage),
         ..d
     }
 }

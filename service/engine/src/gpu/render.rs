@@ -14,7 +14,9 @@
 //! Fourier kernel in tools/volcap/tests/gpu_frames.rs).
 
 use super::kit::entry;
-use super::localize::{CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, OVERFLOW};
+use super::localize::{
+    CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, OVERFLOW, Tiling,
+};
 use super::{Gpu, groups};
 use crate::grid::GridSpec;
 use crate::localize::HierarchicalMode;
@@ -42,6 +44,8 @@ pub struct Columns {
 }
 
 struct RenderPipes {
+    /// The values' tiling the kernels are made for (the localizer's).
+    tiling: Tiling,
     layout: wgpu::BindGroupLayout,
     first_hits: wgpu::ComputePipeline,
     split: wgpu::ComputePipeline,
@@ -93,7 +97,7 @@ pub struct GpuRenderer {
 }
 
 impl RenderPipes {
-    fn new(gpu: &Gpu, layout0: &wgpu::BindGroupLayout) -> Result<Self, String> {
+    fn new(gpu: &Gpu, layout0: &wgpu::BindGroupLayout, tiling: Tiling) -> Result<Self, String> {
         use super::kit::{bind_layout, module, pipeline_layout, storage, uniform};
         let d = &gpu.device;
         let layout = bind_layout(
@@ -101,20 +105,17 @@ impl RenderPipes {
             "render",
             &[uniform(1), storage(2, false), storage(3, false)],
         );
-        let display_layout = bind_layout(
-            d,
-            "display",
-            &[
-                uniform(0),
-                storage(1, true),
-                storage(2, true),
-                storage(3, true),
-                storage(4, false),
-            ],
-        );
+        let mut display_entries = tiling.layout_entries(true);
+        display_entries.extend([
+            uniform(0),
+            storage(2, true),
+            storage(3, true),
+            storage(4, false),
+        ]);
+        let display_layout = bind_layout(d, "display", &display_entries);
         let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
-        let render = module(d, "render", RENDER);
-        let display = module(d, "display", DISPLAY);
+        let render = module(d, "render", &format!("{}{RENDER}", tiling.wgsl(true)));
+        let display = module(d, "display", &format!("{}{DISPLAY}", tiling.wgsl(false)));
         let with_render = pipeline_layout(d, &[layout0, &layout]);
         let display_pl = pipeline_layout(d, &[&display_layout]);
         let pipe = |m, layout, entry| super::kit::pipeline(d, m, layout, entry);
@@ -129,6 +130,7 @@ impl RenderPipes {
             release: pipe(&render, &with_render, "release"),
             surface: pipe(&render, &with_render, "surface"),
             display: pipe(&display, &display_pl, "main"),
+            tiling,
             layout,
             display_layout,
         };
@@ -142,7 +144,7 @@ impl RenderPipes {
 impl GpuRenderer {
     pub fn new(gpu: Arc<Gpu>) -> Result<Self, String> {
         let loc = GpuLocalizer::new(gpu.clone())?;
-        let pipes = RenderPipes::new(&gpu, &loc.pipes().layout0)?;
+        let pipes = RenderPipes::new(&gpu, &loc.pipes().layout0, loc.pipes().tiling)?;
         Ok(GpuRenderer {
             gpu,
             loc,
@@ -169,13 +171,26 @@ impl GpuRenderer {
         self
     }
 
+    /// Tiles of the grid's values of at most `n` floats
+    /// ([`GpuLocalizer::with_tile_floats`]).
+    pub fn with_tile_floats(mut self, n: usize) -> Self {
+        self.loc = self.loc.with_tile_floats(n);
+        self
+    }
+
     /// Whether a grid of `spec` fits the adapter (see [`GpuLocalizer::check_size`]).
     pub fn check_size(&self, spec: GridSpec) -> Result<(), String> {
         self.loc.check_size(spec)
     }
 
     fn column_bufs(&mut self, spec: GridSpec) -> Result<(), String> {
-        self.loc.ensure_buffers(spec);
+        self.loc.ensure_buffers(spec)?;
+        let tiling = self.loc.pipes().tiling;
+        if self.pipes.tiling != tiling {
+            // The localizer's kernels were made for another tiling of the values: so are ours.
+            self.pipes = RenderPipes::new(&self.gpu, &self.loc.pipes().layout0, tiling)?;
+            self.columns = None;
+        }
         let (generation, extra, _) = self.loc.render_buffers().ok_or("no grid buffers")?;
         let fits = self
             .columns
@@ -456,19 +471,20 @@ impl GpuRenderer {
         let db = self.display.as_ref().expect("made above");
         // Bound each frame: the grid's buffers are remade when its lists grow.
         let (_, _, values) = self.loc.render_buffers().ok_or("no grid buffers")?;
+        let mut entries = self.pipes.tiling.entries(values);
+        entries.extend([
+            entry(0, &db.params),
+            entry(2, &cb.cols),
+            entry(3, &db.cols),
+            entry(4, &db.out),
+        ]);
         let bind = self
             .gpu
             .device
             .create_bind_group(&wgpu::BindGroupDescriptor {
                 label: None,
                 layout: &self.pipes.display_layout,
-                entries: &[
-                    entry(0, &db.params),
-                    entry(1, values),
-                    entry(2, &cb.cols),
-                    entry(3, &db.cols),
-                    entry(4, &db.out),
-                ],
+                entries: &entries,
             });
         let bg = u32::from_le_bytes(background);
         let params = [

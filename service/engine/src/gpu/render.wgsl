@@ -46,7 +46,7 @@ fn first_hits(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg
     let n = pp(0u);
     var h = 0u;
     for (var k = n; k > 0u; k = k - 1u) {
-        if values[c + (k - 1u) * plane] > 0.5 {
+        if vget(c + (k - 1u) * plane) > 0.5 {
             h = k;
             break;
         }
@@ -92,7 +92,7 @@ fn conflict_keep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) 
     let t = index(wg, nwg, lid);
     if t >= list_len(pp(4u)) { return; }
     let q0 = src_list[2u * t];
-    let v = values[q0];
+    let v = vget(q0);
     let interp = bitcast<f32>(src_list[2u * t + 1u]);
     if (interp - 0.5) * (v - 0.5) >= 0.0 { return; }
     let n = pp(0u);
@@ -105,7 +105,7 @@ fn conflict_keep(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) 
         if any(qi < vec3<i32>(0)) || any(qi >= vec3<i32>(i32(n))) { continue; }
         let q = linear(u32(qi.x), u32(qi.y), u32(qi.z));
         if is_queued(q) || !in_front(q % plane, q / plane) { continue; }
-        if claim(q) { push(q, values[q]); }
+        if claim(q) { push(q, vget(q)); }
     }
 }
 
@@ -121,7 +121,7 @@ fn raise(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let t = index(wg, nwg, lid);
     if t >= log_len() { return; }
     let q = extra[2u * t];
-    if values[q] > 0.5 {
+    if vget(q) > 0.5 {
         atomicMax(&cols[q % rp.x], q / rp.x + 1u);
     }
 }
@@ -136,10 +136,10 @@ fn refute(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: ve
     let plane = rp.x;
     let c = q % plane;
     let k = q / plane;
-    if atomicLoad(&cols[c]) != k + 1u || values[q] > 0.5 { return; }
+    if atomicLoad(&cols[c]) != k + 1u || vget(q) > 0.5 { return; }
     var h = 0u;
     for (var kk = k; kk > 0u; kk = kk - 1u) {
-        if values[c + (kk - 1u) * plane] > 0.5 {
+        if vget(c + (kk - 1u) * plane) > 0.5 {
             h = kk;
             break;
         }
@@ -185,8 +185,8 @@ fn surface(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: v
     var v_out = 0.0;
     if h > 0u {
         let k = h - 1u;
-        v_in = values[c + k * plane];
-        if k + 1u < pp(0u) { v_out = values[c + (k + 1u) * plane]; }
+        v_in = vget(c + k * plane);
+        if k + 1u < pp(0u) { v_out = vget(c + (k + 1u) * plane); }
     }
     atomicStore(&cols[2u * plane + c], bitcast<u32>(v_in));
     atomicStore(&cols[3u * plane + c], bitcast<u32>(v_out));
