@@ -457,6 +457,51 @@ fn a_grid_over_one_binding_is_tiled_and_refused_only_past_the_adapters_bindings(
     }
 }
 
+/// Index lists grow (x4) while a frame overflows them, but never past what one storage
+/// binding holds: a frame that needs more is refused with a clear error (volcapd then shows
+/// the error and keeps serving), not a buffer that fails wgpu's validation (a panic). The
+/// bound is made small here (64 entries) to reach it on a 33^3 noise field; without it the
+/// same frames run.
+#[test]
+fn index_lists_stop_growing_at_one_binding_with_an_error_not_a_panic() {
+    use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
+    use volcap_engine::gpu::render::GpuRenderer;
+    use volcap_engine::grid::GridSpec;
+    use volcap_engine::localize::HierarchicalMode;
+    let Some(gpu) = gpu() else { return };
+    let spec = GridSpec::from_resolution(33).unwrap();
+    let (_, _, table) = analytic_tables(spec)
+        .into_iter()
+        .find(|(name, _, _)| *name == "noise")
+        .expect("the noise scene");
+    let field = GpuField::Table(&table);
+    let mut gl = GpuLocalizer::new(gpu.clone())
+        .unwrap()
+        .with_list_capacity(16)
+        .with_max_list_entries(64);
+    let e = gl
+        .run(&field, spec, 2, HierarchicalMode::Paper)
+        .unwrap_err();
+    assert!(
+        e.contains("33^3") && e.contains("more than 64 entries"),
+        "{e}"
+    );
+    let mut gr = GpuRenderer::new(gpu.clone())
+        .unwrap()
+        .with_list_capacity(16)
+        .with_max_list_entries(64);
+    let e = gr.frame(&field, spec, 2).unwrap_err();
+    assert!(e.contains("more than 64 entries"), "{e}");
+    // The same frames within the adapter's own bound.
+    let mut gl = GpuLocalizer::new(gpu.clone())
+        .unwrap()
+        .with_list_capacity(16);
+    gl.run(&field, spec, 2, HierarchicalMode::Paper).unwrap();
+    assert!(gl.list_capacity() > 64);
+    let mut gr = GpuRenderer::new(gpu).unwrap().with_list_capacity(16);
+    gr.frame(&field, spec, 2).unwrap();
+}
+
 /// The mesh-free renderer with its grid on the adapter (`Renderer::render_gpu`: localization
 /// and the culled final level there) against the CPU renderer on every analytic scene, the
 /// field tabulated on the host: the same hits (coarse and final), depths, images, evaluation

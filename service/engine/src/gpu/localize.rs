@@ -306,6 +306,9 @@ pub struct GpuLocalizer {
     /// Floats per tile of the values at most, below the adapter's binding limit
     /// ([`Self::with_tile_floats`]).
     tile_floats: Option<u64>,
+    /// Entries per index list at most, below what one binding holds
+    /// ([`Self::with_max_list_entries`]).
+    max_list: Option<usize>,
 }
 
 /// Conflict rounds recorded per read-back at most, unless set: one. Batches (1, 2, 4, up to
@@ -385,6 +388,7 @@ impl GpuLocalizer {
             rounds_per_wait: DEFAULT_ROUNDS_PER_WAIT,
             pending_copy: None,
             tile_floats: None,
+            max_list: None,
         })
     }
 
@@ -419,6 +423,14 @@ impl GpuLocalizer {
     /// Lists of `cap` entries at first (the tests make them small to exercise their growth).
     pub fn with_list_capacity(mut self, cap: usize) -> Self {
         self.cap = cap.max(1);
+        self.bufs = None;
+        self
+    }
+
+    /// Lists of at most `n` entries (one storage binding bounds them anyway; the tests make
+    /// the bound small to reach it).
+    pub fn with_max_list_entries(mut self, n: usize) -> Self {
+        self.max_list = Some(n.max(1));
         self.bufs = None;
         self
     }
@@ -458,7 +470,7 @@ impl GpuLocalizer {
     }
 
     fn buffers(&mut self, spec: GridSpec) -> Result<&Bufs, String> {
-        let cap = self.cap.min(spec.len());
+        let cap = self.cap.min(spec.len()).min(self.list_bound());
         let render = self.render;
         let tiling = self.tiling(spec);
         let fits = self
@@ -737,8 +749,33 @@ impl GpuLocalizer {
         if self.cap >= spec.len() {
             return Err("the index lists overflowed at the grid's size".into());
         }
-        self.cap = (self.cap * 4).min(spec.len());
+        let next = (self.cap * 4).min(spec.len()).min(self.list_bound());
+        if next <= self.cap {
+            // Not a wgpu validation error (a panic) on a buffer over the binding limit.
+            return Err(format!(
+                "this {}^3 frame needs index lists of more than {} entries, the most one \
+                 storage binding holds here (localize it on the CPU)",
+                spec.n(),
+                self.cap
+            ));
+        }
+        self.cap = next;
         Ok(())
+    }
+
+    /// Entries an index list may hold: the largest buffer per entry (the renderer's lists,
+    /// three pairs of words an entry, else a list's pair) within one storage binding, or
+    /// [`Self::with_max_list_entries`].
+    fn list_bound(&self) -> usize {
+        let limits = self.gpu.device.limits();
+        let binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let per_entry = if self.render { 24 } else { 8 };
+        usize::try_from(binding / per_entry)
+            .unwrap_or(usize::MAX)
+            .min(self.max_list.unwrap_or(usize::MAX))
+            .max(1)
     }
 
     /// A recorder of the frame's work on buffers sized for `spec` (its parameters written).

@@ -171,6 +171,12 @@ impl GpuRenderer {
         self
     }
 
+    /// Index lists of at most `n` entries ([`GpuLocalizer::with_max_list_entries`]).
+    pub fn with_max_list_entries(mut self, n: usize) -> Self {
+        self.loc = self.loc.with_max_list_entries(n);
+        self
+    }
+
     /// Tiles of the grid's values of at most `n` floats
     /// ([`GpuLocalizer::with_tile_floats`]).
     pub fn with_tile_floats(mut self, n: usize) -> Self {
