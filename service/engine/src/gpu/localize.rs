@@ -319,7 +319,13 @@ pub struct GpuLocalizer {
 pub const DEFAULT_ROUNDS_PER_WAIT: usize = 1;
 
 impl Pipes {
-    fn new(gpu: &Gpu, tiling: Tiling) -> Result<Self, String> {
+    /// The kernels for `tiling`; `field` keeps the field group's layout of the pipes they
+    /// replace (the field's bind group, made with it, outlives a change of tiling).
+    fn new(
+        gpu: &Gpu,
+        tiling: Tiling,
+        field: Option<&wgpu::BindGroupLayout>,
+    ) -> Result<Self, String> {
         use super::kit::{bind_layout, module, pipeline_layout, storage, uniform};
         let d = &gpu.device;
         // Six storage buffers here (one more per further tile of the values) and two in the
@@ -329,11 +335,13 @@ impl Pipes {
         e0.extend((2..7).map(|b| storage(b, false)));
         let layout0 = bind_layout(d, "localize", &e0);
         let layout_args = bind_layout(d, "localize args", &[storage(0, false)]);
-        let layout_field = bind_layout(
-            d,
-            "localize field",
-            &[uniform(0), storage(1, true), storage(2, true)],
-        );
+        let layout_field = field.cloned().unwrap_or_else(|| {
+            bind_layout(
+                d,
+                "localize field",
+                &[uniform(0), storage(1, true), storage(2, true)],
+            )
+        });
         let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
         let values = tiling.wgsl(true);
         let book = module(d, "localize", &format!("{values}{BOOK}"));
@@ -373,7 +381,7 @@ fn grid_bytes(spec: GridSpec) -> u64 {
 
 impl GpuLocalizer {
     pub fn new(gpu: Arc<Gpu>) -> Result<Self, String> {
-        let pipes = Pipes::new(&gpu, Tiling::ONE)?;
+        let pipes = Pipes::new(&gpu, Tiling::ONE, None)?;
         Ok(GpuLocalizer {
             gpu,
             pipes,
@@ -482,7 +490,7 @@ impl GpuLocalizer {
             self.bufs = None;
             if self.pipes.tiling != tiling {
                 // Kernels for this tiling (a grid size of another tiling than the last).
-                self.pipes = Pipes::new(&self.gpu, tiling)?;
+                self.pipes = Pipes::new(&self.gpu, tiling, Some(&self.pipes.layout_field))?;
             }
             let b = self.make_bufs(spec, cap, render);
             self.generation += 1;
