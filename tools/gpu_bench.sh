@@ -15,9 +15,11 @@
 # and 513^3, fourier-small and fourier-medium, the camera replayed fast enough never to cap
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
 # the adapter's with one and up to eight conflict rounds per read-back), rounds/pipeline.md
-# (the GPU backend's pipeline with `compute.rounds_per_wait` 1 and 8) and nets.md (the
-# networks, tract and the GPU kernels, each profiled per node or step), with run.log. The device is named in
-# every table; the CPU rows are that machine's cores, not the appliance's two.
+# (the GPU backend's pipeline with `compute.rounds_per_wait` 1 and 8), queues.md (the
+# localization alone, beside the shape network on one device, and on a second device) and
+# nets.md (the networks, tract and the GPU kernels, each profiled per node or step), with
+# run.log. The device is named in every table; the CPU rows are that machine's cores, not the
+# appliance's two.
 set -euo pipefail
 repo="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$repo"
@@ -68,15 +70,15 @@ case "$mode" in
     fi
     nvidia-smi -L 2>/dev/null || true
     if [ "$quick" = 1 ]; then
-      res=65 models=fourier-small secs=2 warm=1 runs=1 threads=1 loc_backends=cpu,wgpu
+      res=65 models=fourier-small secs=2 warm=1 runs=1 threads=1 loc_backends=cpu,wgpu qres=33
     elif [ "$quick" = 2 ]; then
       # The whole matrix in about half the time (a lent machine's 15 minutes are shared with
       # training): shorter windows, the machine's cores only.
       res=257,513 models=fourier-small,fourier-medium secs=5 warm=2 runs=3
-      threads="$(nproc)" loc_backends=wgpu
+      threads="$(nproc)" loc_backends=wgpu qres=257
     else
       res=257,513 models=fourier-small,fourier-medium secs=10 warm=5 runs=5
-      threads="1,$(nproc)" loc_backends=cpu,wgpu
+      threads="1,$(nproc)" loc_backends=cpu,wgpu qres=257
     fi
     echo "== pipeline ($res; $models; threads $threads; the camera's view and a turned one)"
     # A turned view (yaw 30) runs the colour networks on the surface points (the colour MLP
@@ -94,6 +96,10 @@ case "$mode" in
       --methods hierarchical,hierarchical-tight --runs "$runs" --rounds-per-wait 1,8 --out "$out"
     mv "$out/accuracy-vs-time.md" "$out/localize.md"
     mv "$out/accuracy-vs-time.png" "$out/localize.png"
+    echo "== two stages on one device or two (item 4: does a wait queue behind a network?)"
+    # The localization timed alone, beside the shape network on its device, and on a second
+    # device of the same adapter (a few seconds a row).
+    "$bin" bench queues --res "$qres" --seconds "$secs" --out "$out"
     echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
     "$bin" bench nets --runtime tract,wgpu --runs "$((runs * 4))" --profile --top 12 --out "$out"
     ls -la "$out"

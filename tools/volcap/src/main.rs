@@ -8,6 +8,7 @@ mod mlp_bench;
 mod nets_bench;
 mod pipeline_bench;
 mod plot;
+mod queues_bench;
 mod reconstruct;
 mod simcmd;
 
@@ -61,6 +62,11 @@ enum BenchCmd {
     Nets(nets_bench::NetsArgs),
     /// The point MLP's throughput (fused and on tract) against the machine's SGEMM peak.
     Mlp(MlpArgs),
+    /// GPU backend: whether a stage's waits queue behind another stage's network on one
+    /// device, and whether a second device on the same adapter avoids it (the localization
+    /// timed alone, beside the shape network on its device, and on a device of its own).
+    /// Writes queues.md.
+    Queues(queues_bench::QueuesArgs),
     /// The live model path frame by frame on simulated scenes per temporal-filter setting:
     /// flicker on still people, accuracy, jitter and lag on moving ones. Writes a table and
     /// a plot (docs/eval-video).
@@ -240,6 +246,7 @@ fn main() -> ExitCode {
         Cmd::Bench(BenchCmd::Mlp(a)) => mlp_bench::run(&a),
         Cmd::Bench(BenchCmd::Nets(a)) => nets_bench::run(&a),
         Cmd::Bench(BenchCmd::Temporal(a)) => eval::video::run(&a),
+        Cmd::Bench(BenchCmd::Queues(a)) => queues_bench::run(&a),
         Cmd::Eval(a) => eval::eval(&a),
         Cmd::Reconstruct(a) => reconstruct::reconstruct(&a),
         Cmd::Sim(c) => simcmd::run(c),
