@@ -16,7 +16,8 @@
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
 # the adapter's with one and up to eight conflict rounds per read-back), rounds/pipeline.md
 # (the GPU backend's pipeline with `compute.rounds_per_wait` 1 and 8), queues.md (the
-# localization alone, beside the shape network on one device, and on a second device) and
+# localization alone, beside the shape network on one device, and on a second device),
+# devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
 # nets.md (the networks, tract and the GPU kernels, each profiled per node or step), with
 # run.log. The device is named in every table; the CPU rows are that machine's cores, not the
 # appliance's two.
@@ -100,6 +101,10 @@ case "$mode" in
     # The localization timed alone, beside the shape network on its device, and on a second
     # device of the same adapter (a few seconds a row).
     "$bin" bench queues --res "$qres" --seconds "$secs" --out "$out"
+    # The same question in the pipeline: the render stage on the networks' device or on a
+    # second one (compute.render_device), the maps crossing the host for the second.
+    "$bin" bench pipeline --backend wgpu --model fourier-small --res "$qres" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --render-device shared,own --out "$out/devices"
     echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
     "$bin" bench nets --runtime tract,wgpu --runs "$((runs * 4))" --profile --top 12 --out "$out"
     ls -la "$out"

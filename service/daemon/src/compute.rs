@@ -9,13 +9,14 @@ use volcap_engine::model::Runtime;
 pub const ON_ADAPTER: &[&str] = &[
     "segment",
     "field: networks",
+    "field: the Fourier maps' temporal filter",
     "localization: the grid, its bookkeeping and the Fourier series",
     "render: first hits, culling, display image",
 ];
 /// What stays on the CPU with `backend = "wgpu"`.
 pub const ON_CPU: &[&str] = &[
     "the surface's colour queries (the colour net runs on the adapter) and shading",
-    "the temporal filter",
+    "the temporal filter of the person mask and the crop (and of a turned view's colour features)",
     "encode",
 ];
 

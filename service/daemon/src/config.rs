@@ -7,7 +7,8 @@ mod model;
 pub mod rtsp;
 mod temporal;
 pub use compute::{
-    ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, THREADS,
+    ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, RenderDevice,
+    THREADS,
 };
 pub use live::{Live, LiveError};
 pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, ThinParts};

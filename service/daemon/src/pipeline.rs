@@ -442,6 +442,9 @@ pub(crate) struct AdapterRenderer {
     gpu: volcap_engine::gpu::render::GpuRenderer,
     /// The reason the last frame was drawn on the CPU, logged when it changes.
     cpu_because: Option<String>,
+    /// On a device of its own (`compute.render_device = "own"`): the frame's maps come from
+    /// the host (read back by the field stage), not from the networks' device.
+    own_device: bool,
 }
 
 #[cfg(feature = "wgpu")]
@@ -450,6 +453,7 @@ impl AdapterRenderer {
         models: Option<&volcap_engine::model::Models>,
         mode: FieldMode,
         rounds_per_wait: usize,
+        device: crate::config::RenderDevice,
     ) -> Option<Self> {
         let volcap_engine::model::Runtime::Wgpu(g) = &models?.runtime else {
             return None;
@@ -457,10 +461,28 @@ impl AdapterRenderer {
         if mode != FieldMode::Model {
             return None;
         }
-        match volcap_engine::gpu::render::GpuRenderer::new(g.clone()) {
+        let own_device = device == crate::config::RenderDevice::Own;
+        let g = if own_device {
+            match g.sibling() {
+                Ok(own) => {
+                    tracing::info!(
+                        "the render stage on a device of its own (compute.render_device = \"own\")"
+                    );
+                    own
+                }
+                Err(e) => {
+                    tracing::warn!("the renderer stays on the CPU: no second device: {e}");
+                    return None;
+                }
+            }
+        } else {
+            g.clone()
+        };
+        match volcap_engine::gpu::render::GpuRenderer::new(g) {
             Ok(gpu) => Some(AdapterRenderer {
                 gpu: gpu.with_rounds_per_wait(rounds_per_wait),
                 cpu_because: None,
+                own_device,
             }),
             Err(e) => {
                 tracing::warn!("the renderer stays on the CPU: {e}");
@@ -477,11 +499,23 @@ impl AdapterRenderer {
         live: &Live,
     ) -> Option<Vec<u8>> {
         let spec = GridSpec::from_resolution(live.resolution).ok()?;
-        let on_gpu = field.gpu_field();
-        let why = match &on_gpu {
+        // On a device of its own the maps come from the host (read back by the field stage;
+        // here only if it did not): the networks' device's buffers are not this one's.
+        let (on_gpu, why) = if self.own_device {
+            match field.gpu_field_from_host() {
+                Ok(f) => (f, None),
+                Err(e) => (
+                    None,
+                    Some(format!("the maps from the networks' device: {e}")),
+                ),
+            }
+        } else {
+            (field.gpu_field(), None)
+        };
+        let why = why.or_else(|| match &on_gpu {
             None => Some("the shape model is not a Fourier head".to_string()),
             Some(_) => self.gpu.check_size(spec).err(),
-        };
+        });
         if why != self.cpu_because {
             if let Some(w) = &why {
                 tracing::warn!("rendering on the CPU: {w}");
@@ -526,6 +560,7 @@ impl AdapterRenderer {
         _models: Option<&volcap_engine::model::Models>,
         _mode: FieldMode,
         _rounds_per_wait: usize,
+        _device: crate::config::RenderDevice,
     ) -> Option<Self> {
         None
     }
@@ -587,6 +622,7 @@ pub fn start(
                 split_up_to: cfg.compute.segment_thread_up_to,
                 close_frames: cfg.model.close_range_frames,
                 temporal: cfg.temporal.settings(),
+                maps_to_host: cfg.compute.render_device == crate::config::RenderDevice::Own,
             },
         ));
     }
@@ -602,6 +638,7 @@ pub fn start(
         cfg.field(),
         cfg.compute.threads,
         cfg.compute.rounds_per_wait,
+        cfg.compute.render_device,
         models.clone(),
     ));
 

@@ -160,3 +160,37 @@ fn model_mode_runs_its_networks_on_the_adapter() {
     assert!(m.contains("volcap_adapter_render_runs_total "), "{m}");
     assert_eq!(s["people"], 1, "{s}");
 }
+
+/// `compute.render_device = "own"`: the render stage on a second device of the adapter, the
+/// frame's maps read back by the field stage (some 2 MB a frame, where the shared device
+/// brings back a fraction of that: with `shared` this test fails) and written by the render
+/// stage; frames are published, rendered there, and counted with the networks' work.
+#[cfg(feature = "wgpu")]
+#[test]
+fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
+    let _serial = serial();
+    if !have_adapter() {
+        return;
+    }
+    let dir = tmp("gpu-own-render");
+    let d = start(&config(&dir, "backend = \"wgpu\"\nrender_device = \"own\""));
+    let s = wait_for(
+        &d.addr,
+        "frames rendered on the second device",
+        Duration::from_secs(120),
+        |s| s["frames_published"].as_u64() > Some(2),
+    );
+    let w = &s["compute"]["adapter_work"];
+    let rendered = w["render_runs"].as_u64().unwrap();
+    assert!(
+        rendered >= 2,
+        "{rendered} frames rendered on the adapter: {s}"
+    );
+    // The maps came down for the render device: 31 x 128 x 128 floats a frame rendered.
+    let down = w["bytes_down"].as_u64().unwrap();
+    assert!(
+        down >= rendered * 31 * 128 * 128 * 4,
+        "{down} bytes down for {rendered} frames: {s}"
+    );
+    assert_eq!(s["people"], 1, "{s}");
+}

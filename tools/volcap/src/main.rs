@@ -139,6 +139,15 @@ pub struct PipelineArgs {
     /// localization levels' conflict rounds recorded per read-back at most.
     #[arg(long = "rounds-per-wait", value_delimiter = ',', default_value = "1")]
     pub rounds_per_wait: Vec<usize>,
+    /// `compute.render_device` values (comma-separated): shared (the networks' device, one
+    /// queue) and/or own (the render stage on a second device of the adapter, the maps
+    /// crossing the host; `bench queues` measures the mechanism).
+    #[arg(
+        long = "render-device",
+        value_delimiter = ',',
+        default_value = "shared"
+    )]
+    pub render_devices: Vec<String>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,

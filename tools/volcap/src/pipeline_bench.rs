@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use volcap_engine::model::{Models, Precision, Runtime, RuntimeChoice};
 use volcapd::capture::Camera;
 use volcapd::capture::replay::{ReplayCamera, Still};
-use volcapd::config::Config;
+use volcapd::config::{Config, RenderDevice};
 use volcapd::pipeline::{self, PipelineState, Shared, stage};
 
 /// One configuration's measurement.
@@ -72,6 +72,8 @@ pub struct Row {
     pub adapter_ms_per_frame: f64,
     /// `compute.rounds_per_wait` (the GPU backend's localization levels).
     pub rounds_per_wait: usize,
+    /// `compute.render_device` ("shared" or "own").
+    pub render_device: &'static str,
     /// The adapter's milliseconds per frame, as `adapter_ms_per_frame`, of the frames'
     /// Fourier maps (interleave and temporal filter), of localization and the render's final
     /// level, and of the display image.
@@ -127,16 +129,17 @@ type Setup = (
     usize,
     bool,
     f32,
-    usize,
+    (usize, RenderDevice),
 );
 
 fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyhow::Result<Config> {
-    let (name, prec, res, coarse, threads, split, display, temporal, yaw, rounds) = setup;
+    let (name, prec, res, coarse, threads, split, display, temporal, yaw, (rounds, device)) = setup;
+    let device = device.name();
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
-         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\n\
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nrender_device = {device:?}\n\
          [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
         match prec {
@@ -225,6 +228,7 @@ fn measure(
         net_plans: work1[5] - work0[5],
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         rounds_per_wait: cfg.compute.rounds_per_wait,
+        render_device: cfg.compute.render_device.name(),
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
         localize_ms_per_frame: (work1[7] - work0[7]) as f64 / 1e6 / published.max(1) as f64,
         display_ms_per_frame: (work1[8] - work0[8]) as f64 / 1e6 / published.max(1) as f64,
@@ -249,6 +253,15 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     if let Some(r) = a.rounds_per_wait.iter().find(|r| !(1..=64).contains(*r)) {
         bail!("--rounds-per-wait {r} must be in 1..=64");
     }
+    let render_devices = a
+        .render_devices
+        .iter()
+        .map(|d| match d.trim() {
+            "shared" => Ok(RenderDevice::Shared),
+            "own" => Ok(RenderDevice::Own),
+            other => Err(anyhow!("--render-device {other:?}: one of shared, own")),
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);
     }
@@ -287,19 +300,21 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                         for &tf in &a.temporal {
                             for &yaw in &a.yaws {
                                 for &rounds in &a.rounds_per_wait {
-                                    for &t in &a.threads {
-                                        configs.push((
-                                            name.clone(),
-                                            prec,
-                                            res,
-                                            c,
-                                            t,
-                                            split,
-                                            d,
-                                            tf,
-                                            yaw,
-                                            rounds,
-                                        ));
+                                    for &dev in &render_devices {
+                                        for &t in &a.threads {
+                                            configs.push((
+                                                name.clone(),
+                                                prec,
+                                                res,
+                                                c,
+                                                t,
+                                                split,
+                                                d,
+                                                tf,
+                                                yaw,
+                                                (rounds, dev),
+                                            ));
+                                        }
                                     }
                                 }
                             }
@@ -383,6 +398,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.temporal == r.temporal
                     && b.yaw_deg == r.yaw_deg
                     && b.rounds_per_wait == r.rounds_per_wait
+                    && b.render_device == r.render_device
             })
             .map(|b| r.fps / b.fps.max(1e-9));
     }
@@ -480,12 +496,17 @@ fn table(rows: &[Row]) -> String {
                 (Some(e), _) => e.clone(),
                 // The GPU backend's traffic: what crosses between host and adapter per frame.
                 (None, true) => format!(
-                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for (up to {} conflict rounds each); {} networks planned while measured{}",
+                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for (up to {} conflict rounds each){}; {} networks planned while measured{}",
                     r.bytes_up_per_frame / 1e6,
                     r.bytes_down_per_frame / 1e6,
                     r.dispatches_per_frame,
                     r.waits_per_frame,
                     r.rounds_per_wait,
+                    if r.render_device == "own" {
+                        "; the render stage on a device of its own"
+                    } else {
+                        ""
+                    },
                     r.net_plans,
                     if r.adapter_ms_per_frame > 0.0 {
                         format!(

@@ -216,6 +216,14 @@ fn hard_frames_stay_finite_on_the_gpu() {
     // frame's crop, size and content jump from the last one's (resampled, or started again).
     let mut temporal = volcap_engine::model::temporal::Temporal::new(Default::default());
     let mut streamed = 0;
+    // The stream's frames rendered from their maps on the adapter, and on a second device of
+    // the adapter from the maps read back (`compute.render_device = "own"`): the same frame.
+    let own = gpu.sibling().unwrap();
+    let (mut gr_shared, mut gr_own) = (
+        GpuRenderer::new(gpu.clone()).unwrap(),
+        GpuRenderer::new(own.clone()).unwrap(),
+    );
+    let (mut r_shared, mut r_own) = (Renderer::new(), Renderer::new());
     for (f, (name, rgb, fw, fh, from_photo)) in frames.into_iter().enumerate() {
         let mut info = FrameInfo::default();
         let (img, mask, crop) = match models.prepare(&rgb, fw, fh, &mut info) {
@@ -255,6 +263,29 @@ fn hard_frames_stay_finite_on_the_gpu() {
                 maps.coefficients().iter().all(|v| v.is_finite()),
                 "{name}: filtered maps"
             );
+            let on_networks = live.gpu_field().expect("a Fourier head");
+            let from_host = live.gpu_field_from_host().unwrap().expect("a Fourier head");
+            let renders_before = gpu.counters().render_runs;
+            let a = r_shared
+                .render_gpu(&mut gr_shared, &on_networks, &live, &live, spec, &opts)
+                .unwrap();
+            let b = r_own
+                .render_gpu(&mut gr_own, &from_host, &live, &live, spec, &opts)
+                .unwrap();
+            assert_eq!(a, b, "{name}: stats on the second device");
+            assert_eq!(r_shared.hits(), r_own.hits(), "{name}: hits");
+            assert!(
+                r_shared
+                    .depth()
+                    .iter()
+                    .zip(r_own.depth())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{name}: depths"
+            );
+            assert_eq!(r_shared.rgba(), r_own.rgba(), "{name}: images");
+            // The second device counts into the first one's counters.
+            assert_eq!(gpu.counters().render_runs, renders_before + 2, "{name}");
+            assert_eq!(gpu.counters(), own.counters());
             streamed += 1;
         }
         let (cpu_grid, cpu_evals) = localize(&field, spec);

@@ -36,6 +36,32 @@ pub enum ComputeFallback {
     Cpu,
 }
 
+/// `compute.render_device`: which device of the adapter the render stage uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum RenderDevice {
+    /// The networks' device: one queue for every stage; the frame's maps stay on the
+    /// adapter from the shape network to the localizer.
+    #[default]
+    Shared,
+    /// A second device on the same adapter: the render stage's read-backs (some ten a frame)
+    /// wait for its own work only, not for the networks the other stages submitted before
+    /// them; the frame's maps cross the host between the two (read back by the field stage,
+    /// written by the render stage: 2 MB each way at K = 15). `volcap bench queues` says
+    /// whether the adapter runs two devices side by side; `volcap bench pipeline
+    /// --render-device shared,own` what it buys.
+    Own,
+}
+
+impl RenderDevice {
+    pub fn name(&self) -> &'static str {
+        match self {
+            RenderDevice::Shared => "shared",
+            RenderDevice::Own => "own",
+        }
+    }
+}
+
 /// The compute section.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -79,6 +105,9 @@ pub struct ComputeConfig {
     /// `volcap bench pipeline --rounds-per-wait` measures the trade on a board's GPU.
     #[serde(default = "d_rounds_per_wait")]
     pub rounds_per_wait: usize,
+    /// `backend = "wgpu"`: `shared` (default) or `own` ([`RenderDevice`]).
+    #[serde(default)]
+    pub render_device: RenderDevice,
 }
 
 /// Accepted range of `compute.rounds_per_wait`.
@@ -108,6 +137,7 @@ impl Default for ComputeConfig {
             runtime: RuntimeChoice::default(),
             onnxruntime_lib: None,
             rounds_per_wait: d_rounds_per_wait(),
+            render_device: RenderDevice::default(),
         }
     }
 }

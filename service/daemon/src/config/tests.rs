@@ -72,6 +72,22 @@ fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
     )
     .unwrap();
     assert_eq!(c.compute.rounds_per_wait, 8);
+    assert_eq!(c.compute.render_device, crate::config::RenderDevice::Shared);
+    let c = Config::parse(
+        &format!("{base}[compute]\nrender_device = \"own\"\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c.compute.render_device, crate::config::RenderDevice::Own);
+    let e = Config::parse(
+        &format!("{base}[compute]\nrender_device = \"other\"\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("line 5") && e.contains("render_device") && e.contains("own"),
+        "{e}"
+    );
     let e = Config::parse(
         &format!("{base}[compute]\nsegment_thread_up_to = 100\n"),
         Path::new("b.toml"),

@@ -181,6 +181,9 @@ pub(super) struct FieldSettings {
     pub split_up_to: usize,
     pub close_frames: u32,
     pub temporal: Option<TemporalSettings>,
+    /// The render stage renders on a device of its own (`compute.render_device = "own"`):
+    /// a frame's maps made on the adapter are read back here, in this stage's queue, for it.
+    pub maps_to_host: bool,
 }
 
 /// Start the field thread: segmented frames from `segmented` (or, above `split_up_to`,
@@ -201,6 +204,7 @@ pub(super) fn spawn(
         split_up_to,
         close_frames,
         temporal,
+        maps_to_host,
     } = settings;
     std::thread::Builder::new()
         .name("field".into())
@@ -255,6 +259,13 @@ pub(super) fn spawn(
                         }
                         Err(e)
                     }
+                };
+                let outcome = match outcome {
+                    Ok(field) if maps_to_host => match field.fourier_maps() {
+                        Ok(_) => Ok(field),
+                        Err(e) => Err(format!("the maps read back for the render device: {e}")),
+                    },
+                    other => other,
                 };
                 if out.put((f, outcome)) {
                     sh.stats[stage::FIELD]

@@ -14,6 +14,7 @@ pub(super) fn spawn(
     mode: FieldMode,
     eval_threads: usize,
     rounds_per_wait: usize,
+    render_device: crate::config::RenderDevice,
     models: Option<Arc<volcap_engine::model::Models>>,
 ) -> std::thread::JoinHandle<()> {
     std::thread::Builder::new()
@@ -22,8 +23,12 @@ pub(super) fn spawn(
             let mut renderer = Renderer::new();
             renderer.set_threads(eval_threads);
             // On the GPU backend the model's frames are localized and drawn on the adapter.
-            let mut on_adapter =
-                super::AdapterRenderer::open(models.as_deref(), mode, rounds_per_wait);
+            let mut on_adapter = super::AdapterRenderer::open(
+                models.as_deref(),
+                mode,
+                rounds_per_wait,
+                render_device,
+            );
             let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
                 let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
                 sh.set_state(PipelineState::Degraded(why));

@@ -174,7 +174,8 @@ pub struct Gpu {
     pub adapter: AdapterSummary,
     /// Nanoseconds per timestamp tick, where the adapter has timestamp queries.
     timestamp_period: Option<f32>,
-    counters: Counters,
+    /// Shared with the devices opened by [`Gpu::sibling`]: one count of the adapter's work.
+    counters: Arc<Counters>,
     pipelines: Mutex<HashMap<&'static str, Arc<wgpu::ComputePipeline>>>,
     /// Frames' Fourier field buffers kept for the next frames ([`fourier::GpuFourier`]).
     pub(crate) field_pool: Mutex<Vec<fourier::FieldBuffers>>,
@@ -230,6 +231,24 @@ impl Gpu {
                 }
             }
         };
+        Self::on(picked, Arc::default())
+    }
+
+    /// A second device on this one's adapter, with a queue of its own, counting into the
+    /// same counters (`compute.render_device = "own"`: the render stage's read-backs then
+    /// wait for its own work only, not for the networks another stage submitted before them;
+    /// `volcap bench queues` measures whether the adapter runs the two side by side).
+    pub fn sibling(&self) -> Result<Arc<Gpu>, String> {
+        let inst = instance();
+        let found = pollster::block_on(inst.enumerate_adapters(wgpu::Backends::all()));
+        let picked = found
+            .into_iter()
+            .find(|a| AdapterSummary::of(&a.get_info()) == self.adapter)
+            .ok_or_else(|| format!("{}: not listed again", self.adapter.label()))?;
+        Self::on(picked, self.counters.clone())
+    }
+
+    fn on(picked: wgpu::Adapter, counters: Arc<Counters>) -> Result<Arc<Gpu>, String> {
         let adapter = AdapterSummary::of(&picked.get_info());
         // Timestamps where the adapter has them (the only optional feature; without it the
         // adapter's time is not measured, nothing else changes).
@@ -249,7 +268,7 @@ impl Gpu {
             queue,
             adapter,
             timestamp_period,
-            counters: Counters::default(),
+            counters,
             pipelines: Mutex::new(HashMap::new()),
             field_pool: Mutex::new(Vec::new()),
             maps_pool: Mutex::new(Vec::new()),

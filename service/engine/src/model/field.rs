@@ -171,6 +171,25 @@ impl ModelField {
         }
     }
 
+    /// [`Self::gpu_field`] with the maps from the host ([`Self::fourier_maps`]: read back
+    /// once where the frame made them on the adapter), for a localizer or renderer on
+    /// another device than the networks' (`compute.render_device = "own"`), which cannot
+    /// read the networks' device's buffers.
+    #[cfg(feature = "wgpu")]
+    pub fn gpu_field_from_host(
+        &self,
+    ) -> Result<Option<crate::gpu::localize::GpuField<'_>>, ModelError> {
+        let Some(maps) = self.fourier_maps()? else {
+            return Ok(None);
+        };
+        Ok(Some(crate::gpu::localize::GpuField::Fourier {
+            maps: crate::gpu::localize::MapsRef::Host(maps),
+            mask: &self.mask,
+            mask_size: INPUT_SIZE,
+            to_crop: self.to_crop,
+        }))
+    }
+
     /// Crop NDC of a render-view NDC point.
     pub fn to_crop(&self, p: Vec3) -> Vec3 {
         self.to_crop * p
