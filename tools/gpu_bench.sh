@@ -71,7 +71,8 @@ case "$mode" in
     fi
     nvidia-smi -L 2>/dev/null || true
     if [ "$quick" = 1 ]; then
-      res=65 models=fourier-small secs=2 warm=1 runs=1 threads=1 loc_backends=cpu,wgpu qres=33
+      # (Windows long enough for lavapipe, whose frames take seconds, to publish some.)
+      res=65 models=fourier-small secs=12 warm=8 runs=1 threads=1 loc_backends=cpu,wgpu qres=33
     elif [ "$quick" = 2 ]; then
       # The whole matrix in about half the time (a lent machine's 15 minutes are shared with
       # training): shorter windows, the machine's cores only.
