@@ -247,16 +247,18 @@ mod imp {
             s.sort_by(f64::total_cmp);
             percentile(&s, 0.5)
         };
+        let (same, second) = (p50(1) / p50(0), p50(2) / p50(0));
         let _ = writeln!(
             md,
-            "\nThe network beside it on the same device makes a localization {:.2}x as long as \
-         alone; on a second device {:.2}x. Near 1 on the second device and well above on the \
-         first: the waits queued behind the network, and stages on devices of their own would \
-         escape it. Alike on both: the adapter time-slices the devices (or is busy), and a \
-         second device buys nothing. (On lavapipe both devices share the same two CPU cores: \
-         its figures say nothing about a GPU.)",
-            p50(1) / p50(0),
-            p50(2) / p50(0)
+            "\nThe network beside it on the same device makes a localization {same:.2}x as \
+             long as alone; on a second device {second:.2}x: {}{}",
+            verdict(same, second),
+            if label.contains("llvmpipe") {
+                " (On lavapipe both devices share the same CPU cores: its figures say nothing \
+                 about a GPU.)"
+            } else {
+                ""
+            }
         );
         print!("{md}");
         std::fs::create_dir_all(&a.out)?;
@@ -264,5 +266,37 @@ mod imp {
         std::fs::write(&path, &md).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         eprintln!("wrote {}", path.display());
         Ok(())
+    }
+
+    /// What the two slow-downs (same device, second device; 1 = as alone) say.
+    pub(super) fn verdict(same: f64, second: f64) -> &'static str {
+        if !(same.is_finite() && second.is_finite()) {
+            "no reading."
+        } else if same < 1.25 {
+            "the network beside it costs the localization little; its waits do not queue \
+             behind it much, and a second device has little to buy."
+        } else if second < 1.0 + (same - 1.0) / 3.0 {
+            "the waits queue behind the network on one device, and a second device escapes \
+             most of it: a stage on a device of its own pays (`compute.render_device = \"own\"`, \
+             if the maps crossing the host cost less)."
+        } else {
+            "the localization is slowed on either device: the adapter time-slices the two \
+             devices (or is busy), and a second device buys little."
+        }
+    }
+}
+
+#[cfg(all(test, feature = "wgpu"))]
+mod tests {
+    use super::imp::verdict;
+
+    #[test]
+    fn the_reading_follows_the_two_slow_downs() {
+        assert!(verdict(1.1, 1.05).contains("costs the localization little"));
+        // Lavapipe's: 850x on one device, 1.6x on a second.
+        assert!(verdict(850.0, 1.6).contains("a second device escapes"));
+        assert!(verdict(3.0, 2.7).contains("time-slices"));
+        assert!(verdict(3.0, 1.5).contains("a second device escapes"));
+        assert!(verdict(f64::NAN, 1.0).contains("no reading"));
     }
 }
