@@ -68,8 +68,10 @@ mod imp {
     /// One row: where the localization ran and what ran beside it.
     struct Row {
         what: &'static str,
-        /// Milliseconds of each localization run.
-        ms: Vec<f64>,
+        /// Localization runs, and their milliseconds' 50th and 90th percentiles.
+        runs: usize,
+        p50: f64,
+        p90: f64,
         /// Read-backs waited for per localization run.
         waits: f64,
         /// The background network's runs per second (None: no background).
@@ -198,10 +200,13 @@ mod imp {
                         .map_err(|_| anyhow!("the background network's thread panicked"))??;
                 }
                 result?;
+                ms.sort_by(f64::total_cmp);
                 Ok(Row {
                     what,
+                    runs: ms.len(),
+                    p50: percentile(&ms, 0.5),
+                    p90: percentile(&ms, 0.9),
                     waits,
-                    ms,
                     net_rate: busy.then(|| (n1 - n0) as f64 / secs),
                 })
             })?;
@@ -227,27 +232,16 @@ mod imp {
         );
         let _ = writeln!(md, "|---|---:|---:|---:|---:|---:|");
         for r in &rows {
-            let mut sorted = r.ms.clone();
-            sorted.sort_by(f64::total_cmp);
             let rate = r.net_rate.map_or("-".to_string(), |x| {
                 format!("{x:.1} (alone {net_alone:.1})")
             });
             let _ = writeln!(
                 md,
                 "| {} | {} | {:.2} | {:.2} | {:.1} | {rate} |",
-                r.what,
-                r.ms.len(),
-                percentile(&sorted, 0.5),
-                percentile(&sorted, 0.9),
-                r.waits
+                r.what, r.runs, r.p50, r.p90, r.waits
             );
         }
-        let p50 = |i: usize| {
-            let mut s = rows[i].ms.clone();
-            s.sort_by(f64::total_cmp);
-            percentile(&s, 0.5)
-        };
-        let (same, second) = (p50(1) / p50(0), p50(2) / p50(0));
+        let (same, second) = (rows[1].p50 / rows[0].p50, rows[2].p50 / rows[0].p50);
         let _ = writeln!(
             md,
             "\nThe network beside it on the same device makes a localization {same:.2}x as \

@@ -1,4 +1,4 @@
-//! `volcap bench localize` run as a user would.
+//! The `volcap bench` commands run as a user would.
 
 use std::process::Command;
 
@@ -342,4 +342,71 @@ fn mlp_bench_reports_throughput_against_the_peak() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("shape-compact-plain-z.mlp.onnx"), "{err}");
+}
+
+/// `volcap bench queues` as a user runs it: two devices on the adapter, the localization
+/// timed alone, beside the shape network on its device and on a second device; each row
+/// measured (runs, positive times, the same read-backs a run: the field is a table), the
+/// table and its reading written to queues.md; a bad argument named.
+#[cfg(feature = "wgpu")]
+#[test]
+fn bench_queues_times_the_localization_on_one_device_and_on_two() {
+    match volcap_engine::gpu::Gpu::open("auto") {
+        Ok(g) => println!("adapter: {}", g.adapter.label()),
+        Err(e) if std::env::var_os("CI").is_some() => panic!("no GPU adapter under CI: {e}"),
+        Err(e) => return println!("skipped: {e}"),
+    }
+    let out = std::env::temp_dir().join(format!("volcap-queues-{}", std::process::id()));
+    let o = volcap()
+        .current_dir(repo_root())
+        .args([
+            "bench",
+            "queues",
+            "--res",
+            "33",
+            "--seconds",
+            "0.3",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(out.join("queues.md")).unwrap();
+    let rows: Vec<Vec<&str>> = md
+        .lines()
+        .filter(|l| l.starts_with("| first") || l.starts_with("| a second"))
+        .map(|l| l.split('|').map(str::trim).collect())
+        .collect();
+    assert_eq!(rows.len(), 3, "{md}");
+    let waits: Vec<f64> = rows.iter().map(|r| r[5].parse().unwrap()).collect();
+    for r in &rows {
+        let runs: usize = r[2].parse().unwrap();
+        let (p50, p90): (f64, f64) = (r[3].parse().unwrap(), r[4].parse().unwrap());
+        assert!(runs >= 1 && p50 > 0.0 && p90 >= p50, "{r:?}");
+    }
+    assert!(
+        waits[0] >= 1.0 && waits.iter().all(|w| *w == waits[0]),
+        "{waits:?}"
+    );
+    // The rows beside the network name its rate; the one alone does not.
+    assert_eq!(rows[0][6], "-");
+    assert!(
+        rows[1][6].contains("alone") && rows[2][6].contains("alone"),
+        "{md}"
+    );
+    assert!(md.contains("as long as alone; on a second device"), "{md}");
+    let o = volcap()
+        .current_dir(repo_root())
+        .args(["bench", "queues", "--scene", "nope", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--scene \"nope\": one of"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&out);
 }

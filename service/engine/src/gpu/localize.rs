@@ -24,13 +24,15 @@ use super::Gpu;
 use super::kit::entry;
 use crate::grid::{Grid, GridSpec};
 use crate::localize::{HierarchicalMode, LocalizeStats, check_coarse};
-use crate::model::fourier::FourierMaps;
-use glam::Mat3;
 use std::sync::Arc;
-use std::sync::atomic::Ordering;
 
+mod field;
 mod record;
+mod tiling;
+use field::FieldBufs;
+pub use field::{GpuField, MapsRef};
 pub(super) use record::{Dispatch, Rec};
+pub use tiling::Tiling;
 
 const BOOK: &str = include_str!("localize.wgsl");
 const EVAL: &str = concat!(
@@ -40,126 +42,6 @@ const EVAL: &str = concat!(
 
 /// Entries each index list holds at first.
 pub const START_CAP: usize = 1 << 18;
-
-const MIB: f64 = (1u64 << 20) as f64;
-
-/// The binding of the values' second tile (the first is binding 1), then one each.
-const TILE_BINDING: u32 = 16;
-
-/// Storage bindings per stage that the localization's kernels take besides the values'
-/// (the lists, bits and counts, and the field's maps and mask in the evaluation kernels).
-const OTHER_STORAGE: u32 = 7;
-
-/// How a grid's values are laid over storage bindings: `tiles` buffers of `1 << shift`
-/// floats (the last one shorter), point `q` at `q & ((1 << shift) - 1)` of tile
-/// `q >> shift`. One tile is the whole grid in one binding, as before tiling.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Tiling {
-    pub shift: u32,
-    pub tiles: u32,
-}
-
-impl Tiling {
-    /// The whole grid in one binding.
-    pub const ONE: Tiling = Tiling {
-        shift: 31,
-        tiles: 1,
-    };
-
-    /// Tiles for `len` floats where a binding holds `max_floats` at most: one tile if it
-    /// fits, else tiles of the largest power of two floats within the limit.
-    pub fn new(len: usize, max_floats: u64) -> Tiling {
-        if len as u64 <= max_floats {
-            return Tiling::ONE;
-        }
-        let shift = 63 - max_floats.max(1).leading_zeros();
-        Tiling {
-            shift,
-            tiles: (len as u64).div_ceil(1 << shift) as u32,
-        }
-    }
-
-    /// Floats in tile `t` of a grid of `len`.
-    fn tile_len(&self, t: u32, len: usize) -> usize {
-        if self.tiles == 1 {
-            return len;
-        }
-        let per = 1usize << self.shift;
-        len.saturating_sub(t as usize * per).min(per)
-    }
-
-    fn binding(t: u32) -> u32 {
-        if t == 0 { 1 } else { TILE_BINDING + t - 1 }
-    }
-
-    /// The layout entries of the tiles (binding 1, then [`TILE_BINDING`] on).
-    pub(super) fn layout_entries(&self, read_only: bool) -> Vec<wgpu::BindGroupLayoutEntry> {
-        (0..self.tiles)
-            .map(|t| super::kit::storage(Self::binding(t), read_only))
-            .collect()
-    }
-
-    /// Bind group entries of `tiles` (one buffer per tile).
-    pub(super) fn entries<'b>(&self, tiles: &'b [wgpu::Buffer]) -> Vec<wgpu::BindGroupEntry<'b>> {
-        tiles
-            .iter()
-            .enumerate()
-            .map(|(t, b)| entry(Self::binding(t as u32), b))
-            .collect()
-    }
-
-    /// WGSL ahead of a kernel source: the tiles' bindings, `vget(q)` and (`writable`)
-    /// `vset(q, v)`.
-    pub(super) fn wgsl(&self, writable: bool) -> String {
-        use std::fmt::Write;
-        let access = if writable { "read_write" } else { "read" };
-        let name = |t: u32| {
-            if t == 0 {
-                "values".to_string()
-            } else {
-                format!("values_{t}")
-            }
-        };
-        let mut w = String::new();
-        for t in 0..self.tiles {
-            let _ = writeln!(
-                w,
-                "@group(0) @binding({}) var<storage, {access}> {}: array<f32>;",
-                Self::binding(t),
-                name(t)
-            );
-        }
-        if self.tiles == 1 {
-            w.push_str("fn vget(q: u32) -> f32 { return values[q]; }\n");
-            if writable {
-                w.push_str("fn vset(q: u32, v: f32) { values[q] = v; }\n");
-            }
-            return w;
-        }
-        let (shift, mask) = (self.shift, (1u64 << self.shift) - 1);
-        let cases = |body: &dyn Fn(&str) -> String| {
-            let mut c = String::new();
-            for t in 1..self.tiles {
-                let _ = writeln!(c, "        case {t}u: {{ {} }}", body(&name(t)));
-            }
-            let _ = writeln!(c, "        default: {{ {} }}", body("values"));
-            c
-        };
-        let _ = write!(
-            w,
-            "fn vget(q: u32) -> f32 {{\n    let o = q & {mask}u;\n    switch q >> {shift}u {{\n{}    }}\n}}\n",
-            cases(&|v| format!("return {v}[o];"))
-        );
-        if writable {
-            let _ = write!(
-                w,
-                "fn vset(q: u32, x: f32) {{\n    let o = q & {mask}u;\n    switch q >> {shift}u {{\n{}    }}\n}}\n",
-                cases(&|v| format!("{v}[o] = x;"))
-            );
-        }
-        w
-    }
-}
 
 /// Counter slots (`localize.wgsl`; slot 0 counts the candidates).
 pub(super) const LIST: [usize; 2] = [1, 2];
@@ -174,54 +56,6 @@ pub(super) const COUNTS: usize = 9;
 /// Parameter blocks per level: lists 0 and 1 read (the other written), the renderer's log
 /// read, its culled list 0 or 1 counted.
 const ORIENTATIONS: usize = 5;
-
-/// A field the localizer evaluates on the adapter.
-pub enum GpuField<'a> {
-    /// One value per point of the run's grid (linear index order), evaluated by the host.
-    Table(&'a [f32]),
-    /// The Fourier head over the render view: `to_crop` maps render NDC to crop NDC, points
-    /// outside the crop or where the `mask_size` x `mask_size` mask is below 0.5 are 0, the
-    /// rest the series (`model/field.rs` `ModelField::occupancy`).
-    Fourier {
-        maps: MapsRef<'a>,
-        mask: &'a [f32],
-        mask_size: usize,
-        to_crop: Mat3,
-    },
-}
-
-/// Where a frame's Fourier maps are: on the host (written to the adapter with the field), or
-/// already on the adapter (the GPU backend's frames: copied there, nothing goes up).
-#[derive(Clone, Copy)]
-pub enum MapsRef<'a> {
-    Host(&'a FourierMaps),
-    Adapter(&'a super::maps::GpuMaps),
-}
-
-impl MapsRef<'_> {
-    fn series_head(&self) -> [u32; 5] {
-        match self {
-            MapsRef::Host(m) => super::fourier::series_head(m),
-            MapsRef::Adapter(m) => m.head().series(),
-        }
-    }
-}
-
-/// The field's data as `upload_field` writes it.
-enum FieldData<'a> {
-    Host(&'a [f32]),
-    /// A buffer on the adapter and the floats to copy from its start.
-    Adapter(&'a wgpu::Buffer, usize),
-}
-
-impl FieldData<'_> {
-    fn len(&self) -> usize {
-        match self {
-            FieldData::Host(d) => d.len(),
-            FieldData::Adapter(_, n) => *n,
-        }
-    }
-}
 
 pub(super) struct Pipes {
     /// The values' tiling the kernels and `layout0` are made for.
@@ -265,19 +99,6 @@ pub(super) struct Bufs {
     binds: Vec<[wgpu::BindGroup; ORIENTATIONS]>,
     /// The values' and bits' read-back, made on first use.
     staging: Option<wgpu::Buffer>,
-}
-
-/// The field's buffers (grown, never shrunk).
-struct FieldBufs {
-    params: wgpu::Buffer,
-    maps: wgpu::Buffer,
-    /// The grid's coordinates, then the mask.
-    aux: wgpu::Buffer,
-    maps_cap: usize,
-    aux_cap: usize,
-    /// Points per axis of the grid whose coordinates `aux` holds (0: none yet).
-    coords_n: usize,
-    bind: wgpu::BindGroup,
 }
 
 /// Reusable state of the hierarchical localizer on the adapter.
@@ -400,25 +221,6 @@ impl GpuLocalizer {
         })
     }
 
-    /// Tiles of the values of at most `n` floats (a power of two at most; the adapter's
-    /// binding limit bounds them anyway): the tests tile small grids with it, so that the
-    /// tiled kernels run where a binding would hold the whole grid.
-    pub fn with_tile_floats(mut self, n: usize) -> Self {
-        self.tile_floats = Some(n.max(1) as u64);
-        self.bufs = None;
-        self
-    }
-
-    /// How a grid of `spec` lays its values over storage bindings here.
-    pub fn tiling(&self, spec: GridSpec) -> Tiling {
-        let limits = self.gpu.device.limits();
-        let bytes = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        let floats = (bytes / 4).min(self.tile_floats.unwrap_or(u64::MAX));
-        Tiling::new(spec.len(), floats)
-    }
-
     /// Conflict rounds recorded per read-back at most (default
     /// [`DEFAULT_ROUNDS_PER_WAIT`], clamped to 1..=64): batches of 1, 2, 4, ... up to it.
     /// The values, evaluations and rounds do not depend on it; the read-backs waited for
@@ -435,46 +237,9 @@ impl GpuLocalizer {
         self
     }
 
-    /// Lists of at most `n` entries (one storage binding bounds them anyway; the tests make
-    /// the bound small to reach it).
-    pub fn with_max_list_entries(mut self, n: usize) -> Self {
-        self.max_list = Some(n.max(1));
-        self.bufs = None;
-        self
-    }
-
     /// Entries each index list holds now (grown by runs that needed more).
     pub fn list_capacity(&self) -> usize {
         self.cap
-    }
-
-    /// Whether a grid of `spec` fits the adapter's limits: its values in as many storage
-    /// bindings as the adapter's binding size needs ([`Self::tiling`]), with the kernels'
-    /// other storage buffers, within the adapter's storage buffers per stage. The error
-    /// names the sizes.
-    pub fn check_size(&self, spec: GridSpec) -> Result<(), String> {
-        let t = self.tiling(spec);
-        let limits = self.gpu.device.limits();
-        let per_stage = limits.max_storage_buffers_per_shader_stage;
-        // Bindings are numbered below the group's limit too (tile t > 0 at 15 + t).
-        let max_tiles = per_stage.saturating_sub(OTHER_STORAGE).min(
-            limits
-                .max_bindings_per_bind_group
-                .saturating_sub(TILE_BINDING - 1),
-        );
-        if t.tiles > max_tiles {
-            let n = spec.n();
-            return Err(format!(
-                "a {n}^3 grid needs {:.1} MiB of values in {} storage bindings of at most \
-                 {:.1} MiB, more than the {max_tiles} that the adapter's {per_stage} storage \
-                 buffers per stage leave beside the localization's other {OTHER_STORAGE} \
-                 (localize it on the CPU)",
-                grid_bytes(spec) as f64 / MIB,
-                t.tiles,
-                (4u64 << t.shift).min(grid_bytes(spec)) as f64 / MIB,
-            ));
-        }
-        Ok(())
     }
 
     fn buffers(&mut self, spec: GridSpec) -> Result<&Bufs, String> {
@@ -582,121 +347,6 @@ impl GpuLocalizer {
         }
     }
 
-    /// Write the field's data (grown buffers where needed) and its bind group.
-    fn upload_field(&mut self, field: &GpuField<'_>, spec: GridSpec) -> Result<(), String> {
-        self.pending_copy = None;
-        let (data, mask, head, to_crop): (FieldData<'_>, &[f32], [u32; 6], Mat3) = match field {
-            GpuField::Table(t) => {
-                if t.len() != spec.len() {
-                    return Err(format!(
-                        "the table holds {} values for a grid of {}",
-                        t.len(),
-                        spec.len()
-                    ));
-                }
-                (FieldData::Host(t), &[0.0][..], [0; 6], Mat3::IDENTITY)
-            }
-            GpuField::Fourier {
-                maps,
-                mask,
-                mask_size,
-                to_crop,
-            } => {
-                if mask.len() != mask_size * mask_size || *mask_size < 2 {
-                    return Err(format!(
-                        "the mask holds {} values, not {mask_size}^2",
-                        mask.len()
-                    ));
-                }
-                let s = maps.series_head();
-                let head = [s[0], s[1], s[2], s[3], s[4], *mask_size as u32];
-                let data = match maps {
-                    MapsRef::Host(m) => FieldData::Host(m.coefficients()),
-                    MapsRef::Adapter(m) => FieldData::Adapter(m.buffer(), m.head().len()),
-                };
-                (data, *mask, head, *to_crop)
-            }
-        };
-        let limit = self.gpu.device.limits().max_storage_buffer_binding_size as usize;
-        if data.len() * 4 > limit {
-            return Err(format!(
-                "the field's data of {} bytes exceed the adapter's {limit} per binding",
-                data.len() * 4
-            ));
-        }
-        let n = spec.n();
-        let aux_len = n + mask.len();
-        let fits = self
-            .field
-            .as_ref()
-            .is_some_and(|f| f.maps_cap >= data.len() && f.aux_cap >= aux_len);
-        if !fits {
-            let old = self.field.take();
-            let maps_cap = old.as_ref().map_or(0, |f| f.maps_cap).max(data.len());
-            let aux_cap = old.as_ref().map_or(0, |f| f.aux_cap).max(aux_len);
-            use wgpu::BufferUsages as U;
-            let d = &self.gpu.device;
-            let buf = |label, floats: usize, usage| {
-                d.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(label),
-                    size: (floats.max(1) * 4) as u64,
-                    usage: usage | U::COPY_DST,
-                    mapped_at_creation: false,
-                })
-            };
-            let params = buf("field params", 20, U::UNIFORM);
-            let maps_b = buf("field data", maps_cap, U::STORAGE);
-            let aux_b = buf("grid coords and mask", aux_cap, U::STORAGE);
-            let bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: None,
-                layout: &self.pipes.layout_field,
-                entries: &[entry(0, &params), entry(1, &maps_b), entry(2, &aux_b)],
-            });
-            self.field = Some(FieldBufs {
-                params,
-                maps: maps_b,
-                aux: aux_b,
-                maps_cap,
-                aux_cap,
-                coords_n: 0,
-                bind,
-            });
-        }
-        let f = self.field.as_mut().expect("made above");
-        let mut params = [0u32; 20];
-        params[..6].copy_from_slice(&head);
-        for (i, v) in to_crop.to_cols_array().iter().enumerate() {
-            params[8 + i] = v.to_bits();
-        }
-        let q = &self.gpu.queue;
-        q.write_buffer(&f.params, 0, bytemuck::cast_slice(&params));
-        let mut up = std::mem::size_of_val(mask) + 80;
-        match data {
-            FieldData::Host(d) => {
-                q.write_buffer(&f.maps, 0, bytemuck::cast_slice(d));
-                up += std::mem::size_of_val(d);
-            }
-            // On the adapter already: copied there at the start of the localization's first
-            // submission ([`Self::recorder`]).
-            FieldData::Adapter(b, n) => self.pending_copy = Some((b.clone(), (n * 4) as u64)),
-        }
-        if f.coords_n != n {
-            // The coordinates from the host (GridSpec::coord: the same floats as the CPU's
-            // points, whatever the adapter's division), when the grid's size changes.
-            let coords: Vec<f32> = (0..n).map(|i| spec.coord(i)).collect();
-            q.write_buffer(&f.aux, 0, bytemuck::cast_slice(&coords));
-            f.coords_n = n;
-            up += n * 4;
-        }
-        // The mask after them.
-        q.write_buffer(&f.aux, (n * 4) as u64, bytemuck::cast_slice(mask));
-        self.gpu
-            .count()
-            .bytes_up
-            .fetch_add(up as u64, Ordering::Relaxed);
-        Ok(())
-    }
-
     /// Localize `field`'s 0.5 level set on `spec` from level `coarse` with `mode`, the values
     /// left on the adapter (read them with [`Self::read_grid`]). The stats count the field
     /// evaluations exactly.
@@ -750,40 +400,6 @@ impl GpuLocalizer {
         self.render = render;
         self.eval_fourier = matches!(field, GpuField::Fourier { .. });
         self.upload_field(field, spec)
-    }
-
-    /// After a list overflowed: lists four times larger (up to the grid's size).
-    pub(super) fn grow(&mut self, spec: GridSpec) -> Result<(), String> {
-        if self.cap >= spec.len() {
-            return Err("the index lists overflowed at the grid's size".into());
-        }
-        let next = (self.cap * 4).min(spec.len()).min(self.list_bound());
-        if next <= self.cap {
-            // Not a wgpu validation error (a panic) on a buffer over the binding limit.
-            return Err(format!(
-                "this {}^3 frame needs index lists of more than {} entries, the most one \
-                 storage binding holds here (localize it on the CPU)",
-                spec.n(),
-                self.cap
-            ));
-        }
-        self.cap = next;
-        Ok(())
-    }
-
-    /// Entries an index list may hold: the largest buffer per entry (the renderer's lists,
-    /// three pairs of words an entry, else a list's pair) within one storage binding, or
-    /// [`Self::with_max_list_entries`].
-    fn list_bound(&self) -> usize {
-        let limits = self.gpu.device.limits();
-        let binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        let per_entry = if self.render { 24 } else { 8 };
-        usize::try_from(binding / per_entry)
-            .unwrap_or(usize::MAX)
-            .min(self.max_list.unwrap_or(usize::MAX))
-            .max(1)
     }
 
     /// A recorder of the frame's work on buffers sized for `spec` (its parameters written).
@@ -903,69 +519,5 @@ impl GpuLocalizer {
             }
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::Tiling;
-
-    #[test]
-    fn tiles_are_the_largest_power_of_two_within_the_binding_and_cover_the_grid() {
-        let len = 513usize * 513 * 513;
-        // A 128 MiB binding (lavapipe's): five tiles of 2^25 floats, the last one short.
-        let t = Tiling::new(len, (128 << 20) / 4);
-        assert_eq!(
-            t,
-            Tiling {
-                shift: 25,
-                tiles: 5
-            }
-        );
-        let lens: Vec<usize> = (0..t.tiles).map(|i| t.tile_len(i, len)).collect();
-        assert_eq!(lens.iter().sum::<usize>(), len);
-        assert!(lens[..4].iter().all(|&l| l == 1 << 25));
-        assert_eq!(lens[4], len - 4 * (1 << 25));
-        // A limit that is not a power of two: tiles of the power of two below it.
-        assert_eq!(
-            Tiling::new(1000, 100),
-            Tiling {
-                shift: 6,
-                tiles: 16
-            }
-        );
-        assert_eq!(Tiling::new(1000, 100).tile_len(15, 1000), 1000 - 15 * 64);
-        // A grid that fits: one tile, the whole grid.
-        assert_eq!(Tiling::new(len, len as u64), Tiling::ONE);
-        assert_eq!(Tiling::ONE.tile_len(0, len), len);
-    }
-
-    #[test]
-    fn the_tiles_wgsl_declares_each_binding_and_routes_by_the_high_bits() {
-        let one = Tiling::ONE.wgsl(true);
-        assert!(one.contains("@binding(1) var<storage, read_write> values: array<f32>;"));
-        assert!(one.contains("fn vset"));
-        assert!(!Tiling::ONE.wgsl(false).contains("fn vset"));
-        let t = Tiling {
-            shift: 16,
-            tiles: 3,
-        };
-        let w = t.wgsl(false);
-        assert!(
-            w.contains("@binding(1) var<storage, read> values: array<f32>;"),
-            "{w}"
-        );
-        assert!(
-            w.contains("@binding(16) var<storage, read> values_1"),
-            "{w}"
-        );
-        assert!(
-            w.contains("@binding(17) var<storage, read> values_2"),
-            "{w}"
-        );
-        assert!(w.contains("q & 65535u") && w.contains("q >> 16u"), "{w}");
-        assert!(w.contains("case 2u: { return values_2[o]; }"), "{w}");
-        assert!(!w.contains("fn vset"), "{w}");
-        // (Compiled with the kernels by the adapter in tests/gpu.rs.)
     }
 }

@@ -154,19 +154,10 @@ impl ModelField {
     /// maps, the person mask and the view's transform), or `None` for the point-MLP family.
     #[cfg(feature = "wgpu")]
     pub fn gpu_field(&self) -> Option<crate::gpu::localize::GpuField<'_>> {
+        use crate::gpu::localize::MapsRef;
         match &self.shape {
-            ShapeState::Fourier(maps) => Some(crate::gpu::localize::GpuField::Fourier {
-                maps: crate::gpu::localize::MapsRef::Host(maps),
-                mask: &self.mask,
-                mask_size: INPUT_SIZE,
-                to_crop: self.to_crop,
-            }),
-            ShapeState::FourierOnAdapter(maps) => Some(crate::gpu::localize::GpuField::Fourier {
-                maps: crate::gpu::localize::MapsRef::Adapter(maps),
-                mask: &self.mask,
-                mask_size: INPUT_SIZE,
-                to_crop: self.to_crop,
-            }),
+            ShapeState::Fourier(maps) => Some(self.gpu_fourier(MapsRef::Host(maps))),
+            ShapeState::FourierOnAdapter(maps) => Some(self.gpu_fourier(MapsRef::Adapter(maps))),
             ShapeState::Mlp { .. } => None,
         }
     }
@@ -179,15 +170,23 @@ impl ModelField {
     pub fn gpu_field_from_host(
         &self,
     ) -> Result<Option<crate::gpu::localize::GpuField<'_>>, ModelError> {
-        let Some(maps) = self.fourier_maps()? else {
-            return Ok(None);
-        };
-        Ok(Some(crate::gpu::localize::GpuField::Fourier {
-            maps: crate::gpu::localize::MapsRef::Host(maps),
+        Ok(self
+            .fourier_maps()?
+            .map(|m| self.gpu_fourier(crate::gpu::localize::MapsRef::Host(m))))
+    }
+
+    /// The Fourier field over the render view with `maps`.
+    #[cfg(feature = "wgpu")]
+    fn gpu_fourier<'a>(
+        &'a self,
+        maps: crate::gpu::localize::MapsRef<'a>,
+    ) -> crate::gpu::localize::GpuField<'a> {
+        crate::gpu::localize::GpuField::Fourier {
+            maps,
             mask: &self.mask,
             mask_size: INPUT_SIZE,
             to_crop: self.to_crop,
-        }))
+        }
     }
 
     /// Crop NDC of a render-view NDC point.

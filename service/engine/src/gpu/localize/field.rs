@@ -1,0 +1,191 @@
+//! The field the localizer evaluates on the adapter ([`GpuField`]: a host table, or the
+//! Fourier head with its maps on the host or already on the adapter) and its upload.
+
+use super::GpuLocalizer;
+use crate::gpu::kit::entry;
+use crate::grid::GridSpec;
+use crate::model::fourier::FourierMaps;
+use glam::Mat3;
+use std::sync::atomic::Ordering;
+
+/// A field the localizer evaluates on the adapter.
+pub enum GpuField<'a> {
+    /// One value per point of the run's grid (linear index order), evaluated by the host.
+    Table(&'a [f32]),
+    /// The Fourier head over the render view: `to_crop` maps render NDC to crop NDC, points
+    /// outside the crop or where the `mask_size` x `mask_size` mask is below 0.5 are 0, the
+    /// rest the series (`model/field.rs` `ModelField::occupancy`).
+    Fourier {
+        maps: MapsRef<'a>,
+        mask: &'a [f32],
+        mask_size: usize,
+        to_crop: Mat3,
+    },
+}
+
+/// Where a frame's Fourier maps are: on the host (written to the adapter with the field), or
+/// already on the adapter (the GPU backend's frames: copied there, nothing goes up).
+#[derive(Clone, Copy)]
+pub enum MapsRef<'a> {
+    Host(&'a FourierMaps),
+    Adapter(&'a crate::gpu::maps::GpuMaps),
+}
+
+impl MapsRef<'_> {
+    fn series_head(&self) -> [u32; 5] {
+        match self {
+            MapsRef::Host(m) => crate::gpu::fourier::series_head(m),
+            MapsRef::Adapter(m) => m.head().series(),
+        }
+    }
+}
+
+/// The field's data as `upload_field` writes it.
+enum FieldData<'a> {
+    Host(&'a [f32]),
+    /// A buffer on the adapter and the floats to copy from its start.
+    Adapter(&'a wgpu::Buffer, usize),
+}
+
+impl FieldData<'_> {
+    fn len(&self) -> usize {
+        match self {
+            FieldData::Host(d) => d.len(),
+            FieldData::Adapter(_, n) => *n,
+        }
+    }
+}
+
+/// The field's buffers (grown, never shrunk).
+pub(in crate::gpu) struct FieldBufs {
+    pub(in crate::gpu) params: wgpu::Buffer,
+    pub(in crate::gpu) maps: wgpu::Buffer,
+    /// The grid's coordinates, then the mask.
+    pub(in crate::gpu) aux: wgpu::Buffer,
+    pub(in crate::gpu) maps_cap: usize,
+    pub(in crate::gpu) aux_cap: usize,
+    /// Points per axis of the grid whose coordinates `aux` holds (0: none yet).
+    pub(in crate::gpu) coords_n: usize,
+    pub(in crate::gpu) bind: wgpu::BindGroup,
+}
+
+impl GpuLocalizer {
+    /// Write the field's data (grown buffers where needed) and its bind group.
+    pub(super) fn upload_field(
+        &mut self,
+        field: &GpuField<'_>,
+        spec: GridSpec,
+    ) -> Result<(), String> {
+        self.pending_copy = None;
+        let (data, mask, head, to_crop): (FieldData<'_>, &[f32], [u32; 6], Mat3) = match field {
+            GpuField::Table(t) => {
+                if t.len() != spec.len() {
+                    return Err(format!(
+                        "the table holds {} values for a grid of {}",
+                        t.len(),
+                        spec.len()
+                    ));
+                }
+                (FieldData::Host(t), &[0.0][..], [0; 6], Mat3::IDENTITY)
+            }
+            GpuField::Fourier {
+                maps,
+                mask,
+                mask_size,
+                to_crop,
+            } => {
+                if mask.len() != mask_size * mask_size || *mask_size < 2 {
+                    return Err(format!(
+                        "the mask holds {} values, not {mask_size}^2",
+                        mask.len()
+                    ));
+                }
+                let s = maps.series_head();
+                let head = [s[0], s[1], s[2], s[3], s[4], *mask_size as u32];
+                let data = match maps {
+                    MapsRef::Host(m) => FieldData::Host(m.coefficients()),
+                    MapsRef::Adapter(m) => FieldData::Adapter(m.buffer(), m.head().len()),
+                };
+                (data, *mask, head, *to_crop)
+            }
+        };
+        let limit = self.gpu.device.limits().max_storage_buffer_binding_size as usize;
+        if data.len() * 4 > limit {
+            return Err(format!(
+                "the field's data of {} bytes exceed the adapter's {limit} per binding",
+                data.len() * 4
+            ));
+        }
+        let n = spec.n();
+        let aux_len = n + mask.len();
+        let fits = self
+            .field
+            .as_ref()
+            .is_some_and(|f| f.maps_cap >= data.len() && f.aux_cap >= aux_len);
+        if !fits {
+            let old = self.field.take();
+            let maps_cap = old.as_ref().map_or(0, |f| f.maps_cap).max(data.len());
+            let aux_cap = old.as_ref().map_or(0, |f| f.aux_cap).max(aux_len);
+            use wgpu::BufferUsages as U;
+            let d = &self.gpu.device;
+            let buf = |label, floats: usize, usage| {
+                d.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: (floats.max(1) * 4) as u64,
+                    usage: usage | U::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            };
+            let params = buf("field params", 20, U::UNIFORM);
+            let maps_b = buf("field data", maps_cap, U::STORAGE);
+            let aux_b = buf("grid coords and mask", aux_cap, U::STORAGE);
+            let bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &self.pipes.layout_field,
+                entries: &[entry(0, &params), entry(1, &maps_b), entry(2, &aux_b)],
+            });
+            self.field = Some(FieldBufs {
+                params,
+                maps: maps_b,
+                aux: aux_b,
+                maps_cap,
+                aux_cap,
+                coords_n: 0,
+                bind,
+            });
+        }
+        let f = self.field.as_mut().expect("made above");
+        let mut params = [0u32; 20];
+        params[..6].copy_from_slice(&head);
+        for (i, v) in to_crop.to_cols_array().iter().enumerate() {
+            params[8 + i] = v.to_bits();
+        }
+        let q = &self.gpu.queue;
+        q.write_buffer(&f.params, 0, bytemuck::cast_slice(&params));
+        let mut up = std::mem::size_of_val(mask) + 80;
+        match data {
+            FieldData::Host(d) => {
+                q.write_buffer(&f.maps, 0, bytemuck::cast_slice(d));
+                up += std::mem::size_of_val(d);
+            }
+            // On the adapter already: copied there at the start of the localization's first
+            // submission ([`Self::recorder`]).
+            FieldData::Adapter(b, n) => self.pending_copy = Some((b.clone(), (n * 4) as u64)),
+        }
+        if f.coords_n != n {
+            // The coordinates from the host (GridSpec::coord: the same floats as the CPU's
+            // points, whatever the adapter's division), when the grid's size changes.
+            let coords: Vec<f32> = (0..n).map(|i| spec.coord(i)).collect();
+            q.write_buffer(&f.aux, 0, bytemuck::cast_slice(&coords));
+            f.coords_n = n;
+            up += n * 4;
+        }
+        // The mask after them.
+        q.write_buffer(&f.aux, (n * 4) as u64, bytemuck::cast_slice(mask));
+        self.gpu
+            .count()
+            .bytes_up
+            .fetch_add(up as u64, Ordering::Relaxed);
+        Ok(())
+    }
+}
