@@ -4,7 +4,7 @@
 # light checkpoint (<= 16 MiB) and the log in RESULT.
 #
 #   run.sh RESULT [--subjects 48] [--poses 16] [--views 3] [--steps 6000] [--procs NPROC]
-#                 [--minutes-data D] [--minutes-train T] [--tiny]
+#                 [--minutes-data D] [--minutes-train T] [--variant V] [--tiny]
 #                 [-- extra `volcap_train.train fourier` options]
 #
 # budget.json's `time_s` says where the training's wall time went (steps, checkpoints,
@@ -24,6 +24,10 @@
 # steps of 16 in two minutes). Both together fit the recipe into a lent machine's call (10
 # minutes a command there).
 #
+# --variant: the Fourier variant trained (default fourier-small); `fourier-geom` (the surface
+# net feeding the series net, issue 34 part 3) starts both of its halves from the bundled
+# fourier-small checkpoint and needs `-- --geom-weight W`.
+#
 # --tiny is the end-to-end check (2 subjects, 2 poses, 2 views, 3 steps). Needs python3 with
 # torch, numpy, safetensors, tqdm (onnxruntime for the product's masks; without it the ground
 # truth's), no network.
@@ -32,7 +36,7 @@ b="$(cd "$(dirname "$0")" && pwd)"
 res="${1:?usage: run.sh RESULT [options]}"
 shift
 subjects=48 poses=16 views=3 steps=6000 procs=$(nproc) points=8000 batch=8 extra=()
-minutes_data=0 minutes_train=0 steps_given=0
+minutes_data=0 minutes_train=0 steps_given=0 variant=fourier-small
 while [ $# -gt 0 ]; do
   case "$1" in
     --subjects) subjects="$2"; shift 2 ;;
@@ -42,6 +46,7 @@ while [ $# -gt 0 ]; do
     --procs) procs="$2"; shift 2 ;;
     --minutes-data) minutes_data="$2"; shift 2 ;;
     --minutes-train) minutes_train="$2"; shift 2 ;;
+    --variant) variant="$2"; shift 2 ;;
     --tiny) subjects=2 poses=2 views=2 steps=3 steps_given=1 procs=2 points=4096 batch=2; shift ;;
     --) shift; extra=("$@"); break ;;
     *) echo "run.sh: unknown option $1" >&2; exit 2 ;;
@@ -135,14 +140,14 @@ mt=()
 [ "$minutes_train" != 0 ] && mt=(--max-minutes "$minutes_train")
 [ ${#more[@]} -gt 0 ] && md=(--more-data "${more[@]}")
 "$py" -m volcap_train.train fourier --data "$res/ds-$first" "${md[@]}" --out "$res/run" \
-  --variant fourier-small --steps "$steps" --batch "$batch" --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I \
+  --variant "$variant" --steps "$steps" --batch "$batch" --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I \
   --depth-frame body --points 2048 --device auto --init "$init" "${seg[@]}" "${mt[@]}" "${extra[@]}" 2>&1 | tee -a "$log"
 echo "training: $(( $(date +%s) - t1 )) s" | tee -a "$log"
 # Where the training's wall time went (steps, of them the batches made and the OHEM update,
 # checkpoints, validation): a GPU run slower than its GPU says here which part holds it.
 "$py" -c 'import json, sys; b = json.load(open(sys.argv[1])); print("steps", b["steps"], "time_s", json.dumps(b.get("time_s")))' \
   "$res/run/budget.json" | tee -a "$log"
-"$py" -m volcap_train.light "$res/run" "$res/checkpoint.pt" --variant fourier-small | tee -a "$log"
+"$py" -m volcap_train.light "$res/run" "$res/checkpoint.pt" --variant "$variant" | tee -a "$log"
 cp "$res/run/log.csv" "$res/run/budget.json" "$res/"
 size=$(stat -c %s "$res/checkpoint.pt")
 echo "checkpoint $res/checkpoint.pt: $size bytes" | tee -a "$log"

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from volcap_train.nets import make_fourier
 from volcap_train.runs import init_weights
 
 REPO = Path(__file__).resolve().parents[3]
@@ -31,8 +32,10 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     assert (bundle / "volcap.gz").exists() and not (bundle / "volcap").exists()
     env = {**os.environ, "PYTHON": sys.executable}
     # Run from elsewhere: the bundle must not need the checkout.
-    # (--sync-parts: the parts' clocks with the device drained at their edges; a no-op here.)
-    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--", "--sync-parts"], check=True, env=env, cwd=tmp_path)
+    # (--sync-parts: the parts' clocks with the device drained at their edges; a no-op here.
+    # --geom-weight: the training-only surfaces head goes through the whole recipe too, and
+    # stays out of the light checkpoint, which holds the series network only.)
+    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--", "--sync-parts", "--geom-weight", "0.1"], check=True, env=env, cwd=tmp_path)
     ck = res / "checkpoint.pt"
     assert 0 < ck.stat().st_size <= 16 * 2**20
     light = torch.load(ck, weights_only=False)
@@ -44,6 +47,8 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     budget = json.loads((res / "budget.json").read_text())
     assert budget["steps"] == 3 and "cuda" in budget["hardware"]
     assert budget["args"]["sync_parts"] == "True", budget["args"]
+    assert budget["args"]["geom_weight"] == "0.1", budget["args"]
+    assert not any(n.startswith("geom") for n in w), sorted(w)[:5]
     assert {"ds-0", "ds-1"} <= {p.name for p in res.iterdir()}
     # The log says where the training's time went (the batches made among the steps).
     log = (res / "recipe.log").read_text()
@@ -65,7 +70,9 @@ def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
         assert (bundle / "volcap.xz").stat().st_size < 20 * 2**20
         env = {**os.environ, "PYTHON": sys.executable}
         subprocess.run(
-            [str(bundle / "run.sh"), str(res), "--tiny", "--poses", "3", "--minutes-data", "30", "--minutes-train", "0.0001"],
+            # The surface variant (issue 34 part 3), its halves started from fourier-small's
+            # checkpoint as the bundle carries it.
+            [str(bundle / "run.sh"), str(res), "--tiny", "--poses", "3", "--minutes-data", "30", "--minutes-train", "0.0001", "--variant", "fourier-geom", "--", "--geom-weight", "1"],
             check=True, env=env, cwd=tmp_path,
         )
     finally:
@@ -82,7 +89,8 @@ def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
             assert len(list((ds / part / sid).glob("*.safetensors"))) == 2, (j, sid)  # 2 views
     assert "3 of 3 poses whole" in (res / "recipe.log").read_text()
     light = torch.load(res / "checkpoint.pt", weights_only=False)
-    assert light["step"] == 1
+    assert light["step"] == 1 and light["variant"] == "fourier-geom"
+    make_fourier("fourier-geom").load_state_dict(init_weights(light, res / "checkpoint.pt"))
     # A lean bundle outside the checkout's root is refused by name.
     r = subprocess.run([str(REPO / "tools/train/recipe/make_bundle.sh"), str(tmp_path / "elsewhere"), "--lean"], capture_output=True, text=True)
     assert r.returncode == 2 and "checkout's root" in r.stderr

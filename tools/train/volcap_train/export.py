@@ -30,7 +30,7 @@ from . import light
 from .data import Split
 from . import fourier as FO
 from .onnx_rewrite import resize_to_shifts
-from .nets import FOURIER_VARIANTS, SOFTZ_BINS, fourier_variant, ColorEncoder, ColorMlp, FourierNet, SegNet, SHAPE_VARIANTS, encode_z, encoder_input, make_shape, sample_features
+from .nets import FOURIER_VARIANTS, SOFTZ_BINS, fourier_variant, make_fourier, ColorEncoder, ColorMlp, FourierNet, SegNet, SHAPE_VARIANTS, encode_z, encoder_input, make_shape, sample_features
 
 OPSET = 17
 SAMPLE_RULE = "bilinear align_corners=1 padding=border"
@@ -257,9 +257,8 @@ def main(argv=None):
 
 
 def load_fourier(run: Path, variant: str) -> FourierNet:
-    k, width, shift = fourier_variant(variant)
     _, (sd,) = load_modules(run, ["net"])
-    net = FourierNet(k, width, shift)
+    net = make_fourier(variant)
     net.load_state_dict(sd)
     net.eval()
     return net

@@ -206,11 +206,11 @@ class FourierNet(nn.Module):
     (fourier.py). Five scales down to 8x8 so that every pixel sees the whole person (depth
     needs global context), skips at every scale, a per-pixel MLP head (1x1 convs)."""
 
-    def __init__(self, k=15, c=12, shift=False):
+    def __init__(self, k=15, c=12, shift=False, in_ch=4, out_ch=None):
         super().__init__()
         self.k = k
         self.shift = shift
-        self.e0 = conv_bn(4, c, 2)  # 128
+        self.e0 = conv_bn(in_ch, c, 2)  # 128
         self.e1 = nn.Sequential(conv_bn(c, 2 * c, 2), Block(2 * c))  # 64
         self.e2 = nn.Sequential(conv_bn(2 * c, 4 * c, 2), Block(4 * c))  # 32
         self.e3 = nn.Sequential(conv_bn(4 * c, 8 * c, 2), Block(8 * c), Block(8 * c))  # 16
@@ -225,9 +225,15 @@ class FourierNet(nn.Module):
         # 2K+1 channels are the series of the occupancy *relative to d*, rotated into place
         # below (`shift_series`): depth enters as a phase, so the network predicts d (smooth
         # in the image) and a nearly depth-free profile instead of cos/sin(k pi d) itself.
-        self.out = nn.Sequential(nn.Conv2d(2 * c, 64, 1), nn.ReLU(inplace=True), nn.Conv2d(64, 2 * k + 1 + int(shift), 1))
+        # `out_ch`: another per-pixel output instead of the series (FourierGeomNet's surfaces).
+        self.out = nn.Sequential(nn.Conv2d(2 * c, 64, 1), nn.ReLU(inplace=True), nn.Conv2d(64, out_ch or 2 * k + 1 + int(shift), 1))
 
     def forward(self, x, with_centre: bool = False):
+        return self.head(self.features(x), with_centre)
+
+    def features(self, x):
+        """The last decoder level [B, 2c, 128, 128], which the series head reads per pixel
+        (and, in training, `surfaces.GeomHead`)."""
         e0 = self.e0(x)
         e1 = self.e1(e0)
         e2 = self.e2(e1)
@@ -237,13 +243,73 @@ class FourierNet(nn.Module):
         d3 = self.d3(torch.cat([up(e4), e3], 1))
         d2 = self.d2(torch.cat([up(d3), e2], 1))
         d1 = self.d1(torch.cat([up(d2), e1], 1))
-        d0 = self.d0(torch.cat([up(d1), e0], 1))
+        return self.d0(torch.cat([up(d1), e0], 1))
+
+    def head(self, d0, with_centre: bool = False):
         out = self.out(d0)
         if not self.shift:
             return (out, None) if with_centre else out
         d = torch.tanh(out[:, 2 * self.k + 1 :])
         coeff = shift_series(out[:, : 2 * self.k + 1], d, self.k)
         return (coeff, d) if with_centre else coeff
+
+
+class FourierGeomNet(nn.Module):
+    """Issue 34 part 3 (FOF-X: a geometric intermediate fed to the coefficient regressor): a
+    first U-Net predicts the person's front and back surfaces as two depth maps [B, 2, 128,
+    128] (zeta, the body depth frame; supervised by `surfaces.geometry_loss`: depths and their
+    slopes, the normals), which are masked, brought to the input's size and given to the
+    series U-Net beside the image and mask. Same input and output as FourierNet (the engine
+    loads it as any Fourier head); about twice fourier-small's work, a GPU board's model.
+
+    `from_small` starts both halves from a trained FourierNet of the same width: the surface
+    net from its trunk (a new 2-channel head), the series net from all of it with zero weights
+    on the two new input channels, so the pair computes the small net's series at the start."""
+
+    def __init__(self, k=15, c=8, g=8):
+        super().__init__()
+        self.k = k
+        self.shift = False
+        self.geom = FourierNet(k, g, out_ch=2)
+        self.series = FourierNet(k, c, in_ch=6)
+
+    def surfaces(self, x):
+        return self.geom(x)
+
+    def series_of(self, x, surf):
+        up = F.interpolate(surf, scale_factor=2.0, mode="bilinear", align_corners=False)
+        return self.series(torch.cat([x, up * x[:, 3:4]], 1))
+
+    def forward(self, x, with_centre: bool = False):
+        out = self.series_of(x, self.surfaces(x))
+        return (out, None) if with_centre else out
+
+    @torch.no_grad()
+    def from_small(self, sd: dict):
+        """Both halves from a FourierNet state dict `sd` (see the class docs)."""
+        own = self.state_dict()
+        for n, v in sd.items():
+            g, s = "geom." + n, "series." + n
+            if g in own and own[g].shape == v.shape and not n.startswith("out.2."):
+                own[g] = v.clone()
+            if s in own:
+                if own[s].shape == v.shape:
+                    own[s] = v.clone()
+                elif n == "e0.0.weight":
+                    w = torch.zeros_like(own[s])
+                    w[:, : v.shape[1]] = v
+                    own[s] = w
+                else:
+                    raise ValueError(f"{n}: {tuple(v.shape)} does not fit {tuple(own[s].shape)}")
+        self.load_state_dict(own)
+
+
+def make_fourier(variant: str) -> nn.Module:
+    """The network of a Fourier variant (FOURIER_VARIANTS)."""
+    k, c, shift = fourier_variant(variant)
+    if variant in GEOM_VARIANTS:
+        return FourierGeomNet(k, c, GEOM_VARIANTS[variant])
+    return FourierNet(k, c, shift)
 
 
 def shift_series(rel: torch.Tensor, d: torch.Tensor, k: int) -> torch.Tensor:
@@ -270,7 +336,11 @@ FOURIER_VARIANTS = {
     "fourier-tiny": (15, 6),
     # name: (K, c, depth as a phase shift)
     "fourier-shift": (15, 12, True),
+    # FourierGeomNet: (K, series width c); its surface net's width in GEOM_VARIANTS
+    "fourier-geom": (15, 8),
 }
+# Surface net width of the FourierGeomNet variants.
+GEOM_VARIANTS = {"fourier-geom": 8}
 
 
 def fourier_variant(name: str):

@@ -21,14 +21,13 @@ from pathlib import Path
 
 import torch
 from . import fourier as FO
-from .nets import FourierNet, fourier_variant, shift_series
+from .nets import FourierNet, fourier_variant, make_fourier, shift_series
 from .runs import init_weights
 from .train import encoder_input, fourier_cached, fourier_upper_cached, predict_points
 
 
 def load(path: Path, variant: str) -> FourierNet:
-    k, width, shift = fourier_variant(variant)
-    net = FourierNet(k, width, shift)
+    net = make_fourier(variant)
     ck = path / "ckpt.pt" if path.is_dir() else path
     net.load_state_dict(init_weights(torch.load(ck, weights_only=False), ck))
     return net.eval()

@@ -21,10 +21,11 @@ from tqdm import tqdm
 from . import crop as C
 from .data import Split, backgrounds, photometric, random_affine, sensor
 from . import fourier as FO
-from .nets import FOURIER_VARIANTS, ColorEncoder, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
+from .nets import FOURIER_VARIANTS, ColorEncoder, FourierGeomNet, make_fourier, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
 from .ray_losses import ray_level_bce, thin_mask
 from .runs import Run, device, init_weights, loop
+from .surfaces import GeomHead, geometry_loss, surface_depths
 
 
 def cropped(split: Split):
@@ -434,15 +435,43 @@ def train_fourier(args):
         # Depth relative to the body (FO.centre_depth): where the camera stood is not learnable.
         for d in (tr, va):
             FO.centre_depth(d["coeff"], d["points"], k)
-    net = FourierNet(k, width, shift)
+    net = make_fourier(args.variant)
+    modules = {"net": net}
+    two_nets = isinstance(net, FourierGeomNet)
+    if two_nets and args.geom_weight <= 0:
+        raise SystemExit(f"--variant {args.variant}: its surface net needs --geom-weight (the weight of its supervision)")
+    if args.geom_weight > 0:
+        # --geom-weight: the front and back surfaces' depth maps (surfaces.py), from the
+        # targets as the net learns them (after the body depth frame), once per item. Their
+        # predictor: FourierGeomNet's surface net, or a training-only head on the series
+        # head's features.
+        for d in (tr, va):
+            g, ins = surface_depths(d["coeff"], k)
+            d["geom"], d["geom_in"] = g.half(), ins
+        if not two_nets:
+            modules["geom"] = GeomHead(2 * width)
+
+    def predict(x):
+        """(series, depth centre or None, surfaces or None) of an encoder input."""
+        if two_nets:
+            surf = net.surfaces(x)
+            return net.series_of(x, surf), None, surf
+        feat = net.features(x)
+        pred, d = net.head(feat, with_centre=True)
+        return pred, d, (modules["geom"](feat) if "geom" in modules else None)
+
     ohem = OhemState(len(tr["rgb"]), tr["points"].shape[1], args.ohem)
-    opt = torch.optim.Adam(net.parameters(), lr=args.lr)
+    opt = torch.optim.Adam([p for m in modules.values() for p in m.parameters()], lr=args.lr)
     sched_total = max(args.steps, 1)
     run = Run(args.out, args)
     if args.init and not run.ckpt.exists():
         light = torch.load(args.init, weights_only=False, map_location="cpu")
         sd = init_weights(light, args.init)
         own = net.state_dict()
+        if two_nets and not any(n.startswith("series.") for n in sd):
+            # A FourierNet checkpoint (fourier-small's): both halves start from it.
+            net.from_small(sd)
+            sd = net.state_dict()
         for n, v in sd.items():
             if n in own and own[n].shape != v.shape and own[n].shape[1:] == v.shape[1:]:
                 # A shift variant from an unshifted checkpoint: the head gains the centre
@@ -458,7 +487,8 @@ def train_fourier(args):
     # batches made on the host, trained at 16 steps/s, and augmenting a batch of 8 takes
     # 63-80 ms of one CPU core). OHEM's sampling stays on the host.
     dev = device(args.device)
-    net.to(dev)
+    for m in modules.values():
+        m.to(dev)
     on_dev = data_on_device(args.data_device, dev, [tr, va])
     if on_dev:
         tr, va = ({n: v.to(dev) if torch.is_tensor(v) else v for n, v in d.items()} for d in (tr, va))
@@ -523,7 +553,7 @@ def train_fourier(args):
         synced()
         parts["batch"] += time.time() - tb
         flips = (torch.rand(len(items), generator=gen) < 0.5).to(dev) if args.flip else None
-        pred, d = net(mirror_some(x, flips), with_centre=True)
+        pred, d, geo = predict(mirror_some(x, flips))
         # A mirrored image's maps, mirrored back, are compared with the image's own targets:
         # the same as training on the mirrored person with mirrored targets.
         pred = mirror_some(pred, flips)
@@ -536,6 +566,11 @@ def train_fourier(args):
             # Depth order: L1 on each ray's first moment int z f dz (linear in the sine terms),
             # whose L2 share in the Parseval loss is small next to the ray length's.
             loss = loss + args.moment_weight * (FO.first_moment(pred, k) - FO.first_moment(target, k)).abs().mean()
+        if geo is not None:
+            geo = mirror_some(geo, flips)  # depths do not change sign in a mirror
+            at = tr["geom"].device
+            gt, gin = tr["geom"][items.to(at)].to(dev).float(), tr["geom_in"][items.to(at)].to(dev)
+            loss = loss + args.geom_weight * geometry_loss(geo, gt, gin, slope_weight=args.geom_slope_weight)
         if d is not None:
             # The shift variants: the depth centre supervised directly (L1, zeta units) on
             # the rays that hold the body, so the phase starts near the right depth.
@@ -552,10 +587,14 @@ def train_fourier(args):
         return loss.item()
 
     def eval_fn():
-        ious, l2s = [], []
+        ious, l2s, geos = [], [], []
         for s in range(0, len(va["rgb"]), 8):
             idx = torch.arange(s, min(s + 8, len(va["rgb"])))
-            pred = net(inputs(va, idx, None))
+            pred, _, geo = predict(inputs(va, idx, None))
+            if geo is not None:
+                at = va["geom"].device
+                gt, gin = va["geom"][idx.to(at)].to(dev).float(), va["geom_in"][idx.to(at)].to(dev)
+                geos.append(geometry_loss(geo, gt, gin, slope_weight=args.geom_slope_weight).item())
             pidx = torch.arange(va["points"].shape[1]).expand(len(idx), -1)
             target = targets(va, idx)
             dense, _, occ, lab = losses(pred, target, va, idx, pidx)
@@ -563,9 +602,12 @@ def train_fourier(args):
             p, t = occ > 0.5, lab > 0.5
             ious.append(((p & t).sum(1).float() / (p | t).sum(1).clamp(min=1).float()).cpu())
         iou = torch.cat(ious)
-        return {"point_iou_mean": iou.mean().item(), "point_iou_worst10": iou.sort().values[:10].mean().item(), "ray_l2": torch.cat(l2s).mean().item(), "images": len(iou), "k": k}
+        out = {"point_iou_mean": iou.mean().item(), "point_iou_worst10": iou.sort().values[:10].mean().item(), "ray_l2": torch.cat(l2s).mean().item(), "images": len(iou), "k": k}
+        if geos:
+            out["geom_loss"] = sum(geos) / len(geos)
+        return out
 
-    return loop(run, {"net": net}, opt, args.steps, step_fn, eval_fn, {"gen": gen, "agen": agen if agen is not gen else None, "ohem": ohem, "parts": parts}, ckpt_every=args.ckpt_every)
+    return loop(run, modules, opt, args.steps, step_fn, eval_fn, {"gen": gen, "agen": agen if agen is not gen else None, "ohem": ohem, "parts": parts}, ckpt_every=args.ckpt_every)
 
 
 def main(argv=None):
@@ -600,6 +642,8 @@ def main(argv=None):
     ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight")
     ap.add_argument("--max-minutes", type=float, default=0.0, help="stop at this wall-clock budget (a checkpoint, the validation and budget.json as at the last step; fourier: the learning rate anneals by it); 0: none")
     ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
+    ap.add_argument("--geom-weight", type=float, default=0.0, help="fourier: weight of the front/back surface loss (surfaces.py: depths and slopes, i.e. normals) on a training-only head on the series head's features, or on the surface net of --variant fourier-geom (required there); 0: off")
+    ap.add_argument("--geom-slope-weight", type=float, default=1.0, help="fourier: the slopes' (normals') share of --geom-weight's loss beside the depths' (0: depths only)")
     ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
     if args.threads:
