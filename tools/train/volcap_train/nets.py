@@ -290,7 +290,8 @@ class FourierGeomNet(nn.Module):
         own = self.state_dict()
         for n, v in sd.items():
             g, s = "geom." + n, "series." + n
-            if g in own and own[g].shape == v.shape and not n.startswith("out.2."):
+            # (The surface net's last layer has 2 outputs, not the series': it stays fresh.)
+            if g in own and own[g].shape == v.shape:
                 own[g] = v.clone()
             if s in own:
                 if own[s].shape == v.shape:

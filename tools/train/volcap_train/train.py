@@ -467,19 +467,19 @@ def train_fourier(args):
     if args.init and not run.ckpt.exists():
         light = torch.load(args.init, weights_only=False, map_location="cpu")
         sd = init_weights(light, args.init)
-        own = net.state_dict()
         if two_nets and not any(n.startswith("series.") for n in sd):
             # A FourierNet checkpoint (fourier-small's): both halves start from it.
             net.from_small(sd)
-            sd = net.state_dict()
-        for n, v in sd.items():
-            if n in own and own[n].shape != v.shape and own[n].shape[1:] == v.shape[1:]:
-                # A shift variant from an unshifted checkpoint: the head gains the centre
-                # channel (kept at its fresh init); the series channels start from the old ones.
-                w = own[n].clone()
-                w[: v.shape[0]] = v
-                sd[n] = w
-        net.load_state_dict(sd)
+        else:
+            own = net.state_dict()
+            for n, v in sd.items():
+                if n in own and own[n].shape != v.shape and own[n].shape[1:] == v.shape[1:]:
+                    # A shift variant from an unshifted checkpoint: the head gains the centre
+                    # channel (kept at its fresh init); the series channels start from the old ones.
+                    w = own[n].clone()
+                    w[: v.shape[0]] = v
+                    sd[n] = w
+            net.load_state_dict(sd)
         print(f"initialized from {args.init} (trained {light.get('step', '?')} steps before; optimizer state restarts)")
     tau = 10.0
     # --device: the net, the batches' augmentation and the losses there; --data-device: the

@@ -256,10 +256,11 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     let render_devices = a
         .render_devices
         .iter()
-        .map(|d| match d.trim() {
-            "shared" => Ok(RenderDevice::Shared),
-            "own" => Ok(RenderDevice::Own),
-            other => Err(anyhow!("--render-device {other:?}: one of shared, own")),
+        .map(|d| {
+            RenderDevice::by_name(d.trim()).ok_or_else(|| {
+                let names: Vec<_> = RenderDevice::ALL.iter().map(|d| d.name()).collect();
+                anyhow!("--render-device {d:?}: one of {}", names.join(", "))
+            })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     if a.frames == 0 || a.frames > 600 {
@@ -502,7 +503,7 @@ fn table(rows: &[Row]) -> String {
                     r.dispatches_per_frame,
                     r.waits_per_frame,
                     r.rounds_per_wait,
-                    if r.render_device == "own" {
+                    if r.render_device == RenderDevice::Own.name() {
                         "; the render stage on a device of its own"
                     } else {
                         ""

@@ -98,9 +98,12 @@ mod imp {
                 volcap_engine::analytic::SCENES.join(", ")
             )
         })?;
-        // Two devices on the one adapter: the networks' and a second one.
+        // Two devices on the one adapter: the networks' and a second one, opened as the
+        // daemon opens it for `compute.render_device = "own"` (the counters shared).
         let first = Gpu::open(&a.adapter).map_err(|e| anyhow!("--adapter: {e}"))?;
-        let second = Gpu::open(&a.adapter).map_err(|e| anyhow!("--adapter: {e}"))?;
+        let second = first
+            .sibling()
+            .map_err(|e| anyhow!("a second device: {e}"))?;
         let label = first.adapter.label();
         eprintln!("bench queues: {label}, two devices");
         let models = Models::load_on(

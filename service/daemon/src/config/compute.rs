@@ -54,11 +54,19 @@ pub enum RenderDevice {
 }
 
 impl RenderDevice {
+    pub const ALL: [RenderDevice; 2] = [RenderDevice::Shared, RenderDevice::Own];
+
+    /// The config value (`volcap bench pipeline --render-device` takes the same).
     pub fn name(&self) -> &'static str {
         match self {
             RenderDevice::Shared => "shared",
             RenderDevice::Own => "own",
         }
+    }
+
+    /// The value named `name` (as [`Self::name`] writes it).
+    pub fn by_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|d| d.name() == name)
     }
 }
 
