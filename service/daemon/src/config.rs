@@ -11,7 +11,7 @@ pub use compute::{
     THREADS,
 };
 pub use live::{Live, LiveError};
-pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, ThinParts};
+pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_PASSES, ThinParts};
 pub use rtsp::RtspConfig;
 pub use temporal::TemporalConfig;
 
@@ -454,6 +454,12 @@ impl Config {
             self.model.close_range_frames,
             &CLOSE_RANGE_FRAMES,
             " (frames)",
+        )?;
+        in_range(
+            "model.segment_passes",
+            self.model.segment_passes,
+            &SEGMENT_PASSES,
+            "",
         )?;
         let split = self.compute.segment_thread_up_to;
         if split != 0 && !GRID_RESOLUTIONS.contains(&split) {

@@ -126,7 +126,8 @@ fn main() -> ExitCode {
         match loaded {
             Ok(m) => {
                 let fill = cfg.model.thin_parts.moment_fill();
-                let (m, took) = m.with_moment_fill(fill);
+                let (mut m, took) = m.with_moment_fill(fill);
+                m.segment_passes = cfg.model.segment_passes;
                 if fill.is_some() && took == 0 {
                     tracing::warn!(
                         "model.thin_parts = \"moment-fill\": {} is not a Fourier model; read as predicted",

@@ -187,7 +187,7 @@ impl Shared {
             mode: cfg.field().name(),
             field_label: match cfg.field() {
                 FieldMode::Model => format!(
-                    "reconstruction: {} ({}{})",
+                    "reconstruction: {} ({}{}{})",
                     cfg.model.name,
                     match cfg.model.precision {
                         crate::config::Precision::F32 => "f32",
@@ -196,6 +196,11 @@ impl Shared {
                     match cfg.model.thin_parts {
                         crate::config::ThinParts::Series => "",
                         crate::config::ThinParts::MomentFill => ", thin parts: moment-fill",
+                    },
+                    if cfg.model.segment_passes > 1 {
+                        ", segmented twice"
+                    } else {
+                        ""
                     }
                 ),
                 other => other.name().to_string(),

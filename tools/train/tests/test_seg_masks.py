@@ -4,7 +4,7 @@ channel from a predicted mask while the targets stay the ground truth's."""
 import torch
 
 from volcap_train import crop as C
-from volcap_train.seg_masks import keep_most_prominent
+from volcap_train.seg_masks import keep_most_prominent, paste_max, second_pass
 from volcap_train.nets import sample_features
 from volcap_train.train import fourier_items
 
@@ -100,3 +100,63 @@ def test_an_image_without_a_predicted_person_is_left_out():
     out = fourier_items(sp, 3, points=800, masks=pred)
     assert out["keep"].tolist() == [1]
     assert torch.equal(out["mask"][0], fourier_items(sp, 3, points=800)["mask"][1])
+
+
+def test_paste_max_takes_a_crop_mask_back_by_its_larger_value_inside_the_crop_only():
+    into = torch.zeros(64, 64)
+    into[30:34, :] = 0.7
+    # The identity crop: the pasted mask is the elementwise maximum.
+    m2 = torch.rand(64, 64, generator=torch.Generator().manual_seed(0))
+    # (Within f32 rounding: a pixel's NDC and back lands a hair off its centre.)
+    assert torch.allclose(paste_max(m2, (1.0, 0.0, 0.0), into), torch.maximum(into, m2), atol=1e-4)
+    # A half-size crop in the upper left quadrant (input NDC x, y in [-1, 0]).
+    p = (0.5, -0.5, -0.5)
+    out = paste_max(torch.ones(64, 64), p, into)
+    ndc = -1 + 2 * torch.arange(64) / 63
+    inside = (ndc <= 0)[:, None] & (ndc <= 0)[None, :]
+    assert (out[inside] == 1).all()
+    assert torch.equal(out[~inside], into[~inside])
+    # Nothing is lowered: a crop mask of zeros changes nothing.
+    assert torch.equal(paste_max(torch.zeros(64, 64), p, into), into)
+    # Round trip: the crop of the pasted mask is the crop mask where it is the larger (away
+    # from the crop's border, where the input grid's resampling blends the outside in).
+    blob = torch.zeros(64, 64)
+    blob[20:44, 24:40] = 1.0
+    back = C.apply_crop(paste_max(blob, p, torch.zeros(64, 64))[None], p)[0]
+    assert (back[24:40, 28:36] > 0.99).all() and (back[:12] < 0.01).all()
+
+
+def test_the_second_pass_adds_what_the_crop_shows_and_keeps_one_person(tmp_path, monkeypatch):
+    import volcap_train.seg_masks as S
+
+    # A first pass that lost the person's arm: the body alone.
+    body = torch.zeros(1, 64, 64)
+    body[0, 10:60, 28:36] = 0.9
+    images = torch.zeros(1, 3, 64, 64)
+    p = C.crop_params(body[0])
+
+    def fake_segment(model, crops):
+        # The second pass, on the crop: the body and the arm beside it, and a blob apart from
+        # the person (a background object the crop shows).
+        assert crops.shape == (1, 3, 64, 64)
+        m = C.apply_crop(body, p)
+        arm = torch.zeros(1, 64, 64)
+        arm[0, 20:24, :] = 0.8
+        arm = C.apply_crop(arm, p) * (C.apply_crop(arm, p) > 0.5)
+        m = torch.maximum(m, arm)
+        m[0, 2:6, 2:6] = 1.0
+        return m
+
+    monkeypatch.setattr(S, "segment", fake_segment)
+    out = second_pass(tmp_path / "seg.onnx", images, body)
+    assert out.shape == body.shape
+    # Nothing of the first pass is lost, the arm's pixels are added...
+    assert (out[0] >= body[0] - 1e-6).all()
+    assert (out[0, 21:23, 5:20] > 0.5).all()
+    # ...and the blob apart from the person, where it lands in the frame, is dropped by the
+    # most prominent person rule.
+    lone = torch.zeros(64, 64)
+    lone[2:6, 2:6] = 1.0
+    where = paste_max(lone, p, torch.zeros(64, 64)) > 0.5
+    assert where.any() and not (body[0][where] > 0).any()
+    assert (out[0][where] == 0).all()

@@ -334,15 +334,21 @@ def run_seg(budget: dict) -> Path | None:
     return Path(seg) if seg not in (None, "None", "") else None
 
 
+def run_passes(budget: dict) -> int:
+    """The segmentation passes of a run's masks (`train --segment-passes`; 1 before it)."""
+    return int(budget.get("args", {}).get("segment_passes", 1) or 1)
+
+
 def masks_row(budget: dict) -> str:
     """The model card's masks row: where the encoder's crops and mask channels came from."""
     seg = run_seg(budget)
     if seg is None:
         return "ground truth (dilated or eroded 1-3 px for half the images when augmenting)"
-    return f"the product's segmentation (`{seg.name}`, `train --seg`): crops and mask channels as the engine makes them (dilated or eroded 1-3 px for half the images when augmenting); targets from the ground truth"
+    twice = ", each person's crop segmented again (`--segment-passes 2`, the engine's `[model] segment_passes = 2`)" if run_passes(budget) > 1 else ""
+    return f"the product's segmentation (`{seg.name}`, `train --seg`{twice}): crops and mask channels as the engine makes them (dilated or eroded 1-3 px for half the images when augmenting); targets from the ground truth"
 
 
-def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96, seg: Path | None = None) -> tuple[float, dict]:
+def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96, seg: Path | None = None, passes: int = 1) -> tuple[float, dict]:
     """The series level read as the surface (`volcap.iso_level`), chosen on the training
     split (never the held-out one): the level of `fourier.ISO_LEVELS` with the best mean point
     IoU over `images` training images (their labelled points, in the model's depth frame; the
@@ -350,7 +356,7 @@ def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96, s
     from .train import fourier_cached, predict_points
 
     k = net.k
-    d = fourier_cached(data, "train", k, seg)
+    d = fourier_cached(data, "train", k, seg, passes)
     n = len(d["rgb"])
     idx = torch.arange(0, n, max(1, n // images))[:images]
     coeff, points = d["coeff"][idx].clone(), d["points"][idx].clone()
@@ -363,14 +369,14 @@ def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96, s
 INT8_CALIB_IMAGES = 64
 
 
-def fourier_calib(data: Path, k: int, seg: Path | None, upper_every: int = 0, images: int = INT8_CALIB_IMAGES) -> list[dict]:
+def fourier_calib(data: Path, k: int, seg: Path | None, upper_every: int = 0, images: int = INT8_CALIB_IMAGES, passes: int = 1) -> list[dict]:
     """int8 calibration feeds of a Fourier net: `images` training images spread over the split,
     encoder inputs built from the crops and mask channels the run trained on (`seg`'s masks
     where it trained on them, else the true ones; half of them upper bodies for a run that
     trained on those, `train --upper-every`)."""
     from .train import fourier_cached, fourier_upper_cached
 
-    sets = [fourier_cached(data, "train", k, seg)]
+    sets = [fourier_cached(data, "train", k, seg, passes)]
     if upper_every > 0:
         sets.append(fourier_upper_cached(data, "train", k, upper_every))
     feeds = []
@@ -425,7 +431,8 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     size = 128
     frame = budget.get("args", {}).get("depth_frame", "camera")
     seg = run_seg(budget)
-    iso, iso_ious = calibrate_level(net, data, frame == "body", seg=seg)
+    passes = run_passes(budget)
+    iso, iso_ious = calibrate_level(net, data, frame == "body", seg=seg, passes=passes)
     iso_rule = "chosen on the training split by mean point IoU"
     if level != "auto":
         iso = float(level)
@@ -445,7 +452,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     upper_every = int(budget.get("args", {}).get("upper_every", 0) or 0)
     int8_path = out / f"{base}.fourier.int8.onnx"
     # Every scheme of FOURIER_INT8_SCHEMES is tried; the one closest to f32 is kept.
-    feeds = fourier_calib(data, k, seg, upper_every)
+    feeds = fourier_calib(data, k, seg, upper_every, passes=passes)
     tried = []  # (drift, fine, percentile, file)
     for tag, fine, pct in FOURIER_INT8_SCHEMES:
         tmp = out / f"{base}.fourier.int8.{tag}.tmp"

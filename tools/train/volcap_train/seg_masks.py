@@ -17,7 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from tqdm import tqdm
+
+from . import crop as C
 
 # preprocess.rs
 MIN_PERSON_FRACTION = 0.002
@@ -99,17 +102,56 @@ def segment(model: Path, images: torch.Tensor, threads: int = 1) -> torch.Tensor
     return torch.stack(out)
 
 
-def predicted_masks(root: Path, split, split_name: str, model: Path) -> torch.Tensor:
+def paste_max(crop_mask: torch.Tensor, params, into: torch.Tensor) -> torch.Tensor:
+    """The engine's `Crop::paste_max`: a [S, S] mask made on the crop `params` (crop.py) taken
+    back into the [S, S] input square, each input pixel inside the crop's square the larger
+    of its own value and the crop mask's bilinear value there (grid_sample,
+    align_corners=True); pixels outside the square keep theirs."""
+    s, tx, ty = params
+    n = into.shape[-1]
+    ndc = -1 + 2 * torch.arange(n, dtype=torch.float32) / (n - 1)
+    ux, uy = (ndc - tx) / s, (ndc - ty) / s
+    gy, gx = torch.meshgrid(uy, ux, indexing="ij")
+    grid = torch.stack([gx, gy], -1)[None]
+    v = F.grid_sample(crop_mask[None, None].float(), grid, mode="bilinear", padding_mode="border", align_corners=True)[0, 0]
+    inside = (gx.abs() <= 1) & (gy.abs() <= 1)
+    return torch.where(inside, torch.maximum(into, v), into)
+
+
+def second_pass(model: Path, images: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
+    """The engine's second segmentation pass (`Models::person_mask` with `segment_passes`
+    2) on kept first-pass masks [B, H, W]: each person's crop segmented again, that mask
+    pasted back by its larger value, the most prominent person kept again."""
+    out = first.clone()
+    crops, where = [], []
+    for i in range(len(first)):
+        p = C.crop_params(first[i])
+        if p is not None:
+            crops.append(C.apply_crop(images[i], p))
+            where.append((i, p))
+    if not crops:
+        return out
+    second = segment(model, torch.stack(crops))
+    for (i, p), m2 in zip(where, second):
+        out[i] = keep_most_prominent(paste_max(m2, p, first[i]))[0]
+    return out
+
+
+def predicted_masks(root: Path, split, split_name: str, model: Path, passes: int = 1) -> torch.Tensor:
     """u8 [B, 1, H, W] (soft mask x 255) of the engine's segmentation for every image of a
-    dataset split, most prominent person only (all zero where none is found); cached as
-    ROOT/seg-{split}-{model stem}-v1.pt."""
-    cache = root / f"seg-{split_name}-{model.stem}-v1.pt"
+    dataset split, most prominent person only (all zero where none is found), with
+    `passes` 2 the person's crop segmented again (`second_pass`); cached as
+    ROOT/seg-{split}-{model stem}[-p2]-v1.pt."""
+    cache = root / f"seg-{split_name}-{model.stem}{'-p2' if passes > 1 else ''}-v1.pt"
     if cache.exists():
         out = torch.load(cache)
         if out.shape[0] == len(split):
             return out
-    soft = segment(model, torch.stack([split.rgb01(i) for i in range(len(split))]))
-    out = torch.stack([keep_most_prominent(m)[0] for m in soft])
-    out = (out.clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
+    images = torch.stack([split.rgb01(i) for i in range(len(split))])
+    soft = segment(model, images)
+    kept = torch.stack([keep_most_prominent(m)[0] for m in soft])
+    if passes > 1:
+        kept = second_pass(model, images, kept)
+    out = (kept.clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
     torch.save(out, cache)
     return out

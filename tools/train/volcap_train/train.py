@@ -132,13 +132,18 @@ def fourier_items(split: Split, k: int, points: int = 4096, keep=None, masks: to
     return {"rgb": torch.stack(rgb), "mask": torch.stack(mask), "coeff": torch.stack(coeff), "points": torch.stack(pts), "occ": torch.stack(occ), "keep": torch.tensor(keep_idx), "k": k}
 
 
-def fourier_cached(root: Path, split: str, k: int, seg: Path | None = None):
-    """`fourier_items` of a split, cached beside the shards; with `seg` (an ONNX segmentation
-    model) the crops and mask channels come from its masks (seg_masks.predicted_masks)."""
+def fourier_cache_path(root: Path, split: str, k: int, seg: Path | None = None, passes: int = 1) -> Path:
+    """Where `fourier_cached` keeps a split's items."""
     if seg is None:
-        cache = root / f"fourier-{split}-k{k}-v2.pt"
-    else:
-        cache = root / f"fourier-{split}-k{k}-seg-{seg.stem}-v1.pt"
+        return root / f"fourier-{split}-k{k}-v2.pt"
+    return root / f"fourier-{split}-k{k}-seg-{seg.stem}{'-p2' if passes > 1 else ''}-v1.pt"
+
+
+def fourier_cached(root: Path, split: str, k: int, seg: Path | None = None, passes: int = 1):
+    """`fourier_items` of a split, cached beside the shards; with `seg` (an ONNX segmentation
+    model) the crops and mask channels come from its masks (seg_masks.predicted_masks, with
+    `passes` segmentation passes: the engine's `segment_passes`)."""
+    cache = fourier_cache_path(root, split, k, seg, passes)
     if cache.exists():
         return torch.load(cache)
     data = Split(root, split)
@@ -146,25 +151,24 @@ def fourier_cached(root: Path, split: str, k: int, seg: Path | None = None):
     if seg is not None:
         from .seg_masks import predicted_masks
 
-        masks = predicted_masks(root, data, split, seg)
+        masks = predicted_masks(root, data, split, seg, passes)
     out = fourier_items(data, k, masks=masks)
     torch.save(out, cache)
     return out
 
 
-def fourier_union(roots: list[Path], split: str, k: int, seg: Path | None = None):
+def fourier_union(roots: list[Path], split: str, k: int, seg: Path | None = None, passes: int = 1):
     """`fourier_cached` of the same split of several datasets as one set of items, in the order
     given. Each dataset's cache is built (or read) on its own and memory-mapped, then copied
     into tensors sized for the union, so the peak is the union plus one dataset's pages, not
     two copies of everything (two 32-pose datasets hold ~10 GB of items). `keep` indexes the
     concatenated images."""
     if len(roots) == 1:
-        return fourier_cached(roots[0], split, k, seg)
+        return fourier_cached(roots[0], split, k, seg, passes)
     parts = []
     for r in roots:
-        fourier_cached(r, split, k, seg)  # builds the cache if missing
-        cache = r / (f"fourier-{split}-k{k}-v2.pt" if seg is None else f"fourier-{split}-k{k}-seg-{seg.stem}-v1.pt")
-        parts.append(torch.load(cache, mmap=True))
+        fourier_cached(r, split, k, seg, passes)  # builds the cache if missing
+        parts.append(torch.load(fourier_cache_path(r, split, k, seg, passes), mmap=True))
     out = {"k": k}
     for name, v in parts[0].items():
         if not torch.is_tensor(v):
@@ -423,8 +427,8 @@ def train_fourier(args):
     # feeds the encoder), for training and validation alike; targets stay the ground truth's.
     # --more-data: further datasets' training images (same subjects' split), one set of items;
     # validation stays --data's.
-    tr = fourier_union([args.data, *args.more_data], "train", k, args.seg)
-    va = fourier_cached(args.data, "val", k, args.seg)
+    tr = fourier_union([args.data, *args.more_data], "train", k, args.seg, args.segment_passes)
+    va = fourier_cached(args.data, "val", k, args.seg, args.segment_passes)
     if args.upper_every:
         # Upper bodies cut by the frame's lower edge (a webcam at a desk): added to the
         # training images (the validation set stays whole bodies, the product's eval).
@@ -633,6 +637,7 @@ def main(argv=None):
     ap.add_argument("--flip", action="store_true", help="fourier: mirror half the training images left-right (their maps mirrored back before the losses): a mirrored person is a person")
     ap.add_argument("--upper-every", type=int, default=0, help="Fourier: add the upper-body variant (fourier_upper_cached: the person cut by the frame's lower edge) of every N-th training image; 0: none")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
+    ap.add_argument("--segment-passes", type=int, choices=[1, 2], default=1, help="Fourier with --seg: the engine's segmentation passes (`[model] segment_passes`): 2 segments each person's crop again (seg_masks.second_pass)")
     ap.add_argument("--seg", type=Path, default=None, help="Fourier: crops and mask channels from this ONNX segmentation model's masks (e.g. ../../models/seg.onnx, the product's) instead of the ground truth's (seg_masks)")
     ap.add_argument("--ckpt-every", type=int, default=100)
     ap.add_argument("--sync-parts", action="store_true", help="fourier on a GPU: wait for the device before and after each timed part of a step (budget.json time_s), so a part holds its own work and not the device's queue; costs some rate")

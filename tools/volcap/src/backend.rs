@@ -68,6 +68,9 @@ pub fn adapter_work(rt: &Runtime) -> [u64; 9] {
 /// read back for meshing), on the CPU otherwise or for a field the adapter cannot take (a
 /// point-MLP head, a grid over its buffer limit).
 pub struct Stages {
+    /// The coarsest level of [`Stages::localize`] (`2^l + 1` points a side); none: the
+    /// engine's default for the grid (`localize::default_coarse`).
+    pub coarse_level: Option<u32>,
     cpu: volcap_engine::localize::Localizer,
     #[cfg(feature = "wgpu")]
     gpu: Option<(
@@ -84,12 +87,14 @@ impl Stages {
             let loc = GpuLocalizer::new(g.clone()).map_err(|e| anyhow!("--backend wgpu: {e}"))?;
             let ren = GpuRenderer::new(g.clone()).map_err(|e| anyhow!("--backend wgpu: {e}"))?;
             return Ok(Stages {
+                coarse_level: None,
                 cpu: Default::default(),
                 gpu: Some((loc, ren)),
             });
         }
         let _ = rt;
         Ok(Stages {
+            coarse_level: None,
             cpu: Default::default(),
             #[cfg(feature = "wgpu")]
             gpu: None,
@@ -109,7 +114,7 @@ impl Stages {
         grid: &mut volcap_engine::grid::Grid,
     ) -> anyhow::Result<volcap_engine::localize::LocalizeStats> {
         use volcap_engine::localize::{Method, default_coarse};
-        let coarse = default_coarse(spec);
+        let coarse = self.coarse_level.unwrap_or_else(|| default_coarse(spec));
         #[cfg(feature = "wgpu")]
         if let (Some((loc, _)), Some(on_gpu)) = (self.gpu.as_mut(), field.gpu_field())
             && loc.check_size(spec).is_ok()

@@ -120,6 +120,15 @@ pub struct EvalArgs {
     /// the fill (`NAME-f32-fill...`), side by side.
     #[arg(long, value_delimiter = ',')]
     pub moment_fill: Option<Vec<f32>>,
+    /// Segmentation passes, comma-separated, each 1 or 2 (`Models::person_mask`; the
+    /// daemon's `[model] segment_passes`): 2 segments the person's crop again. Every model
+    /// gets a row per value (`NAME-f32-seg2`), side by side.
+    #[arg(long, value_delimiter = ',', default_value = "1")]
+    pub segment_passes: Vec<u8>,
+    /// Localization's coarsest level (`2^l + 1` points a side; the boards' `render.coarse_level`
+    /// is 4): default, the engine's for the grid (3 at 257^3: 9^3 seeds).
+    #[arg(long)]
+    pub coarse_level: Option<u32>,
     /// Framing of the test images: `whole` (the whole person in the frame, as the dataset) or
     /// `upper` (a person close to the camera, cut by the frame's lower edge between the hips
     /// and the knees: a webcam's view, where a close-range model takes over). Either way the
@@ -274,8 +283,7 @@ fn run_case(
     // the simulator's person mask.
     let img = volcap_engine::model::preprocess::letterbox(&c.rgb, s, s);
     let t = Instant::now();
-    let mut prob = models.segment(&img)?;
-    volcap_engine::model::preprocess::keep_most_prominent(&mut prob, s);
+    let (prob, _) = models.person_mask(&img)?;
     row.segment_ms = t.elapsed().as_secs_f64() * 1e3;
     let (mut inter, mut union) = (0usize, 0usize);
     for (p, m) in prob.iter().zip(&c.mask) {
@@ -471,6 +479,9 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             "--moment-fill {m:?}: MIN_LEN,MAX_LEN,AWAY with 0 < MIN_LEN <= MAX_LEN <= 2 and AWAY a whole number of map pixels in 1..=32"
         );
     }
+    if a.segment_passes.is_empty() || a.segment_passes.iter().any(|p| !(1..=2).contains(p)) {
+        bail!("--segment-passes {:?}: each 1 or 2", a.segment_passes);
+    }
     for l in &a.iso_level {
         if !(l.is_finite() && *l > 0.0 && *l < 1.0) {
             anyhow::bail!("--iso-level {l}: each level must lie in (0, 1)");
@@ -487,7 +498,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         _ => vec![None],
     };
     let cases = render_cases(a)?;
-    let pb = ProgressBar::new((cases.len() * specs.len() * levels.len() * fills.len()) as u64);
+    let passes = &a.segment_passes;
+    let pb = ProgressBar::new(
+        (cases.len() * specs.len() * levels.len() * fills.len() * passes.len()) as u64,
+    );
     pb.set_style(
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -496,11 +510,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let mut images = Vec::new();
     let mut summary = Vec::new();
     let mut stages = crate::backend::Stages::new(&runtime)?;
+    stages.coarse_level = a.coarse_level;
     let (mut grid, mut truth) = (Grid::new(spec), Grid::new(spec));
-    for (((name, prec), level), fill) in specs
+    for ((((name, prec), level), fill), seg_passes) in specs
         .iter()
         .flat_map(|s| levels.iter().map(move |l| (s, *l)))
         .flat_map(|sl| fills.iter().map(move |f| (sl, *f)))
+        .flat_map(|slf| passes.iter().map(move |p| (slf, *p)))
     {
         let truth_k = truth_order(name);
         // Ground-truth fields still segment (for the mask IoU column) with the default models.
@@ -510,6 +526,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             *prec,
             &runtime,
         )?;
+        models.segment_passes = seg_passes;
         // The Fourier net's decode knobs (not the ground-truth rows' nor other families').
         let knobs = a.peak_level.is_some() || a.moment_fill.is_some() || level.is_some();
         let mut fourier = match &mut models.shape {
@@ -551,9 +568,14 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             _ => None,
         };
         let label = format!(
-            "{name}-{}{}{}{}{}",
+            "{name}-{}{}{}{}{}{}",
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
+            if seg_passes > 1 {
+                format!("-seg{seg_passes}")
+            } else {
+                String::new()
+            },
             level.map(|l| format!("-iso{l:.2}")).unwrap_or_default(),
             peak.map(|(f, g)| format!(
                 "-peak{f:.2}{}",

@@ -148,6 +148,11 @@ pub struct PipelineArgs {
         default_value = "shared"
     )]
     pub render_devices: Vec<String>,
+    /// `model.segment_passes` values (comma-separated, 1 or 2): 2 segments each frame's
+    /// person crop again (one more segmentation a frame; its accuracy in `volcap eval
+    /// --segment-passes 1,2`).
+    #[arg(long = "segment-passes", value_delimiter = ',', default_value = "1")]
+    pub segment_passes: Vec<u8>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,

@@ -74,6 +74,8 @@ pub struct Row {
     pub rounds_per_wait: usize,
     /// `compute.render_device` ("shared" or "own").
     pub render_device: &'static str,
+    /// `model.segment_passes`.
+    pub segment_passes: u8,
     /// The adapter's milliseconds per frame, as `adapter_ms_per_frame`, of the frames'
     /// Fourier maps (interleave and temporal filter), of localization and the render's final
     /// level, and of the display image.
@@ -129,16 +131,20 @@ type Setup = (
     usize,
     bool,
     f32,
-    (usize, RenderDevice),
+    (usize, RenderDevice, u8),
 );
 
+/// A loaded model set: name, precision, runtime index, segmentation passes.
+type ModelKey = (String, Precision, usize, u8);
+
 fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyhow::Result<Config> {
-    let (name, prec, res, coarse, threads, split, display, temporal, yaw, (rounds, device)) = setup;
+    let (name, prec, res, coarse, threads, split, display, temporal, yaw, (rounds, device, passes)) =
+        setup;
     let device = device.name();
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\n\
-         [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\n\
+         [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\n\
          [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nrender_device = {device:?}\n\
          [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
@@ -229,6 +235,7 @@ fn measure(
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         rounds_per_wait: cfg.compute.rounds_per_wait,
         render_device: cfg.compute.render_device.name(),
+        segment_passes: cfg.model.segment_passes,
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
         localize_ms_per_frame: (work1[7] - work0[7]) as f64 / 1e6 / published.max(1) as f64,
         display_ms_per_frame: (work1[8] - work0[8]) as f64 / 1e6 / published.max(1) as f64,
@@ -263,6 +270,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
+    if a.segment_passes.is_empty() || a.segment_passes.iter().any(|p| !(1..=2).contains(p)) {
+        bail!("--segment-passes {:?}: each 1 or 2", a.segment_passes);
+    }
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);
     }
@@ -301,7 +311,10 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                         for &tf in &a.temporal {
                             for &yaw in &a.yaws {
                                 for &rounds in &a.rounds_per_wait {
-                                    for &dev in &render_devices {
+                                    for (&dev, &passes) in render_devices
+                                        .iter()
+                                        .flat_map(|d| a.segment_passes.iter().map(move |p| (d, p)))
+                                    {
                                         for &t in &a.threads {
                                             configs.push((
                                                 name.clone(),
@@ -313,7 +326,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                                 d,
                                                 tf,
                                                 yaw,
-                                                (rounds, dev),
+                                                (rounds, dev, passes),
                                             ));
                                         }
                                     }
@@ -333,11 +346,13 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         }
     }
     // Every model is loaded before anything runs (a bad name fails at once).
-    let mut loaded: Vec<((String, Precision, usize), Arc<Models>)> = Vec::new();
-    for (_, (name, prec, ..), ri) in &runs {
+    // (The segmentation passes are the models' own setting, as in volcapd: a copy each.)
+    let mut loaded: Vec<(ModelKey, Arc<Models>)> = Vec::new();
+    for (cfg, (name, prec, ..), ri) in &runs {
+        let passes = cfg.model.segment_passes;
         if !loaded
             .iter()
-            .any(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri)
+            .any(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri && k.3 == passes)
         {
             let rt = &runtimes[*ri].1;
             let m = Models::load_on(&models_dir, name, *prec, rt).map_err(|e| {
@@ -347,7 +362,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     rt.label()
                 )
             })?;
-            loaded.push(((name.clone(), *prec, *ri), Arc::new(m)));
+            let mut m = m;
+            m.segment_passes = passes;
+            loaded.push(((name.clone(), *prec, *ri, passes), Arc::new(m)));
         }
     }
     let stills = Arc::new(frames(&scene, a.frames)?);
@@ -363,9 +380,10 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             cfg.compute.threads,
             runtimes[*ri].1.name()
         ));
+        let passes = cfg.model.segment_passes;
         let Some((_, models)) = loaded
             .iter()
-            .find(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri)
+            .find(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri && k.3 == passes)
         else {
             bail!("model {name} was not loaded");
         };
@@ -400,6 +418,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.yaw_deg == r.yaw_deg
                     && b.rounds_per_wait == r.rounds_per_wait
                     && b.render_device == r.render_device
+                    && b.segment_passes == r.segment_passes
             })
             .map(|b| r.fps / b.fps.max(1e-9));
     }
@@ -463,8 +482,13 @@ fn table(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            "| {}{} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
+            if r.segment_passes > 1 {
+                ", segmented twice"
+            } else {
+                ""
+            },
             r.runtime,
             r.resolution,
             if r.display_size == 0 {

@@ -40,6 +40,10 @@ pub struct ReconstructArgs {
     /// `[model] close_range`.
     #[arg(long, value_name = "NAME")]
     pub close_range: Option<String>,
+    /// Segmentation passes: 1, or 2 to segment the person's crop again (`volcapd`'s `[model]
+    /// segment_passes`).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub segment_passes: u8,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
@@ -250,10 +254,11 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
     let models = Models::load_on(&a.models_dir, name, precision, &runtime)?;
     // Localization and the render where the networks run (the adapter with `--backend wgpu`).
     let mut stages = crate::backend::Stages::new(&runtime)?;
-    let models = match &a.close_range {
+    let mut models = match &a.close_range {
         Some(close) => models.with_close_range(&a.models_dir, close)?,
         None => models,
     };
+    models.segment_passes = a.segment_passes;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let bar = if a.json {
         ProgressBar::hidden()

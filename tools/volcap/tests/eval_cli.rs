@@ -120,6 +120,8 @@ fn bad_decode_knobs_are_refused_by_name() {
         ("--peak-level", "1.5,0.2"),
         ("--peak-level", "0.5,0.2,1.5"),
         ("--peak-level", "0.5,0.2,0.5,1"),
+        ("--segment-passes", "3"),
+        ("--segment-passes", "1,0"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
             .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
@@ -132,6 +134,9 @@ fn bad_decode_knobs_are_refused_by_name() {
     }
 }
 
+/// One image, one view, 33^3: the smallest run that still makes every row.
+const TINY: [&str; 6] = ["--poses", "1", "--views", "1", "--res", "33"];
+
 /// `--moment-fill` puts each Fourier model's filled row beside its row as predicted, in one
 /// run; the ground-truth series (no network, nothing to fill) get one row.
 #[test]
@@ -139,17 +144,15 @@ fn moment_fill_rows_stand_beside_the_plain_ones() {
     let summaries: Vec<String> = run_eval(
         "fill",
         &[
-            "--poses",
-            "1",
-            "--views",
-            "1",
-            "--res",
-            "33",
-            "--model",
-            "fourier-small,truth-k15",
-            "--moment-fill",
-            "0.02,0.1,4",
-        ],
+            &TINY[..],
+            &[
+                "--model",
+                "fourier-small,truth-k15",
+                "--moment-fill",
+                "0.02,0.1,4",
+            ],
+        ]
+        .concat(),
     )
     .iter()
     .filter(|r| r.get("family").is_some())
@@ -164,4 +167,30 @@ fn moment_fill_rows_stand_beside_the_plain_ones() {
         ],
         "{summaries:?}"
     );
+}
+
+/// `--segment-passes 1,2` gives every model a row per count, one pass first; the second
+/// pass's masks cover at least what the first's did (the larger value of both), so the mask
+/// IoU of the two rows differs only by what the second pass adds.
+#[test]
+fn segment_pass_rows_stand_beside_each_other() {
+    let rows = run_eval(
+        "passes",
+        &[
+            &TINY[..],
+            &["--model", "fourier-small", "--segment-passes", "1,2"],
+        ]
+        .concat(),
+    );
+    let summaries: Vec<&serde_json::Value> =
+        rows.iter().filter(|r| r.get("family").is_some()).collect();
+    let names: Vec<&str> = summaries
+        .iter()
+        .map(|r| r["model"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["fourier-small-f32", "fourier-small-f32-seg2"]);
+    for r in &summaries {
+        let m = r["mask_iou"].as_f64().unwrap();
+        assert!(m.is_finite() && m > 0.5, "{r}");
+    }
 }

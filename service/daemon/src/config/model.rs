@@ -44,6 +44,11 @@ pub struct ModelConfig {
     /// of about 0.2 cm P2S on held-out subjects; docs/eval/hands.md section 5).
     #[serde(default)]
     pub thin_parts: ThinParts,
+    /// How many times each frame is segmented: 1 (the letterboxed frame) or 2 (then the
+    /// person's crop of it once more, an arm or a hand the first pass lost taken back: one
+    /// more segmentation a frame; docs/eval/hands.md section 8).
+    #[serde(default = "d_segment_passes")]
+    pub segment_passes: u8,
 }
 
 /// `model.thin_parts`.
@@ -65,6 +70,13 @@ impl ThinParts {
         }
     }
 }
+
+fn d_segment_passes() -> u8 {
+    1
+}
+
+/// `model.segment_passes`.
+pub const SEGMENT_PASSES: std::ops::RangeInclusive<u8> = 1..=2;
 
 /// About a quarter of a second at the sim's frame rate, a few frames on a webcam.
 fn d_close_range_frames() -> u32 {
@@ -88,6 +100,7 @@ impl Default for ModelConfig {
             close_range: None,
             close_range_frames: d_close_range_frames(),
             thin_parts: ThinParts::Series,
+            segment_passes: d_segment_passes(),
         }
     }
 }

@@ -272,3 +272,29 @@ fn thin_parts_is_read_and_a_wrong_value_named() {
         "{e}"
     );
 }
+
+/// `model.segment_passes`: one by default, two by choice, and anything else refused naming
+/// the key and the range.
+#[test]
+fn segment_passes_is_read_and_a_wrong_count_named() {
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    let c = Config::parse(base, Path::new("b.toml")).unwrap();
+    assert_eq!(c.model.segment_passes, 1);
+    let c = Config::parse(
+        &format!("{base}[model]\nsegment_passes = 2\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c.model.segment_passes, 2);
+    for bad in ["0", "3"] {
+        let e = Config::parse(
+            &format!("{base}[model]\nsegment_passes = {bad}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("b.toml") && e.contains("model.segment_passes") && e.contains("1..=2"),
+            "{e}"
+        );
+    }
+}

@@ -288,6 +288,32 @@ impl Crop {
     }
 }
 
+impl Crop {
+    /// Take a mask made on this crop (`[S, S]` in crop NDC, e.g. the segmentation of
+    /// `self.apply(img)`) back into the input square: every input pixel inside the crop's
+    /// square gets the larger of its value in `into` and the crop mask's bilinear value there
+    /// (`sample::bilinear1`, PyTorch's `grid_sample(align_corners=True)`); pixels outside
+    /// the square keep theirs. The rule `seg_masks.paste_max` repeats for training.
+    pub fn paste_max(&self, crop_mask: &[f32], size: usize, into: &mut [f32]) {
+        if size < 2 || crop_mask.len() < size * size || into.len() < size * size {
+            return;
+        }
+        let ndc = |i: usize| -1.0 + 2.0 * i as f32 / (size - 1) as f32;
+        for (j, row) in into.chunks_exact_mut(size).take(size).enumerate() {
+            let uy = (ndc(j) - self.ty) / self.s;
+            if uy.abs() > 1.0 {
+                continue;
+            }
+            for (i, v) in row.iter_mut().enumerate() {
+                let ux = (ndc(i) - self.tx) / self.s;
+                if ux.abs() <= 1.0 {
+                    *v = v.max(super::sample::bilinear1(crop_mask, size, size, ux, uy));
+                }
+            }
+        }
+    }
+}
+
 /// A mask region counts as a person when it covers at least this fraction of the frame
 /// (0.2 %: 131 pixels at 256x256, a person about a tenth of the frame high)...
 pub const MIN_PERSON_FRACTION: f32 = 0.002;

@@ -31,6 +31,13 @@ fn knobs(a: &EvalArgs) -> String {
     if let Some(m) = &a.moment_fill {
         let _ = write!(k, " --moment-fill {}", list(m));
     }
+    if a.segment_passes != [1] {
+        let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
+        let _ = write!(k, " --segment-passes {}", passes.join(","));
+    }
+    if let Some(l) = a.coarse_level {
+        let _ = write!(k, " --coarse-level {l}");
+    }
     if a.backend != "cpu" {
         let _ = write!(k, " --backend {}", a.backend);
     }
