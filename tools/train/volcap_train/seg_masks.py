@@ -137,12 +137,17 @@ def second_pass(model: Path, images: torch.Tensor, first: torch.Tensor) -> torch
     return out
 
 
+def passes_tag(passes: int) -> str:
+    """The caches' name part for masks made in `passes` segmentation passes ("" for one)."""
+    return "-p2" if passes > 1 else ""
+
+
 def predicted_masks(root: Path, split, split_name: str, model: Path, passes: int = 1) -> torch.Tensor:
     """u8 [B, 1, H, W] (soft mask x 255) of the engine's segmentation for every image of a
     dataset split, most prominent person only (all zero where none is found), with
     `passes` 2 the person's crop segmented again (`second_pass`); cached as
     ROOT/seg-{split}-{model stem}[-p2]-v1.pt."""
-    cache = root / f"seg-{split_name}-{model.stem}{'-p2' if passes > 1 else ''}-v1.pt"
+    cache = root / f"seg-{split_name}-{model.stem}{passes_tag(passes)}-v1.pt"
     if cache.exists():
         out = torch.load(cache)
         if out.shape[0] == len(split):

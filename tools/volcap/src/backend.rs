@@ -151,3 +151,17 @@ impl Stages {
         Ok(())
     }
 }
+
+/// `--segment-passes` of `eval` and `bench pipeline`: a list of counts, each in the engine's
+/// range (`model::SEGMENT_PASSES`).
+pub fn check_segment_passes(passes: &[u8]) -> anyhow::Result<()> {
+    let range = volcap_engine::model::SEGMENT_PASSES;
+    if passes.is_empty() || passes.iter().any(|p| !range.contains(p)) {
+        anyhow::bail!(
+            "--segment-passes {passes:?}: each {} or {}",
+            range.start(),
+            range.end()
+        );
+    }
+    Ok(())
+}

@@ -479,9 +479,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             "--moment-fill {m:?}: MIN_LEN,MAX_LEN,AWAY with 0 < MIN_LEN <= MAX_LEN <= 2 and AWAY a whole number of map pixels in 1..=32"
         );
     }
-    if a.segment_passes.is_empty() || a.segment_passes.iter().any(|p| !(1..=2).contains(p)) {
-        bail!("--segment-passes {:?}: each 1 or 2", a.segment_passes);
-    }
+    crate::backend::check_segment_passes(&a.segment_passes)?;
     for l in &a.iso_level {
         if !(l.is_finite() && *l > 0.0 && *l < 1.0) {
             anyhow::bail!("--iso-level {l}: each level must lie in (0, 1)");

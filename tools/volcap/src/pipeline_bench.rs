@@ -270,9 +270,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    if a.segment_passes.is_empty() || a.segment_passes.iter().any(|p| !(1..=2).contains(p)) {
-        bail!("--segment-passes {:?}: each 1 or 2", a.segment_passes);
-    }
+    crate::backend::check_segment_passes(&a.segment_passes)?;
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);
     }
@@ -348,12 +346,12 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     // Every model is loaded before anything runs (a bad name fails at once).
     // (The segmentation passes are the models' own setting, as in volcapd: a copy each.)
     let mut loaded: Vec<(ModelKey, Arc<Models>)> = Vec::new();
+    let key = |cfg: &Config, name: &String, prec: &Precision, ri: &usize| -> ModelKey {
+        (name.clone(), *prec, *ri, cfg.model.segment_passes)
+    };
     for (cfg, (name, prec, ..), ri) in &runs {
-        let passes = cfg.model.segment_passes;
-        if !loaded
-            .iter()
-            .any(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri && k.3 == passes)
-        {
+        let k = key(cfg, name, prec, ri);
+        if !loaded.iter().any(|(l, _)| *l == k) {
             let rt = &runtimes[*ri].1;
             let m = Models::load_on(&models_dir, name, *prec, rt).map_err(|e| {
                 anyhow!(
@@ -362,9 +360,11 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     rt.label()
                 )
             })?;
-            let mut m = m;
-            m.segment_passes = passes;
-            loaded.push(((name.clone(), *prec, *ri, passes), Arc::new(m)));
+            let m = Models {
+                segment_passes: k.3,
+                ..m
+            };
+            loaded.push((k, Arc::new(m)));
         }
     }
     let stills = Arc::new(frames(&scene, a.frames)?);
@@ -380,11 +380,8 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             cfg.compute.threads,
             runtimes[*ri].1.name()
         ));
-        let passes = cfg.model.segment_passes;
-        let Some((_, models)) = loaded
-            .iter()
-            .find(|(k, _)| k.0 == *name && k.1 == *prec && k.2 == *ri && k.3 == passes)
-        else {
+        let k = key(cfg, name, prec, ri);
+        let Some((_, models)) = loaded.iter().find(|(l, _)| *l == k) else {
             bail!("model {name} was not loaded");
         };
         rows.push(measure(

@@ -42,7 +42,7 @@ pub struct ReconstructArgs {
     pub close_range: Option<String>,
     /// Segmentation passes: 1, or 2 to segment the person's crop again (`volcapd`'s `[model]
     /// segment_passes`).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    #[arg(long, default_value_t = 1, value_parser = segment_passes)]
     pub segment_passes: u8,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
@@ -121,6 +121,13 @@ pub fn read_rgb(path: &Path) -> anyhow::Result<(Vec<u8>, u32, u32)> {
         .decode()
         .map_err(|e| anyhow!("{}: cannot decode: {e}", path.display()))?;
     Ok((img.to_rgb8().into_raw(), w, h))
+}
+
+/// `--segment-passes`: one count in the engine's range.
+fn segment_passes(s: &str) -> Result<u8, String> {
+    let n: u8 = s.parse().map_err(|e| format!("{s:?}: {e}"))?;
+    crate::backend::check_segment_passes(&[n]).map_err(|e| e.to_string())?;
+    Ok(n)
 }
 
 fn stem(path: &Path) -> String {

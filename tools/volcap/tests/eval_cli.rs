@@ -169,9 +169,8 @@ fn moment_fill_rows_stand_beside_the_plain_ones() {
     );
 }
 
-/// `--segment-passes 1,2` gives every model a row per count, one pass first; the second
-/// pass's masks cover at least what the first's did (the larger value of both), so the mask
-/// IoU of the two rows differs only by what the second pass adds.
+/// `--segment-passes 1,2` gives every model a row per count, one pass first, each with a
+/// mask IoU that found the person.
 #[test]
 fn segment_pass_rows_stand_beside_each_other() {
     let rows = run_eval(

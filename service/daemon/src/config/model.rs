@@ -75,8 +75,8 @@ fn d_segment_passes() -> u8 {
     1
 }
 
-/// `model.segment_passes`.
-pub const SEGMENT_PASSES: std::ops::RangeInclusive<u8> = 1..=2;
+/// `model.segment_passes`: the engine's range.
+pub use volcap_engine::model::SEGMENT_PASSES;
 
 /// About a quarter of a second at the sim's frame rate, a few frames on a webcam.
 fn d_close_range_frames() -> u32 {

@@ -140,6 +140,10 @@ pub struct Models {
     pub segment_passes: u8,
 }
 
+/// The counts [`Models::segment_passes`] takes (the daemon's `[model] segment_passes`, the
+/// tools' `--segment-passes`).
+pub const SEGMENT_PASSES: std::ops::RangeInclusive<u8> = 1..=2;
+
 pub(crate) const IMG: [Option<usize>; 4] = [Some(1), Some(4), Some(INPUT_SIZE), Some(INPUT_SIZE)];
 
 fn encoder(path: &Path, kind: &str, rt: &Runtime) -> Result<(Net, usize), ModelError> {
@@ -512,10 +516,10 @@ impl Models {
     /// ([`preprocess::keep_most_prominent`]: 0 outside that person) and the people counted.
     /// With [`Models::segment_passes`] 2 the person's crop is segmented too and that mask
     /// taken back into the frame by its larger value ([`Crop::paste_max`]; measured on
-    /// held-out renders: thin rays kept 0.61 -> 0.74, mask IoU 0.885 -> 0.898 in the
-    /// frame; docs/eval/hands.md section 8), then the most prominent person kept again, so the crop made from the result
-    /// holds what the second pass found. The people are those of the first pass (the
-    /// second sees only the crop).
+    /// held-out renders: thin rays kept 0.61 -> 0.74, mask IoU 0.885 -> 0.898 in the frame;
+    /// docs/eval/hands.md section 8), then the most prominent person kept again, so the
+    /// crop made from the result holds what the second pass found. The people are those of
+    /// the first pass (the second sees only the crop).
     pub fn person_mask(&self, img: &[f32]) -> Result<(Vec<f32>, usize), ModelError> {
         let mut mask = self.segment(img)?;
         let people = preprocess::keep_most_prominent(&mut mask, INPUT_SIZE);

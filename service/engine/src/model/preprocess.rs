@@ -286,9 +286,7 @@ impl Crop {
         }
         out
     }
-}
 
-impl Crop {
     /// Take a mask made on this crop (`[S, S]` in crop NDC, e.g. the segmentation of
     /// `self.apply(img)`) back into the input square: every input pixel inside the crop's
     /// square gets the larger of its value in `into` and the crop mask's bilinear value there
