@@ -15,6 +15,10 @@
 #   cargo run --release -p volcap -- sim dataset --subjects 48 --poses 32 --views 3 --val-fraction 0.15 --seed 11 --pose-seed 12 --lighting varied --out /work/data/ds5
 #   DATA_LIGHT2: as DATA_LIGHT in 32 more new poses (fourier-small's stage 9 trains on the three), e.g.
 #   cargo run --release -p volcap -- sim dataset --subjects 48 --poses 32 --views 3 --val-fraction 0.15 --seed 11 --pose-seed 13 --lighting varied --out /work/data/ds6
+#   DATA_SEG2 (optional): three folders, space-separated, of the same identities in 16 new poses each
+#   (fourier-small-seg2: fourier-small resumed on two-pass masks), each made by
+#   cargo run --release -p volcap -- sim dataset --subjects 48 --poses 16 --views 3 --val-fraction 0.15 --seed 11 --pose-seed P --lighting varied --out DIR
+#   with P = 13, 14 and 15.
 set -euo pipefail
 cd "$(dirname "$0")"
 DATA=${DATA:?set DATA to a volcap sim dataset folder}
@@ -63,6 +67,13 @@ $T fourier --data "$DATA_POSES2" --more-data "$DATA_LIGHT" --out "$RUNS/stages/f
 # (9) resumed on the three together (DATA_LIGHT2: 32 more new poses under varied light; peak RAM
 # about 21 GB; held-out 257^3 2.22 / 0.98 / 0.667 -> 2.17 / 0.96 / 0.667).
 $T fourier --data "$DATA_POSES2" --more-data "$DATA_LIGHT" "$DATA_LIGHT2" --out "$RUNS/fourier-small" --variant fourier-small --steps 10000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-small-8/ckpt.pt"
+# fourier-small-seg2 (with DATA_SEG2): (10) fourier-small resumed on the masks of two segmentation
+# passes (`--segment-passes 2`, what the boards with `[model] segment_passes = 2` feed it); held-out
+# 257^3, segmented twice, 1.99 / 1.15 / 0.669 -> 1.92 / 0.99 / 0.668 (docs/eval/hands.md section 9).
+if [ -n "${DATA_SEG2:-}" ]; then
+  read -r -a SEG2 <<< "$DATA_SEG2"
+  $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 5000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --init "$RUNS/fourier-small/ckpt.pt"
+fi
 # fourier-medium: fourier-small widened from c = 8 to 12 without changing its function
 # (volcap_train.widen: the new channels start unread), then trained on as fourier-small's last
 # stage (more capacity without starting over).
@@ -76,6 +87,9 @@ $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 # fourier-small's surface level comes from a sweep on training subjects (its model card):
 #   volcap eval --subjects train --poses 1 --views 2 --res 129 --seed 7 --model fourier-small --iso-level 0.45,0.5,0.55,0.6
 $PY -m volcap_train.export --data "$DATA_POSES2" --runs "$RUNS" --out ../../models --only fourier-small --iso-level "${FOURIER_SMALL_ISO:-0.55}"
+if [ -n "${DATA_SEG2:-}" ]; then
+  $PY -m volcap_train.export --data "${SEG2[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55
+fi
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5
 # The product's segmentation is MediaPipe's (pinned PyPI wheel, converted to ONNX); ours is seg-sim.onnx.
 $PY -m volcap_train.mediapipe_seg --out ../../models
