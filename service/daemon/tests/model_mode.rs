@@ -193,8 +193,7 @@ fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
     let _serial = serial();
     let dir = std::env::temp_dir().join(format!("volcapd-thin-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    // The snapshot's opaque columns: (opaque pixels, first and last column, the person's
-    // mass centre column, height in rows).
+    // The snapshot's reach to either side (`Reach`).
     let render = |field: &str, thin: &str| -> Reach {
         let cfg = dir.join(format!("{field}-{thin}.toml"));
         std::fs::write(
