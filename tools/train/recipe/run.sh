@@ -4,7 +4,7 @@
 # light checkpoint (<= 16 MiB) and the log in RESULT.
 #
 #   run.sh RESULT [--subjects 48] [--poses 16] [--views 3] [--steps 6000] [--procs NPROC]
-#                 [--minutes-data D] [--minutes-train T] [--variant V] [--tiny]
+#                 [--minutes-data D] [--minutes-train T] [--variant V] [--init CKPT] [--tiny]
 #                 [-- extra `volcap_train.train fourier` options]
 #
 # budget.json's `time_s` says where the training's wall time went (steps, checkpoints,
@@ -28,6 +28,12 @@
 # net feeding the series net, issue 34 part 3) starts both of its halves from the bundled
 # fourier-small checkpoint and needs `-- --geom-weight W`.
 #
+# --init: the light checkpoint training starts from (a path from where run.sh is called, e.g.
+# models/checkpoints/shape-fourier-small-seg2.pt with `-- --segment-passes 2` to go on with the
+# two-pass network) instead of the bundled fourier-small one.
+#
+# `-- --amp bf16` runs the steps' forward in bfloat16 (train's --amp; float32 losses).
+#
 # --tiny is the end-to-end check (2 subjects, 2 poses, 2 views, 3 steps). Needs python3 with
 # torch, numpy, safetensors, tqdm (onnxruntime for the product's masks; without it the ground
 # truth's), no network.
@@ -36,7 +42,7 @@ b="$(cd "$(dirname "$0")" && pwd)"
 res="${1:?usage: run.sh RESULT [options]}"
 shift
 subjects=48 poses=16 views=3 steps=6000 procs=$(nproc) points=8000 batch=8 extra=()
-minutes_data=0 minutes_train=0 steps_given=0 variant=fourier-small
+minutes_data=0 minutes_train=0 steps_given=0 variant=fourier-small init_given=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --subjects) subjects="$2"; shift 2 ;;
@@ -47,6 +53,7 @@ while [ $# -gt 0 ]; do
     --minutes-data) minutes_data="$2"; shift 2 ;;
     --minutes-train) minutes_train="$2"; shift 2 ;;
     --variant) variant="$2"; shift 2 ;;
+    --init) init_given="$2"; shift 2 ;;
     --tiny) subjects=2 poses=2 views=2 steps=3 steps_given=1 procs=2 points=4096 batch=2; shift ;;
     --) shift; extra=("$@"); break ;;
     *) echo "run.sh: unknown option $1" >&2; exit 2 ;;
@@ -71,6 +78,11 @@ else
   pydir="$repo/tools/train" seg_model="$repo/models/seg.onnx" init="$repo/models/checkpoints/shape-fourier-small.pt"
   [ -d "$pydir/volcap_train" ] || { echo "run.sh: a lean bundle must sit in the checkout's root (no $pydir/volcap_train)" >&2; exit 2; }
 fi
+if [ -n "$init_given" ]; then
+  [ -f "$init_given" ] || { echo "run.sh: --init $init_given: no such checkpoint" | tee -a "$log" >&2; exit 2; }
+  init="$(cd "$(dirname "$init_given")" && pwd)/$(basename "$init_given")"
+fi
+echo "start checkpoint: $init" | tee -a "$log"
 if [ -f "$b/volcap.xz" ]; then xz -dc "$b/volcap.xz" > "$res/volcap"; else gunzip -c "$b/volcap.gz" > "$res/volcap"; fi
 chmod +x "$res/volcap"
 assets=()

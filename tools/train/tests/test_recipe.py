@@ -1,7 +1,7 @@
 """The training recipe end to end on a tiny configuration (issue 34, part 4): the bundle is
 made from the release binary (`cargo build --release -p volcap`, which the test command builds
 before this suite), stays under 64 MiB, and its run.sh generates the data with two generators,
-trains from the bundled checkpoint and leaves a light checkpoint (<= 16 MiB) that `--init`
+trains from a start checkpoint (`--init`; the bundled one by default) and leaves a light checkpoint (<= 16 MiB) that `--init`
 takes, with the log and budget. Without the binary: a failure under CI, a skip elsewhere."""
 import json
 import os
@@ -35,7 +35,13 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     # (--sync-parts: the parts' clocks with the device drained at their edges; a no-op here.
     # --geom-weight: the training-only surfaces head goes through the whole recipe too, and
     # stays out of the light checkpoint, which holds the series network only.)
-    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--", "--sync-parts", "--geom-weight", "0.1"], check=True, env=env, cwd=tmp_path)
+    # --init: a start checkpoint named from the caller's directory (the two-pass network's);
+    # --amp bf16: the steps' forward in bfloat16 through the whole recipe.
+    (tmp_path / "start").mkdir()
+    (tmp_path / "start" / "seg2.pt").write_bytes((REPO / "models/checkpoints/shape-fourier-small-seg2.pt").read_bytes())
+    missing = subprocess.run([str(bundle / "run.sh"), str(tmp_path / "refused"), "--tiny", "--init", "start/none.pt"], capture_output=True, text=True, env=env, cwd=tmp_path)
+    assert missing.returncode == 2 and "--init start/none.pt: no such checkpoint" in missing.stderr, missing.stderr
+    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--init", "start/seg2.pt", "--", "--sync-parts", "--geom-weight", "0.1", "--amp", "bf16"], check=True, env=env, cwd=tmp_path)
     ck = res / "checkpoint.pt"
     assert 0 < ck.stat().st_size <= 16 * 2**20
     light = torch.load(ck, weights_only=False)
@@ -48,6 +54,8 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     assert budget["steps"] == 3 and "cuda" in budget["hardware"]
     assert budget["args"]["sync_parts"] == "True", budget["args"]
     assert budget["args"]["geom_weight"] == "0.1", budget["args"]
+    assert budget["args"]["amp"] == "bf16", budget["args"]
+    assert budget["args"]["init"] == str(tmp_path / "start" / "seg2.pt"), budget["args"]
     assert not any(n.startswith("geom") for n in w), sorted(w)[:5]
     assert {"ds-0", "ds-1"} <= {p.name for p in res.iterdir()}
     # The log says where the training's time went (the batches made among the steps).

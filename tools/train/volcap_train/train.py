@@ -417,6 +417,34 @@ def data_on_device(choice: str, dev: torch.device, sets) -> bool:
     return need <= free // 2
 
 
+def training_forward(fn, modules, amp: str = "off", compile: bool = False):
+    """The training steps' forward of `fn` (input [B, C, H, W] -> a tuple of tensors or None).
+    `amp` "bf16": under autocast in bfloat16 (AMX or AVX-512 BF16 on a CPU that has them,
+    tensor cores on a GPU), each output brought back to float32, so every loss, its
+    exponentials and the optimizer stay float32. `compile`: the forward graph compiled
+    (torch.compile; the backward follows it). Either puts the modules' weights and the input
+    in channels-last order (what oneDNN's convolutions want on a CPU). Both at once are
+    refused (`main`): with torch 2.15 on this CPU every encoder weight's gradient came out
+    non-finite after the first backward of the compiled bfloat16 graph."""
+    if amp not in ("off", "bf16"):
+        raise ValueError(f"amp {amp!r}: off or bf16")
+    if compile and amp != "off":
+        raise ValueError("--compile with --amp bf16: the compiled bfloat16 backward gives non-finite gradients (torch's inductor on CPU); use one of them")
+    if not compile and amp == "off":
+        return fn
+    for m in modules:
+        m.to(memory_format=torch.channels_last)
+    f = torch.compile(fn, dynamic=False) if compile else fn
+
+    def forward(x):
+        x = x.contiguous(memory_format=torch.channels_last)
+        with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=amp == "bf16"):
+            out = f(x)
+        return tuple(None if t is None else t.float() for t in out)
+
+    return forward
+
+
 def train_fourier(args):
     """The Fourier head, densely supervised: every pixel's whole ray (Parseval L2 on the
     coefficients) plus BCE on labelled 3D points through the basis (OHEM on points and images).
@@ -457,7 +485,7 @@ def train_fourier(args):
         if not two_nets:
             modules["geom"] = GeomHead(2 * width)
 
-    def predict(x):
+    def predict_f32(x):
         """(series, depth centre or None, surfaces or None) of an encoder input."""
         if two_nets:
             surf = net.surfaces(x)
@@ -465,6 +493,12 @@ def train_fourier(args):
         feat = net.features(x)
         pred, d = net.head(feat, with_centre=True)
         return pred, d, (modules["geom"](feat) if "geom" in modules else None)
+
+    train_forward = training_forward(predict_f32, modules.values(), args.amp, args.compile)
+
+    def predict(x, train=True):
+        # The validation runs in float32, uncompiled, so runs compare on one footing.
+        return train_forward(x) if train else predict_f32(x)
 
     ohem = OhemState(len(tr["rgb"]), tr["points"].shape[1], args.ohem)
     opt = torch.optim.Adam([p for m in modules.values() for p in m.parameters()], lr=args.lr)
@@ -596,7 +630,7 @@ def train_fourier(args):
         ious, l2s, geos = [], [], []
         for s in range(0, len(va["rgb"]), 8):
             idx = torch.arange(s, min(s + 8, len(va["rgb"])))
-            pred, _, geo = predict(inputs(va, idx, None))
+            pred, _, geo = predict(inputs(va, idx, None), train=False)
             if geo is not None:
                 at = va["geom"].device
                 gt, gin = va["geom"][idx.to(at)].to(dev).float(), va["geom_in"][idx.to(at)].to(dev)
@@ -651,8 +685,12 @@ def main(argv=None):
     ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
     ap.add_argument("--geom-weight", type=float, default=0.0, help="fourier: weight of the front/back surface loss (surfaces.py: depths and slopes, i.e. normals) on a training-only head on the series head's features, or on the surface net of --variant fourier-geom (required there); 0: off")
     ap.add_argument("--geom-slope-weight", type=float, default=1.0, help="fourier: the slopes' (normals') share of --geom-weight's loss beside the depths' (0: depths only)")
+    ap.add_argument("--amp", default="off", choices=["off", "bf16"], help="fourier: the training steps' forward in bfloat16 (autocast), outputs and losses in float32; validation in float32")
+    ap.add_argument("--compile", action="store_true", help="fourier: the training forward compiled (torch.compile, channels-last weights and input); the first steps pay the compilation")
     ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
+    if args.compile and args.amp != "off":
+        ap.error("--compile with --amp bf16: the compiled bfloat16 backward gives non-finite gradients (torch's inductor on CPU, measured with torch 2.15); use one of them")
     if args.threads:
         torch.set_num_threads(args.threads)
     return {"seg": train_seg, "shape": train_shape, "color": train_color, "fourier": train_fourier}[args.task](args)
