@@ -18,7 +18,7 @@
 use crate::camera::Camera;
 use crate::raster::Texture;
 use glam::{DVec3, Vec2, Vec3};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use volcap_engine::field::{ColorField, FieldError, OccupancyField};
 use volcap_engine::grid::BitSet;
 use volcap_engine::metrics::TriangleIndex;
@@ -39,6 +39,8 @@ pub struct Oracle {
     voxel: f32,
     dims: [usize; 3],
     inside: BitSet,
+    /// The voxels in bricks, made on first use ([`Oracle::bricks`]).
+    bricks: OnceLock<Bricks>,
 }
 
 impl Oracle {
@@ -60,6 +62,7 @@ impl Oracle {
                 voxel,
                 dims: [1, 1, 1],
                 inside: BitSet::new(1),
+                bricks: OnceLock::new(),
             };
         }
         let margin = 3.0 * voxel;
@@ -75,6 +78,7 @@ impl Oracle {
             voxel,
             dims,
             inside: BitSet::new(dims[0] * dims[1] * dims[2]),
+            bricks: OnceLock::new(),
         };
         let mut solid = BitSet::new(o.inside.len());
         for m in meshes.iter().filter(|m| m.closed) {
@@ -294,6 +298,18 @@ impl Oracle {
         acc.clamp(0.0, 1.0)
     }
 
+    /// Voxel coordinates of `p`: voxel `i` spans `[i, i + 1)` on each axis (its centre at
+    /// `i + 0.5`, where [`Self::occupancy`] reads the indicator).
+    pub fn voxel_coords(&self, p: Vec3) -> Vec3 {
+        (p - self.origin) / self.voxel
+    }
+
+    /// The voxels in bricks of [`BRICK`]^3, each known to read 0 or 1 everywhere (made once
+    /// per oracle, on first use).
+    pub fn bricks(&self) -> &Bricks {
+        self.bricks.get_or_init(|| Bricks::of(self))
+    }
+
     /// Inside volume in cubic metres.
     pub fn volume_m3(&self) -> f64 {
         self.inside.count_ones() as f64 * (self.voxel as f64).powi(3)
@@ -311,6 +327,148 @@ impl Oracle {
             self.dims[2] as f32,
         );
         (self.origin, self.origin + d * self.voxel)
+    }
+}
+
+/// Voxels per side of a brick of [`Bricks`] (2 cm at the default 5 mm voxel: ten 2 mm march
+/// steps).
+pub const BRICK: usize = 4;
+
+/// Voxels around a brick that decide its state: [`Oracle::occupancy`] at a point of the
+/// brick's closed box reads the voxels one beyond it; one more absorbs rounding.
+const BRICK_APRON: usize = 2;
+
+/// What [`Oracle::occupancy`] reads everywhere in a brick's closed box.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BrickState {
+    /// 0: no voxel within the brick and its apron is inside.
+    Empty,
+    /// 1: every voxel within the brick and its apron is inside (none past the grid).
+    Full,
+    Mixed,
+}
+
+/// The oracle's voxels in bricks of [`BRICK`]^3 voxels (brick `b` spans voxel coordinates
+/// `[b B, (b + 1) B]` per axis), each empty, full or mixed as [`Oracle::occupancy`] reads
+/// it: a march along a ray ([`crate::rays::ray_intervals`]) passes a brick whose reading
+/// is its own state without reading the voxels. Counted with a summed-volume table.
+pub struct Bricks {
+    dims: [usize; 3],
+    state: Vec<BrickState>,
+}
+
+impl Bricks {
+    fn of(o: &Oracle) -> Self {
+        let [nx, ny, nz] = o.dims;
+        // Inclusive prefix counts, zero-padded: s[(i, j, k)] counts the inside voxels of
+        // [0, i) x [0, j) x [0, k).
+        let (sx, sy) = (nx + 1, ny + 1);
+        let at = |i: usize, j: usize, k: usize| i + sx * (j + sy * k);
+        let mut s = vec![0u32; sx * sy * (nz + 1)];
+        for k in 0..nz {
+            for j in 0..ny {
+                let mut row = 0u32;
+                for i in 0..nx {
+                    row += u32::from(o.inside.get(o.lin([i, j, k])));
+                    s[at(i + 1, j + 1, k + 1)] = row;
+                }
+            }
+        }
+        for k in 1..=nz {
+            for j in 1..=ny {
+                for i in 1..=nx {
+                    s[at(i, j, k)] += s[at(i, j - 1, k)];
+                }
+            }
+        }
+        for k in 1..=nz {
+            for j in 1..=ny {
+                for i in 1..=nx {
+                    s[at(i, j, k)] += s[at(i, j, k - 1)];
+                }
+            }
+        }
+        // Inside voxels of [lo, hi) (clamped to the grid).
+        let count = |lo: [usize; 3], hi: [usize; 3]| -> i64 {
+            let c = |i, j, k| i64::from(s[at(i, j, k)]);
+            let ([x0, y0, z0], [x1, y1, z1]) = (lo, hi);
+            c(x1, y1, z1) - c(x0, y1, z1) - c(x1, y0, z1) - c(x1, y1, z0)
+                + c(x0, y0, z1)
+                + c(x0, y1, z0)
+                + c(x1, y0, z0)
+                - c(x0, y0, z0)
+        };
+        let dims = o.dims.map(|n| n.div_ceil(BRICK));
+        let side = (BRICK + 2 * BRICK_APRON) as i64;
+        let mut state = Vec::with_capacity(dims[0] * dims[1] * dims[2]);
+        for bz in 0..dims[2] {
+            for by in 0..dims[1] {
+                for bx in 0..dims[0] {
+                    let mut lo = [0; 3];
+                    let mut hi = [0; 3];
+                    let mut clipped = false;
+                    for (a, b) in [bx, by, bz].into_iter().enumerate() {
+                        let l = (b * BRICK) as i64 - BRICK_APRON as i64;
+                        let h = ((b + 1) * BRICK + BRICK_APRON) as i64;
+                        clipped |= l < 0 || h > o.dims[a] as i64;
+                        lo[a] = l.max(0) as usize;
+                        hi[a] = (h as usize).min(o.dims[a]);
+                    }
+                    let n = count(lo, hi);
+                    state.push(if n == 0 {
+                        BrickState::Empty
+                    } else if !clipped && n == side * side * side {
+                        BrickState::Full
+                    } else {
+                        BrickState::Mixed
+                    });
+                }
+            }
+        }
+        Bricks { dims, state }
+    }
+
+    /// The state of the brick holding voxel coordinates `u` (None past the grid).
+    pub fn state_at(&self, u: Vec3) -> Option<BrickState> {
+        self.index(u).map(|(i, _)| self.state[i])
+    }
+
+    fn index(&self, u: Vec3) -> Option<(usize, [usize; 3])> {
+        if !(u.x >= 0.0 && u.y >= 0.0 && u.z >= 0.0) {
+            return None;
+        }
+        // Non-negative: truncation is the floor (and the cast saturates).
+        let b = [u.x, u.y, u.z].map(|c| (c / BRICK as f32) as usize);
+        if (0..3).any(|a| b[a] >= self.dims[a]) {
+            return None;
+        }
+        Some((b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2]), b))
+    }
+
+    /// Where the line `u0 + du t` (voxel coordinates) leaves the brick that holds `u` (a point
+    /// of it), when that brick reads `inside` everywhere; None otherwise.
+    pub fn exit_if(&self, inside: bool, u: Vec3, u0: Vec3, du: Vec3) -> Option<f32> {
+        let (i, b) = self.index(u)?;
+        let want = if inside {
+            BrickState::Full
+        } else {
+            BrickState::Empty
+        };
+        if self.state[i] != want {
+            return None;
+        }
+        let mut exit = f32::INFINITY;
+        for a in 0..3 {
+            let edge = if du[a] > 0.0 {
+                (b[a] + 1) * BRICK
+            } else if du[a] < 0.0 {
+                b[a] * BRICK
+            } else {
+                continue;
+            };
+            exit = exit.min((edge as f32 - u0[a]) / du[a]);
+        }
+        exit.is_finite().then_some(exit)
     }
 }
 

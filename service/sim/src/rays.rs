@@ -95,11 +95,26 @@ fn clip_line(a: Vec3, b: Vec3, lo: Vec3, hi: Vec3, t0: f32, t1: f32) -> Option<(
     Some((t0, t1))
 }
 
-/// The inside intervals along every pixel ray of `camera`, marching `step_m` metres.
+/// The inside intervals along every pixel ray of `camera`, marching `step_m` metres. A run of
+/// steps through a brick of the oracle whose voxels all read as the ray's current state
+/// ([`crate::oracle::Bricks`]: empty while outside, full while inside) is passed without
+/// reading it: the same samples, states and bisections as [`ray_intervals_marched`], so the
+/// same intervals, bit for bit (the sim's tests compare both).
 pub fn ray_intervals(oracle: &Oracle, camera: &Camera, step_m: f32) -> RayIntervals {
+    march(oracle, camera, step_m, true)
+}
+
+/// [`ray_intervals`] reading the oracle at every step (the reference of its tests and
+/// benchmark).
+pub fn ray_intervals_marched(oracle: &Oracle, camera: &Camera, step_m: f32) -> RayIntervals {
+    march(oracle, camera, step_m, false)
+}
+
+fn march(oracle: &Oracle, camera: &Camera, step_m: f32, skip: bool) -> RayIntervals {
     let (w, h) = (camera.width, camera.height);
     let view = camera.projector();
     let (lo, hi) = oracle.bounds();
+    let bricks = skip.then(|| oracle.bricks());
     let mut offsets = Vec::with_capacity(w * h + 1);
     let mut z = Vec::new();
     offsets.push(0u32);
@@ -115,16 +130,48 @@ pub fn ray_intervals(oracle: &Oracle, camera: &Camera, step_m: f32) -> RayInterv
                 let dt = step_m / b.length().max(1e-9);
                 let n = (((t1 - t0) / dt).ceil() as usize).max(1);
                 let at = |t: f32| a + b * t;
+                let sample = |k: usize| {
+                    if k == n {
+                        t1
+                    } else {
+                        t0 + (t1 - t0) * k as f32 / n as f32
+                    }
+                };
+                // The line in voxel coordinates, for the bricks' exits.
+                let (u0, du) = (
+                    oracle.voxel_coords(a),
+                    oracle.voxel_coords(a + b) - oracle.voxel_coords(a),
+                );
                 // March from far (t0) to near (t1); bisect each change of state.
                 let mut prev_t = t0;
                 let mut prev_in = inside(at(t0));
                 let mut open = if prev_in { Some(t0) } else { None };
-                for k in 1..=n {
-                    let t = if k == n {
-                        t1
-                    } else {
-                        t0 + (t1 - t0) * k as f32 / n as f32
-                    };
+                let mut k = 1;
+                while k <= n {
+                    let t = sample(k);
+                    if let Some(exit) = bricks
+                        .and_then(|br| br.exit_if(prev_in, oracle.voxel_coords(at(t)), u0, du))
+                    {
+                        // Samples k..=last lie in a brick that reads `prev_in` everywhere:
+                        // no change of state among them. (t grows with k.)
+                        let est = (exit - t0) / (t1 - t0) * n as f32;
+                        let mut last = if est.is_finite() && est > 0.0 {
+                            (est as usize).clamp(k, n)
+                        } else {
+                            k
+                        };
+                        while last > k && sample(last) >= exit {
+                            last -= 1;
+                        }
+                        while last < n && sample(last + 1) < exit {
+                            last += 1;
+                        }
+                        if sample(last) < exit {
+                            prev_t = sample(last);
+                            k = last + 1;
+                            continue;
+                        }
+                    }
                     let now_in = inside(at(t));
                     if now_in != prev_in {
                         let (mut l, mut r) = (prev_t, t);
@@ -144,6 +191,7 @@ pub fn ray_intervals(oracle: &Oracle, camera: &Camera, step_m: f32) -> RayInterv
                         prev_in = now_in;
                     }
                     prev_t = t;
+                    k += 1;
                 }
                 if let Some(s) = open {
                     z.push([s, t1]);

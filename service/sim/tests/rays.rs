@@ -5,7 +5,8 @@
 use glam::Vec3;
 use std::path::Path;
 use std::sync::Arc;
-use volcap_sim::rays::{DEFAULT_STEP_M, ray_intervals};
+use volcap_sim::oracle::{BRICK, BrickState};
+use volcap_sim::rays::{DEFAULT_STEP_M, ray_intervals, ray_intervals_marched};
 use volcap_sim::scene::Scene;
 use volcap_sim::{HumanAssets, Simulator};
 
@@ -125,4 +126,72 @@ fn the_nearest_interval_starts_at_the_rendered_surface() {
             "yaw {yaw}: {far} of {n} pixels disagree by > 3 cm"
         );
     }
+}
+
+/// The march passes the oracle's empty and full bricks without reading them: the intervals
+/// are the plain march's bit for bit, from every side, at the dataset's step and a coarse
+/// one, and on the close framing where rays graze the grid's edges.
+#[test]
+fn passing_uniform_bricks_changes_no_interval() {
+    let (mut sim, field) = clothed_subject(64);
+    let mut intervals = 0;
+    for yaw in [0.0f32, 37.0, 90.0, 180.0, 293.0] {
+        sim.set_view_yaw(yaw);
+        let f = sim.render(5).unwrap();
+        for step in [DEFAULT_STEP_M, 0.013] {
+            let fast = ray_intervals(&field.oracle, &f.camera, step);
+            let plain = ray_intervals_marched(&field.oracle, &f.camera, step);
+            assert_eq!(fast, plain, "yaw {yaw}, step {step}");
+            intervals += fast.z.len();
+        }
+    }
+    assert!(
+        intervals > 2_000,
+        "the subject is in view: {intervals} intervals"
+    );
+}
+
+/// A brick called empty reads 0 and a full one 1 at every point of its closed box (the
+/// voxels one beyond it included); all three states occur on a clothed subject.
+#[test]
+fn bricks_read_what_their_state_says() {
+    let (_sim, field) = clothed_subject(16);
+    let o = &field.oracle;
+    let (lo, hi) = o.bounds();
+    let bricks = o.bricks();
+    let mut seen = [0usize; 3];
+    let mut rng = 0x9e37_79b9_7f4a_7c15u64;
+    let mut unit = || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let voxel = o.voxel_m();
+    for _ in 0..200_000 {
+        let p = lo + (hi - lo) * Vec3::new(unit(), unit(), unit());
+        let u = o.voxel_coords(p);
+        let Some(state) = bricks.state_at(u) else {
+            continue;
+        };
+        // A point of the brick's box, on its faces and corners too.
+        let b = (u / BRICK as f32).floor();
+        let mut snap = |c: f32, b: f32| match (unit() * 4.0) as u32 {
+            0 => b * BRICK as f32,
+            1 => (b + 1.0) * BRICK as f32,
+            _ => c,
+        };
+        let q = Vec3::new(snap(u.x, b.x), snap(u.y, b.y), snap(u.z, b.z));
+        let occ = o.occupancy(lo + q * voxel);
+        match state {
+            BrickState::Empty => assert_eq!(occ, 0.0, "empty brick reads {occ} at {q}"),
+            BrickState::Full => assert!(occ > 0.999, "full brick reads {occ} at {q}"),
+            BrickState::Mixed => {}
+        }
+        seen[state as usize] += 1;
+    }
+    assert!(
+        seen.iter().all(|&n| n > 100),
+        "empty / full / mixed seen {seen:?}"
+    );
 }
