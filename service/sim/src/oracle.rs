@@ -445,18 +445,11 @@ impl Bricks {
         Some((b[0] + self.dims[0] * (b[1] + self.dims[1] * b[2]), b))
     }
 
-    /// Where the line `u0 + du t` (voxel coordinates) leaves the brick that holds `u` (a point
-    /// of it), when that brick reads `inside` everywhere; None otherwise.
-    pub fn exit_if(&self, inside: bool, u: Vec3, u0: Vec3, du: Vec3) -> Option<f32> {
+    /// The state of the brick that holds `u` (a point of the line `u0 + du t`, voxel
+    /// coordinates) and where the line leaves it; None past the grid or where the line does
+    /// not move.
+    pub fn visit(&self, u: Vec3, u0: Vec3, du: Vec3) -> Option<(BrickState, f32)> {
         let (i, b) = self.index(u)?;
-        let want = if inside {
-            BrickState::Full
-        } else {
-            BrickState::Empty
-        };
-        if self.state[i] != want {
-            return None;
-        }
         let mut exit = f32::INFINITY;
         for a in 0..3 {
             let edge = if du[a] > 0.0 {
@@ -468,7 +461,7 @@ impl Bricks {
             };
             exit = exit.min((edge as f32 - u0[a]) / du[a]);
         }
-        exit.is_finite().then_some(exit)
+        exit.is_finite().then_some((self.state[i], exit))
     }
 }
 

@@ -14,7 +14,7 @@
 //! same formula for the engine's tests.
 
 use crate::camera::Camera;
-use crate::oracle::Oracle;
+use crate::oracle::{BrickState, Oracle};
 use glam::Vec3;
 use volcap_engine::model::fourier::{Basis, FourierMaps};
 use volcap_engine::model::preprocess::Crop;
@@ -147,11 +147,25 @@ fn march(oracle: &Oracle, camera: &Camera, step_m: f32, skip: bool) -> RayInterv
                 let mut prev_in = inside(at(t0));
                 let mut open = if prev_in { Some(t0) } else { None };
                 let mut k = 1;
+                // The line is in a mixed brick until here: no brick to pass before.
+                let mut mixed_until = f32::NEG_INFINITY;
                 while k <= n {
                     let t = sample(k);
-                    if let Some(exit) = bricks
-                        .and_then(|br| br.exit_if(prev_in, oracle.voxel_coords(at(t)), u0, du))
-                    {
+                    let brick = match bricks {
+                        Some(br) if t >= mixed_until => {
+                            br.visit(oracle.voxel_coords(at(t)), u0, du)
+                        }
+                        _ => None,
+                    };
+                    if let Some((BrickState::Mixed, exit)) = brick {
+                        mixed_until = exit;
+                    }
+                    let reads = if prev_in {
+                        BrickState::Full
+                    } else {
+                        BrickState::Empty
+                    };
+                    if let Some((_, exit)) = brick.filter(|(s, _)| *s == reads) {
                         // Samples k..=last lie in a brick that reads `prev_in` everywhere:
                         // no change of state among them. (t grows with k.)
                         let est = (exit - t0) / (t1 - t0) * n as f32;
