@@ -104,8 +104,7 @@ pub fn ray_intervals(oracle: &Oracle, camera: &Camera, step_m: f32) -> RayInterv
     march(oracle, camera, step_m, true)
 }
 
-/// [`ray_intervals`] reading the oracle at every step (the reference of its tests and
-/// benchmark).
+/// [`ray_intervals`] reading the oracle at every step (the reference of its tests).
 pub fn ray_intervals_marched(oracle: &Oracle, camera: &Camera, step_m: f32) -> RayIntervals {
     march(oracle, camera, step_m, false)
 }
@@ -138,10 +137,8 @@ fn march(oracle: &Oracle, camera: &Camera, step_m: f32, skip: bool) -> RayInterv
                     }
                 };
                 // The line in voxel coordinates, for the bricks' exits.
-                let (u0, du) = (
-                    oracle.voxel_coords(a),
-                    oracle.voxel_coords(a + b) - oracle.voxel_coords(a),
-                );
+                let u0 = oracle.voxel_coords(a);
+                let du = oracle.voxel_coords(a + b) - u0;
                 // March from far (t0) to near (t1); bisect each change of state.
                 let mut prev_t = t0;
                 let mut prev_in = inside(at(t0));

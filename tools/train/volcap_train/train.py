@@ -417,6 +417,11 @@ def data_on_device(choice: str, dev: torch.device, sets) -> bool:
     return need <= free // 2
 
 
+# With torch 2.15 on this CPU every encoder weight's gradient came out non-finite after the
+# first backward of the compiled bfloat16 graph (eager bfloat16 and compiled float32 are finite).
+COMPILE_BF16_REFUSED = "--compile with --amp bf16: the compiled bfloat16 backward gives non-finite gradients (torch's inductor on CPU, measured with torch 2.15); use one of them"
+
+
 def training_forward(fn, modules, amp: str = "off", compile: bool = False):
     """The training steps' forward of `fn` (input [B, C, H, W] -> a tuple of tensors or None).
     `amp` "bf16": under autocast in bfloat16 (AMX or AVX-512 BF16 on a CPU that has them,
@@ -424,12 +429,11 @@ def training_forward(fn, modules, amp: str = "off", compile: bool = False):
     exponentials and the optimizer stay float32. `compile`: the forward graph compiled
     (torch.compile; the backward follows it). Either puts the modules' weights and the input
     in channels-last order (what oneDNN's convolutions want on a CPU). Both at once are
-    refused (`main`): with torch 2.15 on this CPU every encoder weight's gradient came out
-    non-finite after the first backward of the compiled bfloat16 graph."""
+    refused (COMPILE_BF16_REFUSED; `main` refuses them before any data is read)."""
     if amp not in ("off", "bf16"):
         raise ValueError(f"amp {amp!r}: off or bf16")
     if compile and amp != "off":
-        raise ValueError("--compile with --amp bf16: the compiled bfloat16 backward gives non-finite gradients (torch's inductor on CPU); use one of them")
+        raise ValueError(COMPILE_BF16_REFUSED)
     if not compile and amp == "off":
         return fn
     for m in modules:
@@ -690,7 +694,7 @@ def main(argv=None):
     ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
-        ap.error("--compile with --amp bf16: the compiled bfloat16 backward gives non-finite gradients (torch's inductor on CPU, measured with torch 2.15); use one of them")
+        ap.error(COMPILE_BF16_REFUSED)
     if args.threads:
         torch.set_num_threads(args.threads)
     return {"seg": train_seg, "shape": train_shape, "color": train_color, "fourier": train_fourier}[args.task](args)
