@@ -45,7 +45,7 @@ pub struct App {
     pub rtsp: Arc<crate::rtsp::Status>,
 }
 
-pub use mesh::{MESH_CONCURRENCY, MeshCache, MeshWorker};
+pub use mesh::{MESH_CONCURRENCY, MESH_NICE, MeshCache, MeshWorker};
 
 impl App {
     pub fn new(

@@ -14,6 +14,23 @@ use common::{
 };
 
 /// `volcapd` threads whose name is `name` (`/proc/PID/task/*/comm`).
+/// The niceness of each of `pid`'s threads named `name` (field 19 of `/proc/PID/task/TID/stat`,
+/// counted after the `(comm)` field, which may hold spaces).
+fn nice_of_threads(pid: u32, name: &str) -> Vec<i64> {
+    let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return Vec::new();
+    };
+    dir.filter_map(|e| e.ok())
+        .filter(|e| std::fs::read_to_string(e.path().join("comm")).is_ok_and(|c| c.trim() == name))
+        .filter_map(|e| {
+            let stat = std::fs::read_to_string(e.path().join("stat")).ok()?;
+            // After "pid (comm) ": state is field 3, nice field 19.
+            let rest = &stat[stat.rfind(')')? + 2..];
+            rest.split_whitespace().nth(16)?.parse().ok()
+        })
+        .collect()
+}
+
 fn threads_named(pid: u32, name: &str) -> usize {
     std::fs::read_dir(format!("/proc/{pid}/task"))
         .map(|d| {
@@ -187,9 +204,14 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     );
     assert_eq!(mesh_metric(&addr, "volcap_mesh_total{result=\"done\"}"), 0);
     let from = Instant::now();
+    let frames0 = state(&addr)["frames_published"].as_u64().unwrap();
     let (rss, mesh, threads, busy) = abandon_meshes(&addr, pid, 300, Duration::from_millis(20));
-    let during = fps(&addr, 3.0);
+    std::thread::sleep(Duration::from_secs(3));
+    // Frames a second over the storm and the three seconds after it.
+    let during = (state(&addr)["frames_published"].as_u64().unwrap() - frames0) as f64
+        / from.elapsed().as_secs_f64();
     let gap = notify.longest_gap(from);
+    let nice = nice_of_threads(pid, "volcap-mesh");
     eprintln!(
         "257^3: cancelled in {cancelled_in:?}; 300 abandoned: RSS {} -> peak {} MB, threads {threads0} -> {threads}, \
          mesh threads at once {mesh}, fps {before:.1} -> {during:.1}, longest watchdog gap {gap:?}",
@@ -198,7 +220,16 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     );
     assert!(threads <= threads0 + 2, "threads {threads0} -> {threads}");
     assert!(rss < 600 * 1024, "peak RSS {} MB", rss / 1024);
-    assert!(during >= before / 2.0, "fps {before:.1} -> {during:.1}");
+    // Not starved: the pipeline goes on publishing. The bug this guards against took it to
+    // 4 frames in 40 s; a quarter of the rate before leaves room for a shared CI machine's
+    // noise (a vCPU's steal time is not ours to measure), while the mesh thread's niceness
+    // below is the deterministic half of the property.
+    assert!(during >= before / 4.0, "fps {before:.1} -> {during:.1}");
+    assert_eq!(
+        nice,
+        vec![i64::from(volcapd::http::MESH_NICE)],
+        "the mesh thread runs at a lower priority than the pipeline"
+    );
     assert!(gap < Duration::from_secs(5), "watchdog gap {gap:?}");
     assert_eq!(own_thread, 1, "the mesh runs on its own thread");
     assert!(mesh <= 1, "{mesh} mesh threads at once");
