@@ -455,12 +455,9 @@ impl Config {
             &CLOSE_RANGE_FRAMES,
             " (frames)",
         )?;
-        in_range(
-            "model.segment_passes",
-            self.model.segment_passes,
-            &SEGMENT_PASSES,
-            "",
-        )?;
+        if let Some(passes) = self.model.segment_passes {
+            in_range("model.segment_passes", passes, &SEGMENT_PASSES, "")?;
+        }
         let split = self.compute.segment_thread_up_to;
         if split != 0 && !GRID_RESOLUTIONS.contains(&split) {
             return bad(

@@ -127,7 +127,9 @@ fn main() -> ExitCode {
             Ok(m) => {
                 let fill = cfg.model.thin_parts.moment_fill();
                 let (mut m, took) = m.with_moment_fill(fill);
-                m.segment_passes = cfg.model.segment_passes;
+                if let Some(passes) = cfg.model.segment_passes {
+                    m.segment_passes = passes;
+                }
                 if fill.is_some() && took == 0 {
                     tracing::warn!(
                         "model.thin_parts = \"moment-fill\": {} is not a Fourier model; read as predicted",
@@ -200,6 +202,9 @@ fn main() -> ExitCode {
     tracing::info!(config = %cli.config.display(), board = %cfg.description, "starting");
     let (tx, _rx) = tokio::sync::watch::channel(None);
     let mut shared = pipeline::Shared::new(&cfg, source.clone(), tx);
+    if let Some(m) = &models {
+        shared.set_segment_passes(m.segment_passes);
+    }
     if let Some((label, fallback)) = runtime {
         shared.set_runtime(label, fallback);
     }

@@ -187,7 +187,7 @@ impl Shared {
             mode: cfg.field().name(),
             field_label: match cfg.field() {
                 FieldMode::Model => format!(
-                    "reconstruction: {} ({}{}{})",
+                    "reconstruction: {} ({}{})",
                     cfg.model.name,
                     match cfg.model.precision {
                         crate::config::Precision::F32 => "f32",
@@ -197,11 +197,6 @@ impl Shared {
                         crate::config::ThinParts::Series => "",
                         crate::config::ThinParts::MomentFill => ", thin parts: moment-fill",
                     },
-                    if cfg.model.segment_passes > 1 {
-                        ", segmented twice"
-                    } else {
-                        ""
-                    }
                 ),
                 other => other.name().to_string(),
             },
@@ -217,6 +212,19 @@ impl Shared {
             evaluations: AtomicU64::new(0),
             temporal: cfg.field() == FieldMode::Model && cfg.temporal.enabled,
             temporal_resets: AtomicU64::new(0),
+        }
+    }
+
+    /// Model mode: how many times each frame is segmented, as the loaded networks run it
+    /// (`[model] segment_passes`, unset: as the shape model was trained); two joins the
+    /// field's label (`reconstruction: NAME (PRECISION, segmented twice)`). Called before
+    /// [`Self::set_runtime`].
+    pub fn set_segment_passes(&mut self, passes: u8) {
+        if self.mode == "model"
+            && passes > 1
+            && let Some(open) = self.field_label.rfind(')')
+        {
+            self.field_label.insert_str(open, ", segmented twice");
         }
     }
 

@@ -155,7 +155,9 @@ impl Drop for Notify {
 /// computation went on, so abandoned requests stacked computations: 300 at 257^3 from one
 /// address took RSS to 1.2 GB, 93 threads, 4 frames in 40 s and a 10 s watchdog gap. Now the
 /// permit lives as long as the computation, leaving cancels it, and it runs at a lower
-/// priority on one thread of its own.
+/// priority on one thread of its own. Times are measured against yardsticks of the same run
+/// (a whole mesh, the frame rate before), not wall-clock constants: CI's shared vCPUs and a
+/// machine busy beside the test stretch both sides alike.
 #[test]
 fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     let _s = serial();
@@ -182,6 +184,18 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     });
     let before = fps(&addr, 3.0);
     let (threads0, rss0) = (proc_status(&p, "Threads:"), proc_status(&p, "VmRSS:"));
+    // The yardstick of "stops early": one whole mesh at 257^3 under the same load (the
+    // pipeline running beside it, the mesh thread at its lower priority).
+    let t = Instant::now();
+    let (st, head, glb) = request(&addr, "GET", "/mesh.glb", "");
+    assert_eq!(st, 200, "{head}");
+    assert_eq!(&glb[..4], b"glTF");
+    let whole = t.elapsed();
+    // A new frame, so that the next request computes instead of reading the cache.
+    let n = state(&addr)["frames_published"].as_u64().unwrap();
+    wait_for(&addr, "a new frame", Duration::from_secs(30), |s| {
+        s["frames_published"].as_u64() > Some(n)
+    });
     // One request kept open: a mesh is computed on one thread, and a second request
     // meanwhile is told to come back.
     let mut a = TcpStream::connect(&addr).unwrap();
@@ -202,7 +216,7 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
         mesh_metric(&addr, "volcap_mesh_total{result=\"cancelled\"}"),
         1
     );
-    assert_eq!(mesh_metric(&addr, "volcap_mesh_total{result=\"done\"}"), 0);
+    assert_eq!(mesh_metric(&addr, "volcap_mesh_total{result=\"done\"}"), 1);
     let from = Instant::now();
     let frames0 = state(&addr)["frames_published"].as_u64().unwrap();
     let (rss, mesh, threads, busy) = abandon_meshes(&addr, pid, 300, Duration::from_millis(20));
@@ -213,7 +227,7 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     let gap = notify.longest_gap(from);
     let nice = nice_of_threads(pid, "volcap-mesh");
     eprintln!(
-        "257^3: cancelled in {cancelled_in:?}; 300 abandoned: RSS {} -> peak {} MB, threads {threads0} -> {threads}, \
+        "257^3: a whole mesh in {whole:?}, an abandoned one cancelled in {cancelled_in:?}; 300 abandoned: RSS {} -> peak {} MB, threads {threads0} -> {threads}, \
          mesh threads at once {mesh}, fps {before:.1} -> {during:.1}, longest watchdog gap {gap:?}",
         rss0 / 1024,
         rss / 1024
@@ -235,8 +249,8 @@ fn abandoned_mesh_requests_neither_stack_nor_starve_the_pipeline() {
     assert!(mesh <= 1, "{mesh} mesh threads at once");
     assert!(busy <= 1, "{busy} mesh computations at once");
     assert!(
-        cancelled_in < Duration::from_secs(1),
-        "an abandoned mesh ran on for {cancelled_in:?}"
+        cancelled_in < whole / 2,
+        "an abandoned mesh ran on for {cancelled_in:?}, a whole one takes {whole:?}"
     );
     assert!(
         !notify

@@ -187,7 +187,8 @@ fn close_range_model_is_checked_at_start() {
 /// within 10 % of the reach, measured against each render's own height, since the model
 /// frames the person in its own proportions), it only adds pixels, and not many. The series
 /// alone may end at a wrist (printed: `fourier-small` does at both; `fourier-small-seg2`, trained
-/// on two-pass masks, at one). The config names no model: the daemon's default, `fourier-small`.
+/// on two-pass masks, at one). The config names no model: the daemon's default,
+/// `fourier-small-seg2` (`volcap_engine::model::DEFAULT_MODEL`), segmented once.
 #[test]
 fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
     let _serial = serial();

@@ -615,6 +615,86 @@ fn fourier_surface_level_metadata_is_checked_and_applied() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `volcap.segment_passes`: the passes a Fourier model was trained on are the ones it is
+/// loaded with (`Models::segment_passes`, the daemon's `[model] segment_passes` unset), read
+/// the same without building a network (`trained_segment_passes`, for the tools); absent
+/// reads 1, and a count outside the engine's range is refused naming the file and the key.
+#[test]
+fn fourier_segment_passes_metadata_is_checked_and_loaded() {
+    use prost::Message;
+    use tract_onnx::prelude::Framework;
+    use volcap_engine::model::trained_segment_passes;
+    // The committed files: the default model was trained on two-pass masks, fourier-small on one.
+    let dir = models_dir();
+    for (name, want) in [
+        ("fourier-small-seg2", 2),
+        ("fourier-small", 1),
+        ("compact", 1),
+    ] {
+        for prec in [Precision::F32, Precision::Int8] {
+            assert_eq!(
+                trained_segment_passes(&dir, name, prec).unwrap(),
+                want,
+                "{name}"
+            );
+        }
+        let m = Models::load(&dir, name, Precision::F32).unwrap();
+        assert_eq!(m.segment_passes, want, "{name}");
+        assert_eq!(m.shape.trained_segment_passes(), want, "{name}");
+    }
+    assert_eq!(
+        trained_segment_passes(&dir, volcap_engine::model::DEFAULT_MODEL, Precision::F32).unwrap(),
+        2
+    );
+    let src = FourierNet::path(&dir, "fourier", Precision::F32);
+    let with_passes = |value: &str, dir: &Path| {
+        let mut m = tract_onnx::onnx().proto_model_for_path(&src).unwrap();
+        m.metadata_props
+            .retain(|p| p.key != "volcap.segment_passes");
+        let mut p = m.metadata_props[0].clone();
+        p.key = "volcap.segment_passes".into();
+        p.value = value.into();
+        m.metadata_props.push(p);
+        std::fs::write(
+            FourierNet::path(dir, "fourier", Precision::F32),
+            m.encode_to_vec(),
+        )
+        .unwrap();
+    };
+    let dir = tmp("passes");
+    for bad in ["0", "3", "-1", "two", ""] {
+        with_passes(bad, &dir);
+        for e in [
+            FourierNet::load(&dir, "fourier", Precision::F32)
+                .err()
+                .unwrap_or_else(|| panic!("segment passes {bad:?} was accepted"))
+                .to_string(),
+            trained_segment_passes(&dir, "fourier", Precision::F32)
+                .unwrap_err()
+                .to_string(),
+        ] {
+            assert!(
+                e.contains("shape-fourier.fourier.onnx")
+                    && e.contains("volcap.segment_passes")
+                    && e.contains("1..=2"),
+                "{bad}: {e}"
+            );
+        }
+    }
+    with_passes("2", &dir);
+    assert_eq!(
+        FourierNet::load(&dir, "fourier", Precision::F32)
+            .unwrap()
+            .segment_passes,
+        2
+    );
+    assert_eq!(
+        trained_segment_passes(&dir, "fourier", Precision::F32).unwrap(),
+        2
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Issue 32: the temporal filter on a stream of hard frames (black, white, noise, cut,
 /// tiny, odd sizes, the person between them, and the person twice in a row): every field
 /// stays finite and in [0, 1] across its resets; a frame showing a person elsewhere (the

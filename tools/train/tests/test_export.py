@@ -252,3 +252,23 @@ def test_export_reads_a_light_checkpoint_as_a_run_s(tmp_path):
     # A module the checkpoint lacks is refused naming the file and the module.
     with pytest.raises(SystemExit, match=r"ckpt\.pt: no module enc"):
         load_modules(run, ["enc", "net"])
+
+
+@pytest.mark.parametrize("name", sorted(p.name.split(".")[0] for p in MODELS.glob("shape-fourier*.fourier*.onnx")))
+def test_committed_fourier_files_say_the_segmentation_passes_they_were_trained_on(name):
+    # The engine feeds a model masks made as its training masks were (`volcap.segment_passes`,
+    # absent: 1; `[model] segment_passes` unset): the file must say what its run used.
+    card = json.loads((MODELS / "models.json").read_text())[name]
+    trained = int(card.get("budget", {}).get("args", {}).get("segment_passes", 1) or 1)
+    for f in MODELS.glob(f"{name}.fourier*.onnx"):
+        meta = {p.key: p.value for p in onnx.load(str(f), load_external_data=False).metadata_props}
+        assert int(meta.get("volcap.segment_passes", "1")) == trained, f.name
+
+
+def test_fourier_export_writes_the_segmentation_passes_of_a_two_pass_run():
+    from volcap_train.export import fourier_meta
+
+    one = fourier_meta("fourier-small", 15, "body", 0.55, "x", passes=1)
+    two = fourier_meta("fourier-small", 15, "body", 0.55, "x", passes=2)
+    assert "segment_passes" not in one and two["segment_passes"] == "2"
+    assert {k: v for k, v in two.items() if k != "segment_passes"} == one

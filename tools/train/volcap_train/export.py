@@ -424,6 +424,20 @@ def calib_row(seg: Path | None, upper_every: int, fine: bool = False, percentile
     return f"{scheme_text(fine, percentile)} from {INT8_CALIB_IMAGES} training images, {masks}{upper}"
 
 
+def fourier_meta(variant: str, k: int, frame: str, iso: float, name: str, passes: int, size: int = 128) -> dict:
+    """A Fourier file's metadata (`volcap.*` once written)."""
+    meta = {"kind": "shape-fourier", "variant": variant, "input_size": 256, "fourier_k": k, "coeff_size": size, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": name,
+            # Where the person sits along depth (train --depth-frame; runs before it: camera).
+            "depth_frame": frame,
+            # The series level read as the surface (calibrated on the training split).
+            "iso_level": f"{iso:.2f}"}
+    if passes > 1:
+        # Trained on masks of two segmentation passes: the engine feeds it such masks unless
+        # told otherwise (`volcap.segment_passes`, `[model] segment_passes` unset).
+        meta["segment_passes"] = str(passes)
+    return meta
+
+
 def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, common, gen, va: Split, data: Path, level: str = "auto") -> dict:
     net = load_fourier(run, variant)
     k = net.k
@@ -437,11 +451,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     if level != "auto":
         iso = float(level)
         iso_rule = "set at export (`--iso-level`, from a sweep on training subjects: see the run history); mean point IoU on the training split"
-    meta = {"kind": "shape-fourier", "variant": variant, "input_size": 256, "fourier_k": k, "coeff_size": size, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": name,
-            # Where the person sits along depth (train --depth-frame; runs before it: camera).
-            "depth_frame": frame,
-            # The series level read as the surface (calibrated on the training split).
-            "iso_level": f"{iso:.2f}"}
+    meta = fourier_meta(variant, k, frame, iso, name, passes, size)
     path = out / f"{base}.fourier.onnx"
     export(net, (x,), ["image"], ["coeff"], path, meta, False)
     files = [path.name]

@@ -70,7 +70,7 @@ pub struct EvalArgs {
     /// is the ground-truth Fourier field of order K (crop from the true mask): the Fourier
     /// family's upper bound at that truncation; `truth-cosN` the ground-truth half-range
     /// cosine series of N terms (N odd; FOF-X's basis) at the same channel count 2K + 1 = N.
-    #[arg(long, value_delimiter = ',', default_value = "fourier-small")]
+    #[arg(long, value_delimiter = ',', default_value = volcap_engine::model::DEFAULT_MODEL)]
     pub model: Vec<String>,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
@@ -122,8 +122,10 @@ pub struct EvalArgs {
     pub moment_fill: Option<Vec<f32>>,
     /// Segmentation passes, comma-separated, each 1 or 2 (`Models::person_mask`; the
     /// daemon's `[model] segment_passes`): 2 segments the person's crop again. Every model
-    /// gets a row per value (`NAME-f32-seg2`), side by side.
-    #[arg(long, value_delimiter = ',', default_value = "1")]
+    /// gets a row per value, side by side, named for the count where it is not the one the
+    /// model was trained on (`NAME-f32-seg2`, `NAME-f32-seg1`). Unset: each model as it was
+    /// trained (its file's `volcap.segment_passes`), as `volcapd` runs it.
+    #[arg(long, value_delimiter = ',')]
     pub segment_passes: Vec<u8>,
     /// Localization's coarsest level (`2^l + 1` points a side; the boards' `render.coarse_level`
     /// is 4): default, the engine's for the grid (3 at 257^3: 9^3 seeds).
@@ -211,6 +213,8 @@ pub struct ModelRow {
     pub params: Option<u64>,
     /// [`ImageRow::part_cm`] averaged over the images that show the part.
     pub part_cm: [f64; 6],
+    /// How many times each frame was segmented (`Models::segment_passes`).
+    pub segment_passes: u8,
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
@@ -479,7 +483,9 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             "--moment-fill {m:?}: MIN_LEN,MAX_LEN,AWAY with 0 < MIN_LEN <= MAX_LEN <= 2 and AWAY a whole number of map pixels in 1..=32"
         );
     }
-    crate::backend::check_segment_passes(&a.segment_passes)?;
+    if !a.segment_passes.is_empty() {
+        crate::backend::check_segment_passes(&a.segment_passes)?;
+    }
     for l in &a.iso_level {
         if !(l.is_finite() && *l > 0.0 && *l < 1.0) {
             anyhow::bail!("--iso-level {l}: each level must lie in (0, 1)");
@@ -496,7 +502,12 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         _ => vec![None],
     };
     let cases = render_cases(a)?;
-    let passes = &a.segment_passes;
+    // None: the model's own count.
+    let passes: Vec<Option<u8>> = if a.segment_passes.is_empty() {
+        vec![None]
+    } else {
+        a.segment_passes.iter().map(|p| Some(*p)).collect()
+    };
     let pb = ProgressBar::new(
         (cases.len() * specs.len() * levels.len() * fills.len() * passes.len()) as u64,
     );
@@ -524,6 +535,8 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             *prec,
             &runtime,
         )?;
+        let own_passes = models.segment_passes;
+        let seg_passes = seg_passes.unwrap_or(own_passes);
         models.segment_passes = seg_passes;
         // The Fourier net's decode knobs (not the ground-truth rows' nor other families').
         let knobs = a.peak_level.is_some() || a.moment_fill.is_some() || level.is_some();
@@ -569,7 +582,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             "{name}-{}{}{}{}{}{}",
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
-            if seg_passes > 1 {
+            if seg_passes != own_passes {
                 format!("-seg{seg_passes}")
             } else {
                 String::new()
@@ -646,6 +659,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 models.shape.family().to_string()
             },
             images: rows.len(),
+            segment_passes: seg_passes,
             failed: rows.len() - ok.len(),
             chamfer_cm: mean(ok.iter().map(|r| r.chamfer_cm)),
             p2s_cm: mean(ok.iter().map(|r| r.p2s_cm)),

@@ -98,7 +98,7 @@ pub struct PipelineArgs {
     #[arg(long, value_delimiter = ',', default_value = "65,129,257")]
     pub res: Vec<usize>,
     /// Models (NAME or NAME@int8, comma-separated; models/shape-NAME.*).
-    #[arg(long = "model", value_delimiter = ',', default_value = "fourier-small")]
+    #[arg(long = "model", value_delimiter = ',', default_value = volcap_engine::model::DEFAULT_MODEL)]
     pub models: Vec<String>,
     /// Coarsest localization levels (comma-separated).
     #[arg(long = "coarse-level", value_delimiter = ',', default_value = "3")]
@@ -150,8 +150,9 @@ pub struct PipelineArgs {
     pub render_devices: Vec<String>,
     /// `model.segment_passes` values (comma-separated, 1 or 2): 2 segments each frame's
     /// person crop again (one more segmentation a frame; its accuracy in `volcap eval
-    /// --segment-passes 1,2`).
-    #[arg(long = "segment-passes", value_delimiter = ',', default_value = "1")]
+    /// --segment-passes 1,2`). Unset: each model as it was trained (its file's
+    /// `volcap.segment_passes`), as `volcapd` runs it.
+    #[arg(long = "segment-passes", value_delimiter = ',')]
     pub segment_passes: Vec<u8>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]

@@ -16,7 +16,7 @@ use volcap_engine::model::{Net, NodeTime};
 #[derive(Args, Debug, Clone)]
 pub struct NetsArgs {
     /// Shape models (NAME or NAME@int8, comma-separated).
-    #[arg(long = "model", value_delimiter = ',', default_value = "fourier-small")]
+    #[arg(long = "model", value_delimiter = ',', default_value = volcap_engine::model::DEFAULT_MODEL)]
     pub models: Vec<String>,
     /// Runtimes (comma-separated): tract, onnxruntime (its library as the daemon finds it:
     /// $VOLCAP_ONNXRUNTIME, /usr/lib/volcap/onnxruntime/, target/onnxruntime/), wgpu (the

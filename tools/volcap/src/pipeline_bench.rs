@@ -235,7 +235,7 @@ fn measure(
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         rounds_per_wait: cfg.compute.rounds_per_wait,
         render_device: cfg.compute.render_device.name(),
-        segment_passes: cfg.model.segment_passes,
+        segment_passes: cfg.model.segment_passes.unwrap_or(1),
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
         localize_ms_per_frame: (work1[7] - work0[7]) as f64 / 1e6 / published.max(1) as f64,
         display_ms_per_frame: (work1[8] - work0[8]) as f64 / 1e6 / published.max(1) as f64,
@@ -270,7 +270,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    crate::backend::check_segment_passes(&a.segment_passes)?;
+    if !a.segment_passes.is_empty() {
+        crate::backend::check_segment_passes(&a.segment_passes)?;
+    }
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);
     }
@@ -302,6 +304,15 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     let mut configs = Vec::new();
     for m in &a.models {
         let (name, prec) = model_spec(m)?;
+        // Unset: the model's own count, as volcapd runs it.
+        let passes_of_model = if a.segment_passes.is_empty() {
+            vec![
+                volcap_engine::model::trained_segment_passes(&models_dir, &name, prec)
+                    .map_err(|e| anyhow!("model {name}: {e}"))?,
+            ]
+        } else {
+            a.segment_passes.clone()
+        };
         for &res in &a.res {
             for &c in &a.coarse_levels {
                 for &split in &a.segment_split {
@@ -311,7 +322,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                 for &rounds in &a.rounds_per_wait {
                                     for (&dev, &passes) in render_devices
                                         .iter()
-                                        .flat_map(|d| a.segment_passes.iter().map(move |p| (d, p)))
+                                        .flat_map(|d| passes_of_model.iter().map(move |p| (d, p)))
                                     {
                                         for &t in &a.threads {
                                             configs.push((
@@ -347,7 +358,12 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     // (The segmentation passes are the models' own setting, as in volcapd: a copy each.)
     let mut loaded: Vec<(ModelKey, Arc<Models>)> = Vec::new();
     let key = |cfg: &Config, name: &String, prec: &Precision, ri: &usize| -> ModelKey {
-        (name.clone(), *prec, *ri, cfg.model.segment_passes)
+        (
+            name.clone(),
+            *prec,
+            *ri,
+            cfg.model.segment_passes.unwrap_or(1),
+        )
     };
     for (cfg, (name, prec, ..), ri) in &runs {
         let k = key(cfg, name, prec, ri);

@@ -18,7 +18,7 @@ use std::path::PathBuf;
 #[derive(Args, Debug, Clone)]
 pub struct QueuesArgs {
     /// The shape network run in the background (models/shape-NAME.*, f32).
-    #[arg(long, default_value = "fourier-small")]
+    #[arg(long, default_value = volcap_engine::model::DEFAULT_MODEL)]
     pub model: String,
     /// Grid resolution of the localization timed (2^L + 1).
     #[arg(long, default_value_t = 129)]

@@ -33,7 +33,7 @@ pub struct ReconstructArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Shape model: NAME or NAME@int8 (files models/shape-NAME.*).
-    #[arg(long, default_value = "fourier-small")]
+    #[arg(long, default_value = volcap_engine::model::DEFAULT_MODEL)]
     pub model: String,
     /// Close-range shape model (e.g. `fourier-small-upper`): used instead of --model on
     /// images whose person the image's lower edge cuts (an upper body), as `volcapd`'s
@@ -41,9 +41,9 @@ pub struct ReconstructArgs {
     #[arg(long, value_name = "NAME")]
     pub close_range: Option<String>,
     /// Segmentation passes: 1, or 2 to segment the person's crop again (`volcapd`'s `[model]
-    /// segment_passes`).
-    #[arg(long, default_value_t = 1, value_parser = segment_passes)]
-    pub segment_passes: u8,
+    /// segment_passes`); unset: as the model was trained (its file's `volcap.segment_passes`).
+    #[arg(long, value_parser = segment_passes)]
+    pub segment_passes: Option<u8>,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
@@ -265,7 +265,9 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
         Some(close) => models.with_close_range(&a.models_dir, close)?,
         None => models,
     };
-    models.segment_passes = a.segment_passes;
+    if let Some(passes) = a.segment_passes {
+        models.segment_passes = passes;
+    }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let bar = if a.json {
         ProgressBar::hidden()

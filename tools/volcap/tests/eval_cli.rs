@@ -188,8 +188,42 @@ fn segment_pass_rows_stand_beside_each_other() {
         .map(|r| r["model"].as_str().unwrap())
         .collect();
     assert_eq!(names, ["fourier-small-f32", "fourier-small-f32-seg2"]);
+    let passes: Vec<u64> = summaries
+        .iter()
+        .map(|r| r["segment_passes"].as_u64().unwrap())
+        .collect();
+    assert_eq!(passes, [1, 2]);
     for r in &summaries {
         let m = r["mask_iou"].as_f64().unwrap();
         assert!(m.is_finite() && m > 0.5, "{r}");
     }
+}
+
+/// Without `--segment-passes` each model is segmented as it was trained (its file's
+/// `volcap.segment_passes`), as volcapd runs it: the default model twice, `fourier-small`
+/// once; a count other than the model's own is named in the row.
+#[test]
+fn each_model_is_segmented_as_it_was_trained_unless_told() {
+    let rows = run_eval(
+        "own-passes",
+        &[&TINY[..], &["--model", "fourier-small-seg2,fourier-small"]].concat(),
+    );
+    let row = |rows: &[serde_json::Value], name: &str| -> u64 {
+        rows.iter()
+            .find(|r| r.get("family").is_some() && r["model"] == name)
+            .unwrap_or_else(|| panic!("no row {name}"))["segment_passes"]
+            .as_u64()
+            .unwrap()
+    };
+    assert_eq!(row(&rows, "fourier-small-seg2-f32"), 2);
+    assert_eq!(row(&rows, "fourier-small-f32"), 1);
+    let rows = run_eval(
+        "one-pass",
+        &[
+            &TINY[..],
+            &["--model", "fourier-small-seg2", "--segment-passes", "1"],
+        ]
+        .concat(),
+    );
+    assert_eq!(row(&rows, "fourier-small-seg2-f32-seg1"), 1);
 }

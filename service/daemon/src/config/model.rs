@@ -18,8 +18,9 @@ pub enum Precision {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
-    /// The shape model: `fourier-small` (the default, the best measured) or another committed
-    /// variant (`models/models.json`).
+    /// The shape model: `fourier-small-seg2` (the default, the best measured:
+    /// [`volcap_engine::model::DEFAULT_MODEL`]) or another committed variant
+    /// (`models/models.json`).
     #[serde(default = "d_model")]
     pub name: String,
     #[serde(default)]
@@ -46,9 +47,11 @@ pub struct ModelConfig {
     pub thin_parts: ThinParts,
     /// How many times each frame is segmented: 1 (the letterboxed frame) or 2 (then the
     /// person's crop of it once more, an arm or a hand the first pass lost taken back: one
-    /// more segmentation a frame; docs/eval/hands.md section 8).
-    #[serde(default = "d_segment_passes")]
-    pub segment_passes: u8,
+    /// more segmentation a frame; docs/eval/hands.md section 8). Unset: as the shape model
+    /// was trained (its file's `volcap.segment_passes`: 2 for the default
+    /// `fourier-small-seg2`, 1 for `fourier-small`).
+    #[serde(default)]
+    pub segment_passes: Option<u8>,
 }
 
 /// `model.thin_parts`.
@@ -71,10 +74,6 @@ impl ThinParts {
     }
 }
 
-fn d_segment_passes() -> u8 {
-    1
-}
-
 /// `model.segment_passes`: the engine's range.
 pub use volcap_engine::model::SEGMENT_PASSES;
 
@@ -83,9 +82,9 @@ fn d_close_range_frames() -> u32 {
     5
 }
 
-/// The best model measured (docs/eval): the Fourier head `fourier-small`.
+/// The best model measured (docs/eval): [`volcap_engine::model::DEFAULT_MODEL`].
 fn d_model() -> String {
-    "fourier-small".into()
+    volcap_engine::model::DEFAULT_MODEL.into()
 }
 fn d_model_dir() -> PathBuf {
     PathBuf::from("../models")
@@ -100,7 +99,7 @@ impl Default for ModelConfig {
             close_range: None,
             close_range_frames: d_close_range_frames(),
             thin_parts: ThinParts::Series,
-            segment_passes: d_segment_passes(),
+            segment_passes: None,
         }
     }
 }

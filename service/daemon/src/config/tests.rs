@@ -273,19 +273,21 @@ fn thin_parts_is_read_and_a_wrong_value_named() {
     );
 }
 
-/// `model.segment_passes`: one by default, two by choice, and anything else refused naming
-/// the key and the range.
+/// `model.segment_passes`: unset by default (the shape model's own), one or two by choice,
+/// and anything else refused naming the key and the range.
 #[test]
 fn segment_passes_is_read_and_a_wrong_count_named() {
     let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
     let c = Config::parse(base, Path::new("b.toml")).unwrap();
-    assert_eq!(c.model.segment_passes, 1);
-    let c = Config::parse(
-        &format!("{base}[model]\nsegment_passes = 2\n"),
-        Path::new("b.toml"),
-    )
-    .unwrap();
-    assert_eq!(c.model.segment_passes, 2);
+    assert_eq!(c.model.segment_passes, None);
+    for n in [1u8, 2] {
+        let c = Config::parse(
+            &format!("{base}[model]\nsegment_passes = {n}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.model.segment_passes, Some(n));
+    }
     for bad in ["0", "3"] {
         let e = Config::parse(
             &format!("{base}[model]\nsegment_passes = {bad}\n"),

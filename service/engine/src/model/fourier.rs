@@ -441,6 +441,10 @@ pub struct FourierNet {
     pub iso_level: f32,
     /// The series the maps hold (metadata `volcap.basis`, absent: fourier).
     pub basis: Basis,
+    /// The segmentation passes of the masks it was trained on (metadata
+    /// `volcap.segment_passes`, written by the exporter for a `train --segment-passes 2` run;
+    /// absent: 1): [`super::Models::segment_passes`] starts there.
+    pub segment_passes: u8,
     /// Experimental: [`FourierMaps::with_peak_relative_level`] `(frac, min_peak)` on every
     /// frame's maps (`volcap eval --peak-level`); off by default.
     pub peak_level: Option<(f32, f32)>,
@@ -450,6 +454,31 @@ pub struct FourierNet {
     /// [`FourierMaps::with_moment_fill`] `(min_len, max_len, away)` on every frame's maps
     /// (`volcap eval --moment-fill`, `Models::with_moment_fill`); off by default.
     pub moment_fill: Option<(f32, f32, usize)>,
+}
+
+/// A Fourier file's `volcap.segment_passes` (absent: 1), checked against
+/// [`super::SEGMENT_PASSES`].
+pub(crate) fn trained_segment_passes(
+    path: &Path,
+    meta: &std::collections::HashMap<String, String>,
+) -> Result<u8, ModelError> {
+    match meta.get("volcap.segment_passes") {
+        None => Ok(1),
+        Some(v) => v
+            .parse::<u8>()
+            .ok()
+            .filter(|n| super::SEGMENT_PASSES.contains(n))
+            .ok_or_else(|| ModelError::Mismatch {
+                path: path.display().to_string(),
+                what: "metadata volcap.segment_passes".into(),
+                expected: format!(
+                    "{}..={}",
+                    super::SEGMENT_PASSES.start(),
+                    super::SEGMENT_PASSES.end()
+                ),
+                found: format!("{v:?}"),
+            }),
+    }
 }
 
 impl FourierNet {
@@ -516,6 +545,7 @@ impl FourierNet {
                 found: format!("{v:?}"),
             })?,
         };
+        let segment_passes = trained_segment_passes(&path, &meta)?;
         let net = Net::load_on(
             &path,
             "shape-fourier",
@@ -534,6 +564,7 @@ impl FourierNet {
             depth_frame,
             iso_level,
             basis,
+            segment_passes,
             peak_level: None,
             peak_gate: None,
             moment_fill: None,

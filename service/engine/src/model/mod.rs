@@ -135,9 +135,31 @@ pub struct Models {
     pub runtime: Runtime,
     /// How many times a frame is segmented ([`Models::person_mask`]): 1, the letterboxed
     /// frame; 2, then once more on the person's crop of it (thin parts the first pass loses,
-    /// an arm, a hand, come back: `docs/eval/hands.md` section 8). The daemon's `[model]
-    /// segment_passes`.
+    /// an arm, a hand, come back: `docs/eval/hands.md` section 8). Loaded as the shape
+    /// model was trained ([`ShapeModel::trained_segment_passes`]); the daemon's `[model]
+    /// segment_passes` and the tools' `--segment-passes` set it otherwise.
     pub segment_passes: u8,
+}
+
+/// The shape model a board or a tool runs unless told otherwise (the daemon's `[model] name`,
+/// the tools' `--model`): the best measured, `fourier-small-seg2` (`fourier-small`'s network
+/// trained on to run (11) on two-pass masks: held-out 257^3 better than `fourier-small` with
+/// one segmentation pass as with two, docs/eval/eval.md and docs/eval/hands.md section 10).
+pub const DEFAULT_MODEL: &str = "fourier-small-seg2";
+
+/// [`ShapeModel::trained_segment_passes`] of `shape-NAME` in `dir` at `precision` from its
+/// file's metadata alone (no network is built): for the tools that set up a run per model
+/// before loading it. 1 for the point-MLP family.
+pub fn trained_segment_passes(
+    dir: &Path,
+    name: &str,
+    precision: Precision,
+) -> Result<u8, ModelError> {
+    let path = FourierNet::path(dir, name, precision);
+    if !path.exists() {
+        return Ok(1);
+    }
+    fourier::trained_segment_passes(&path, &meta_of(&path))
 }
 
 /// The counts [`Models::segment_passes`] takes (the daemon's `[model] segment_passes`, the
@@ -329,6 +351,17 @@ impl ShapeModel {
             Self::Fourier(_) => "fourier",
         }
     }
+
+    /// The segmentation passes the model was trained on (a Fourier file's metadata
+    /// `volcap.segment_passes`; 1 where absent and for the point-MLP family): what
+    /// [`Models::segment_passes`] starts at, so a model is fed masks made as its training
+    /// masks were unless the board or the tool says otherwise.
+    pub fn trained_segment_passes(&self) -> u8 {
+        match self {
+            Self::Mlp(_) => 1,
+            Self::Fourier(f) => f.segment_passes,
+        }
+    }
 }
 
 impl ColorNets {
@@ -457,15 +490,16 @@ impl Models {
             &[Some(1), Some(1), Some(INPUT_SIZE), Some(INPUT_SIZE)],
             rt,
         )?;
+        let shape = ShapeModel::load_on(dir, name, precision, rt)?;
         Ok(Models {
             seg,
-            shape: ShapeModel::load_on(dir, name, precision, rt)?,
+            segment_passes: shape.trained_segment_passes(),
+            shape,
             color: Arc::new(ColorNets::load_on(dir, rt)?),
             name: name.into(),
             precision,
             close_range: None,
             runtime: rt.clone(),
-            segment_passes: 1,
         })
     }
 

@@ -31,7 +31,7 @@ fn knobs(a: &EvalArgs) -> String {
     if let Some(m) = &a.moment_fill {
         let _ = write!(k, " --moment-fill {}", list(m));
     }
-    if a.segment_passes != [1] {
+    if !a.segment_passes.is_empty() {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
         let _ = write!(k, " --segment-passes {}", passes.join(","));
     }
@@ -92,13 +92,18 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
     for m in summary {
         let _ = writeln!(
             s,
-            "| {} | {}, {} frame{} | {} | {} | {} | {:.0} | {:.1} | {:.1} | {:.0} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} | {}/{} |",
+            "| {} | {}, {} frame{}{} | {} | {} | {} | {:.0} | {:.1} | {:.1} | {:.0} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} | {}/{} |",
             m.model,
             m.family,
             m.depth_frame,
             m.iso_level
                 .map(|l| format!(", iso {l:.2}"))
                 .unwrap_or_default(),
+            if m.segment_passes > 1 {
+                ", segmented twice"
+            } else {
+                ""
+            },
             m.params
                 .map(|p| p.to_string())
                 .unwrap_or_else(|| "-".into()),

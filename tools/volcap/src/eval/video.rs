@@ -64,7 +64,7 @@ pub struct TemporalArgs {
     #[arg(long, default_value_t = 4)]
     pub coarse_level: u32,
     /// Shape model (NAME or NAME@int8).
-    #[arg(long, default_value = "fourier-small")]
+    #[arg(long, default_value = volcap_engine::model::DEFAULT_MODEL)]
     pub model: String,
     /// Filter settings (comma-separated): `off`, `default` (volcapd's defaults), or
     /// `KEY=VALUE+KEY=VALUE...` over the defaults (keys of `[temporal]`: crop_min_cutoff_hz,
