@@ -71,11 +71,14 @@ $T fourier --data "$DATA_POSES2" --more-data "$DATA_LIGHT" "$DATA_LIGHT2" --out 
 # passes (`--segment-passes 2`, what the boards with `[model] segment_passes = 2` feed it); held-out
 # 257^3, segmented twice, 1.99 / 1.15 / 0.669 -> 1.92 / 0.99 / 0.668 (docs/eval/hands.md section 9);
 # (11) resumed on the same for 7,390 steps (100 minutes on 2 threads): 1.92 / 0.99 / 0.668 ->
-# 1.81 / 0.92 / 0.692 (section 10).
+# 1.81 / 0.92 / 0.692 (section 10); (12) resumed in bfloat16 (`--amp bf16`), 5,034 steps at lr 2e-4
+# then 13,459 at 1e-4: 1.81 / 0.92 / 0.692 -> 1.79 / 0.89 / 0.688 (section 11; the default model).
 if [ -n "${DATA_SEG2:-}" ]; then
   read -r -a SEG2 <<< "$DATA_SEG2"
   $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/stages/fourier-small-seg2-10" --variant fourier-small --steps 5000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --init "$RUNS/fourier-small/ckpt.pt"
-  $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 7390 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --init "$RUNS/stages/fourier-small-seg2-10/ckpt.pt"
+  $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/stages/fourier-small-seg2-11" --variant fourier-small --steps 7390 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --init "$RUNS/stages/fourier-small-seg2-10/ckpt.pt"
+  $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/stages/fourier-small-seg2-12a" --variant fourier-small --steps 5034 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --init "$RUNS/stages/fourier-small-seg2-11/ckpt.pt"
+  $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 13459 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 1 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --init "$RUNS/stages/fourier-small-seg2-12a/ckpt.pt"
 fi
 # fourier-medium: fourier-small widened from c = 8 to 12 without changing its function
 # (volcap_train.widen: the new channels start unread), then trained on as fourier-small's last

@@ -185,9 +185,13 @@ fn close_range_model_is_checked_at_start() {
 /// rendered by the oracle and by the model at 129^3 with and without the fill. With the fill,
 /// the render reaches as far to either side of the person as the oracle's does (its hands,
 /// within 10 % of the reach, measured against each render's own height, since the model
-/// frames the person in its own proportions), it only adds pixels, and not many. The series
+/// frames the person in its own proportions), it adds pixels (not many) and loses at most a
+/// map pixel at an edge. The series
 /// alone may end at a wrist (printed: `fourier-small` does at both; `fourier-small-seg2`, trained
-/// on two-pass masks, at one). The config names no model: the daemon's default,
+/// on two-pass masks, at one). The temporal filter is off: each snapshot is then a function of
+/// the still scene's one frame, not of how many frames the filter has blended by the time it is
+/// taken (two daemons, two frame counts).
+/// The config names no model: the daemon's default,
 /// `fourier-small-seg2` (`volcap_engine::model::DEFAULT_MODEL`), segmented once.
 #[test]
 fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
@@ -200,7 +204,7 @@ fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
         std::fs::write(
             &cfg,
             format!(
-                "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"{field}\"\nresolution = 129\n[model]\ndir = \"{}\"\nthin_parts = \"{thin}\"\n",
+                "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"{field}\"\nresolution = 129\n[model]\ndir = \"{}\"\nthin_parts = \"{thin}\"\n[temporal]\nenabled = false\n",
                 root().join("tests/scenes/still-rest.toml").display(),
                 root().join("models").display()
             ),
@@ -258,9 +262,14 @@ fn thin_parts_moment_fill_brings_the_hands_into_the_render() {
         truth.left(),
         truth.right()
     );
+    // The fill only adds inside at the coefficient maps' pixels; between them the render
+    // interpolates the maps, so where a filled pixel borders one that decodes, the edge may move
+    // by up to one map pixel: the crop's side over the maps' 128 (the person fills 0.8 of the
+    // crop's height, the render's height here).
+    let map_px = (series.rows / 0.8 / 128.0).ceil() as u32;
     assert!(
-        fill.first <= series.first && fill.last >= series.last,
-        "the fill's render {}..{} lost columns of the series' {}..{}",
+        fill.first <= series.first + map_px && fill.last + map_px >= series.last,
+        "the fill's render {}..{} lost more than a map pixel ({map_px} columns) of the series' {}..{}",
         fill.first,
         fill.last,
         series.first,

@@ -143,8 +143,8 @@ pub struct Models {
 
 /// The shape model a board or a tool runs unless told otherwise (the daemon's `[model] name`,
 /// the tools' `--model`): the best measured, `fourier-small-seg2` (`fourier-small`'s network
-/// trained on to run (11) on two-pass masks: held-out 257^3 better than `fourier-small` with
-/// one segmentation pass as with two, docs/eval/eval.md and docs/eval/hands.md section 10).
+/// trained on to run (12) on two-pass masks: held-out 257^3 better than `fourier-small` with
+/// one segmentation pass as with two, docs/eval/eval.md and docs/eval/hands.md sections 10-11).
 pub const DEFAULT_MODEL: &str = "fourier-small-seg2";
 
 /// [`ShapeModel::trained_segment_passes`] of `shape-NAME` in `dir` at `precision` from its
