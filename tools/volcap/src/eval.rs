@@ -24,6 +24,7 @@ use volcap_engine::model::{DepthFrame, FrameError, ModelView, Models, Precision,
 mod cases;
 mod framing;
 mod report;
+pub use report::ModelRow;
 mod turntable;
 pub mod video;
 use cases::{Case, render_cases};
@@ -182,39 +183,6 @@ pub struct ImageRow {
     /// by the nearest body vertex's bone) to the reconstruction; NaN where the frame shows
     /// none of it. A missing hand is a large hands value.
     pub part_cm: [f64; 6],
-}
-
-#[derive(Debug, Clone, Serialize)]
-pub struct ModelRow {
-    pub model: String,
-    /// "mlp" (encoder + point MLP) or "fourier".
-    pub family: String,
-    /// The depth frame of the comparison: "camera" or "body" (see `--depth-frame`).
-    pub depth_frame: String,
-    /// The series level read as the surface (Fourier models: `--iso-level` or the file's
-    /// `volcap.iso_level`; none for the other families and the ground-truth rows).
-    pub iso_level: Option<f32>,
-    pub images: usize,
-    pub failed: usize,
-    pub chamfer_cm: f64,
-    pub p2s_cm: f64,
-    pub worst10_chamfer_cm: f64,
-    pub worst10_p2s_cm: f64,
-    pub iou: f64,
-    pub mask_iou: f64,
-    pub evaluations: f64,
-    pub segment_ms: f64,
-    pub encode_ms: f64,
-    pub localize_ms: f64,
-    /// segment + encode + localize (the per-frame cost without meshing).
-    pub frame_ms: f64,
-    pub gmacs_frame: Option<f64>,
-    pub macs_point: Option<f64>,
-    pub params: Option<u64>,
-    /// [`ImageRow::part_cm`] averaged over the images that show the part.
-    pub part_cm: [f64; 6],
-    /// How many times each frame was segmented (`Models::segment_passes`).
-    pub segment_passes: u8,
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {

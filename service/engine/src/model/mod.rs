@@ -27,12 +27,14 @@ pub use threads::with_threads;
 mod on_adapter;
 pub mod preprocess;
 pub mod sample;
+mod shape;
 pub mod temporal;
 
 use crate::field::FieldError;
 use crate::softz::{SOFTZ_BINS, soft_z};
 pub use field::{EncodeTimings, ModelField, ShapeState};
 pub use fourier::{DepthFrame, FourierNet};
+pub use shape::{ShapeModel, trained_segment_passes};
 
 use glam::Vec3;
 use preprocess::{Crop, INPUT_SIZE};
@@ -146,21 +148,6 @@ pub struct Models {
 /// trained on to run (12) on two-pass masks: held-out 257^3 better than `fourier-small` with
 /// one segmentation pass as with two, docs/eval/eval.md and docs/eval/hands.md sections 10-11).
 pub const DEFAULT_MODEL: &str = "fourier-small-seg2";
-
-/// [`ShapeModel::trained_segment_passes`] of `shape-NAME` in `dir` at `precision` from its
-/// file's metadata alone (no network is built): for the tools that set up a run per model
-/// before loading it. 1 for the point-MLP family.
-pub fn trained_segment_passes(
-    dir: &Path,
-    name: &str,
-    precision: Precision,
-) -> Result<u8, ModelError> {
-    let path = FourierNet::path(dir, name, precision);
-    if !path.exists() {
-        return Ok(1);
-    }
-    fourier::trained_segment_passes(&path, &meta_of(&path))
-}
 
 /// The counts [`Models::segment_passes`] takes (the daemon's `[model] segment_passes`, the
 /// tools' `--segment-passes`).
@@ -311,56 +298,6 @@ impl ShapeNets {
         }
         out[..n].copy_from_slice(&occ);
         Ok(())
-    }
-}
-
-/// A shape model family: the paper's encoder + point MLP, or the Fourier head.
-pub enum ShapeModel {
-    Mlp(Arc<ShapeNets>),
-    Fourier(Arc<FourierNet>),
-}
-
-impl ShapeModel {
-    /// `shape-NAME.fourier.onnx` if it exists, else `shape-NAME.encoder.onnx` + `.mlp.onnx`.
-    pub fn load(dir: &Path, name: &str, precision: Precision) -> Result<Self, ModelError> {
-        Self::load_on(dir, name, precision, &Runtime::Tract)
-    }
-
-    /// [`ShapeModel::load`] on `rt`.
-    pub fn load_on(
-        dir: &Path,
-        name: &str,
-        precision: Precision,
-        rt: &Runtime,
-    ) -> Result<Self, ModelError> {
-        if FourierNet::path(dir, name, precision).is_file() {
-            Ok(Self::Fourier(Arc::new(FourierNet::load_on(
-                dir, name, precision, rt,
-            )?)))
-        } else {
-            Ok(Self::Mlp(Arc::new(ShapeNets::load_on(
-                dir, name, precision, rt,
-            )?)))
-        }
-    }
-
-    /// "mlp" or "fourier".
-    pub fn family(&self) -> &'static str {
-        match self {
-            Self::Mlp(_) => "mlp",
-            Self::Fourier(_) => "fourier",
-        }
-    }
-
-    /// The segmentation passes the model was trained on (a Fourier file's metadata
-    /// `volcap.segment_passes`; 1 where absent and for the point-MLP family): what
-    /// [`Models::segment_passes`] starts at, so a model is fed masks made as its training
-    /// masks were unless the board or the tool says otherwise.
-    pub fn trained_segment_passes(&self) -> u8 {
-        match self {
-            Self::Mlp(_) => 1,
-            Self::Fourier(f) => f.segment_passes,
-        }
     }
 }
 

@@ -1,9 +1,44 @@
 //! The evaluation's report: the Markdown table (models side by side, per-image rows) and the
 //! Chamfer-vs-time plot.
 
-use super::{EvalArgs, Framing, ImageRow, ModelRow};
+use super::{EvalArgs, Framing, ImageRow};
+use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
+
+/// One model's summary line of the report (its table row, its JSON object).
+#[derive(Debug, Clone, Serialize)]
+pub struct ModelRow {
+    pub model: String,
+    /// "mlp" (encoder + point MLP) or "fourier".
+    pub family: String,
+    /// The depth frame of the comparison: "camera" or "body" (see `--depth-frame`).
+    pub depth_frame: String,
+    /// The series level read as the surface (Fourier models: `--iso-level` or the file's
+    /// `volcap.iso_level`; none for the other families and the ground-truth rows).
+    pub iso_level: Option<f32>,
+    pub images: usize,
+    pub failed: usize,
+    pub chamfer_cm: f64,
+    pub p2s_cm: f64,
+    pub worst10_chamfer_cm: f64,
+    pub worst10_p2s_cm: f64,
+    pub iou: f64,
+    pub mask_iou: f64,
+    pub evaluations: f64,
+    pub segment_ms: f64,
+    pub encode_ms: f64,
+    pub localize_ms: f64,
+    /// segment + encode + localize (the per-frame cost without meshing).
+    pub frame_ms: f64,
+    pub gmacs_frame: Option<f64>,
+    pub macs_point: Option<f64>,
+    pub params: Option<u64>,
+    /// [`ImageRow::part_cm`] averaged over the images that show the part.
+    pub part_cm: [f64; 6],
+    /// How many times each frame was segmented (`Models::segment_passes`).
+    pub segment_passes: u8,
+}
 
 /// The options that change what was measured, as they were given (so that the report's
 /// command line reproduces it): framing, mask, surface levels, the experimental readings,

@@ -1,0 +1,224 @@
+//! `volcap bench pipeline`'s report: the stages' and parts' tables and the plot.
+
+use super::Row;
+use anyhow::anyhow;
+use plotters::prelude::*;
+use std::fmt::Write as _;
+use std::path::Path;
+use volcapd::config::RenderDevice;
+
+pub(super) fn table(rows: &[Row]) -> String {
+    let mut s = String::from(
+        "| model | runtime | res | display px | coarse | threads | segment thread | temporal | yaw | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {}{} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            r.model,
+            if r.segment_passes > 1 {
+                ", segmented twice"
+            } else {
+                ""
+            },
+            r.runtime,
+            r.resolution,
+            if r.display_size == 0 {
+                r.resolution
+            } else {
+                r.display_size
+            },
+            r.coarse_level,
+            r.threads,
+            if r.resolution <= r.segment_thread_up_to {
+                "yes"
+            } else {
+                "no"
+            },
+            if r.temporal { "on" } else { "off" },
+            r.yaw_deg,
+            r.fps,
+            r.speedup_vs_1_thread
+                .map(|x| format!("{x:.2}"))
+                .unwrap_or_else(|| "-".into()),
+            r.latency_p50_ms,
+            r.latency_p99_ms,
+            r.stage_p50_ms[0],
+            r.stage_p50_ms[1],
+            r.stage_p50_ms[2],
+            r.stage_p50_ms[3],
+            r.stage_p50_ms[4],
+            r.evaluations,
+            match (&r.error, r.dispatches_per_frame > 0.0) {
+                (Some(e), _) => e.clone(),
+                // The GPU backend's traffic: what crosses between host and adapter per frame.
+                (None, true) => format!(
+                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for (up to {} conflict rounds each){}; {} networks planned while measured{}",
+                    r.bytes_up_per_frame / 1e6,
+                    r.bytes_down_per_frame / 1e6,
+                    r.dispatches_per_frame,
+                    r.waits_per_frame,
+                    r.rounds_per_wait,
+                    if r.render_device == RenderDevice::Own.name() {
+                        "; the render stage on a device of its own"
+                    } else {
+                        ""
+                    },
+                    r.net_plans,
+                    if r.adapter_ms_per_frame > 0.0 {
+                        format!(
+                            "; on the adapter's clock: networks {:.1} ms, maps {:.1} ms, localization and render {:.1} ms, display {:.1} ms",
+                            r.adapter_ms_per_frame,
+                            r.maps_ms_per_frame,
+                            r.localize_ms_per_frame,
+                            r.display_ms_per_frame
+                        )
+                    } else {
+                        String::new()
+                    }
+                ),
+                (None, false) => String::new(),
+            },
+        );
+    }
+    s
+}
+
+/// Model-mode rows: where the field and render stages' time goes, each part's mean ms beside
+/// its stage's mean (the parts of a stage add up to about its mean; what is left of the field
+/// stage is the thread's bookkeeping). Empty without such rows.
+pub(super) fn parts_table(rows: &[Row]) -> String {
+    let names = volcapd::pipeline::part::NAMES;
+    let rows: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.part_mean_ms.len() == names.len() && r.error.is_none())
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\nWhere the field and render stages' time goes (mean ms per frame; each stage's mean beside its parts):\n\n\
+         | model | runtime | res | yaw | field |",
+    );
+    for n in &names[..volcapd::pipeline::part::LOCALIZE] {
+        let _ = write!(s, " {} |", n.trim_start_matches("field: "));
+    }
+    s.push_str(" render |");
+    for n in &names[volcapd::pipeline::part::LOCALIZE..] {
+        let _ = write!(s, " {} |", n.trim_start_matches("render: "));
+    }
+    s.push('\n');
+    s.push_str(&"|---".repeat(6 + names.len()));
+    s.push_str("|\n");
+    for r in rows {
+        let _ = write!(
+            s,
+            "| {} | {} | {} | {} | {:.2} |",
+            r.model, r.runtime, r.resolution, r.yaw_deg, r.field_mean_ms
+        );
+        for (i, ms) in r.part_mean_ms.iter().enumerate() {
+            if i == volcapd::pipeline::part::LOCALIZE {
+                let _ = write!(s, " {:.2} |", r.render_mean_ms);
+            }
+            let _ = write!(s, " {ms:.2} |");
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// A plotted quantity: its title and how to read it from a row.
+type Metric = (&'static str, fn(&Row) -> f64);
+
+/// fps and p99 latency over resolution, one line per (model, coarse level, threads,
+/// segment split, display size).
+pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
+    crate::plot::register_font();
+    let root = BitMapBackend::new(path, (1100, 460)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let (left, right) = root.split_horizontally(550);
+    let key = |r: &Row| {
+        (
+            format!("{} {}", r.model, r.runtime),
+            r.coarse_level,
+            r.threads,
+            r.segment_thread_up_to,
+            r.display_size,
+            r.temporal,
+            // Tenths of a degree: a key that sorts.
+            (r.yaw_deg * 10.0).round() as i64,
+        )
+    };
+    let mut keys: Vec<(String, u32, usize, usize, usize, bool, i64)> =
+        rows.iter().map(key).collect();
+    keys.sort();
+    keys.dedup();
+    let xmax = rows.iter().map(|r| r.resolution).max().unwrap_or(257) as f64 * 1.3;
+    let xmin = rows.iter().map(|r| r.resolution).min().unwrap_or(65) as f64 / 1.3;
+    let metric: [Metric; 2] = [
+        ("frames per second", |r| r.fps),
+        ("p99 latency, ms", |r| r.latency_p99_ms),
+    ];
+    for (area, (what, f)) in [&left, &right].into_iter().zip(metric) {
+        let ymax = rows.iter().map(f).fold(1.0, f64::max) * 1.15;
+        let mut chart = ChartBuilder::on(area)
+            .caption(what, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(50)
+            .build_cartesian_2d((xmin..xmax).log_scale(), 0.0..ymax)
+            .map_err(|e| anyhow!("{e}"))?;
+        chart
+            .configure_mesh()
+            .x_desc("grid resolution (points per axis)")
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+        for (i, k) in keys.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            let mut pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.error.is_none() && key(r) == *k)
+                .map(|r| (r.resolution as f64, f(r)))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(|e| anyhow!("{e}"))?
+                .label(format!(
+                    "{} c{} x{} seg<={}{}{}{}",
+                    k.0,
+                    k.1,
+                    k.2,
+                    k.3,
+                    if k.4 == 0 {
+                        String::new()
+                    } else {
+                        format!(" {}px", k.4)
+                    },
+                    if k.5 { "" } else { " no-temporal" },
+                    if k.6 == 0 {
+                        String::new()
+                    } else {
+                        format!(" yaw {}", k.6 as f64 / 10.0)
+                    }
+                ))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                });
+            chart
+                .draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))
+                .map_err(|e| anyhow!("{e}"))?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    root.present()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(())
+}
