@@ -16,20 +16,22 @@ use std::sync::Arc;
 use std::time::Instant;
 use volcap_engine::grid::{Grid, GridSpec};
 use volcap_engine::localize::{Method, default_coarse};
-use volcap_engine::mesh::{Mesh, marching_cubes};
-use volcap_engine::metrics::{chamfer, iou_bits, point_to_surface, sample_surface};
+use volcap_engine::mesh::marching_cubes;
+use volcap_engine::metrics::iou_bits;
 use volcap_engine::model::fourier::Basis;
 use volcap_engine::model::{DepthFrame, FrameError, ModelView, Models, Precision, ShapeModel};
 
 mod cases;
+mod distances;
 mod framing;
 mod report;
 pub use report::ModelRow;
 mod turntable;
 pub mod video;
 use cases::{Case, render_cases};
+use distances::surface_distances;
 pub use framing::Framing;
-use framing::{OracleInCrop, ToCamera, in_frame};
+use framing::{OracleInCrop, ToCamera};
 use report::{plot, report};
 pub use turntable::TURNTABLE_YAWS;
 use turntable::turntable;
@@ -121,6 +123,11 @@ pub struct EvalArgs {
     /// the fill (`NAME-f32-fill...`), side by side.
     #[arg(long, value_delimiter = ',')]
     pub moment_fill: Option<Vec<f32>>,
+    /// Experimental, Fourier models: `LEVEL,ERODE`: the surface read at LEVEL instead of the
+    /// model's own on the map pixels inside the person mask eroded by ERODE map pixels
+    /// (`FourierMaps::with_level_in`; the silhouette's blurred halo keeps the model's level).
+    #[arg(long, value_delimiter = ',')]
+    pub interior_level: Option<Vec<f32>>,
     /// Segmentation passes, comma-separated, each 1 or 2 (`Models::person_mask`; the
     /// daemon's `[model] segment_passes`): 2 segments the person's crop again. Every model
     /// gets a row per value, side by side, named for the count where it is not the one the
@@ -183,6 +190,11 @@ pub struct ImageRow {
     /// by the nearest body vertex's bone) to the reconstruction; NaN where the frame shows
     /// none of it. A missing hand is a large hands value.
     pub part_cm: [f64; 6],
+    /// Per body part, the share of the P2S (cm) that the reconstruction's samples nearest
+    /// that part's body vertices make: the sum of their distances to the true surface over
+    /// all samples, so the six add up to the image's P2S. Where spurious surface is (a
+    /// blurred fringe, a misplaced hand) rather than what is missing.
+    pub part_p2s_cm: [f64; 6],
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
@@ -247,6 +259,7 @@ fn run_case(
         localize_ms: 0.0,
         mesh_ms: 0.0,
         part_cm: [f64::NAN; 6],
+        part_p2s_cm: [f64::NAN; 6],
     };
     let s = c.size;
     let truth_mask: Vec<f32> = c.mask.iter().map(|&m| m as f32 / 255.0).collect();
@@ -324,82 +337,15 @@ fn run_case(
     let mesh = marching_cubes(grid);
     row.mesh_ms = t.elapsed().as_secs_f64() * 1e3;
     match surface_distances(mesh, crop, to_cam, &c.oracle, &c.gt_mesh, Some(&c.parts)) {
-        Some((ch, p2s, parts)) => {
+        Some((ch, p2s, parts, part_p2s)) => {
             row.chamfer_cm = ch;
             row.p2s_cm = p2s;
             row.part_cm = parts;
+            row.part_p2s_cm = part_p2s;
         }
         None => row.status = "empty surface".into(),
     }
     Ok(row)
-}
-
-/// Chamfer and point-to-surface distance (cm) of a mesh in the model's crop NDC against
-/// the ground-truth world mesh, both where the frame shows them (10,000 samples each), and
-/// with `parts`, per body part the mean distance from the true surface's samples of that
-/// part to the mesh (cm, NaN for a part not shown); `None` for an empty surface.
-fn surface_distances(
-    mut mesh: Mesh,
-    crop: volcap_engine::model::preprocess::Crop,
-    to_cam: ToCamera,
-    oracle: &volcap_sim::oracle::SceneField,
-    gt_mesh: &Mesh,
-    parts: Option<&volcap_sim::parts::PartLabeler>,
-) -> Option<(f64, f64, [f64; 6])> {
-    if mesh.triangles.is_empty() {
-        return None;
-    }
-    let cam = oracle.camera.projector();
-    for v in &mut mesh.vertices {
-        *v = cam.ndc_to_world(to_cam.apply(crop.to_input(*v)));
-    }
-    // Both surfaces where the frame shows them (a no-op for a person wholly in the frame).
-    let shown = |p: &glam::DVec3| in_frame(cam.world_to_ndc(p.as_vec3()));
-    let pred: Vec<_> = sample_surface(&mesh, 10_000, 1)
-        .into_iter()
-        .filter(shown)
-        .collect();
-    let gt: Vec<_> = sample_surface(gt_mesh, 10_000, 2)
-        .into_iter()
-        .filter(shown)
-        .collect();
-    if pred.is_empty() {
-        return None;
-    }
-    // Completeness per part: each true sample's distance to the reconstruction.
-    let index = volcap_engine::metrics::TriangleIndex::new(
-        mesh.triangles
-            .iter()
-            .map(|t| t.map(|i| mesh.vertices[i as usize].as_dvec3()))
-            .collect(),
-    );
-    let mut sum = [0.0f64; 6];
-    let mut n = [0usize; 6];
-    for p in gt.iter().filter(|_| parts.is_some()) {
-        let Some(part) = parts.map(|l| l.label(*p)) else {
-            continue;
-        };
-        let i = volcap_sim::parts::Part::ALL
-            .iter()
-            .position(|x| *x == part)
-            .unwrap_or(1);
-        if let Some((_, _, _, d)) = index.nearest(*p) {
-            sum[i] += d;
-            n[i] += 1;
-        }
-    }
-    let part_cm = std::array::from_fn(|i| {
-        if n[i] == 0 {
-            f64::NAN
-        } else {
-            sum[i] / n[i] as f64 * 100.0
-        }
-    });
-    Some((
-        chamfer(&pred, &gt) * 100.0,
-        point_to_surface(&pred, gt_mesh) * 100.0,
-        part_cm,
-    ))
 }
 
 fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, Option<u64>) {
@@ -449,6 +395,16 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     {
         bail!(
             "--moment-fill {m:?}: MIN_LEN,MAX_LEN,AWAY with 0 < MIN_LEN <= MAX_LEN <= 2 and AWAY a whole number of map pixels in 1..=32"
+        );
+    }
+    if let Some(m) = &a.interior_level
+        && (m.len() != 2
+            || !(m[0] > 0.0 && m[0] < 1.0)
+            || !(0.0..=32.0).contains(&m[1])
+            || m[1].fract() != 0.0)
+    {
+        bail!(
+            "--interior-level {m:?}: LEVEL,ERODE with LEVEL in (0, 1) and ERODE a whole number of map pixels in 0..=32"
         );
     }
     if !a.segment_passes.is_empty() {
@@ -507,7 +463,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         let seg_passes = seg_passes.unwrap_or(own_passes);
         models.segment_passes = seg_passes;
         // The Fourier net's decode knobs (not the ground-truth rows' nor other families').
-        let knobs = a.peak_level.is_some() || a.moment_fill.is_some() || level.is_some();
+        let knobs = a.peak_level.is_some()
+            || a.moment_fill.is_some()
+            || level.is_some()
+            || a.interior_level.is_some();
         let mut fourier = match &mut models.shape {
             ShapeModel::Fourier(f) if truth_k.is_none() && knobs => {
                 Some(Arc::get_mut(f).ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?)
@@ -519,6 +478,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 f.peak_level = Some((pl[0], pl[1]));
                 f.peak_gate = pl.get(2).copied();
                 Some((pl[0], f.peak_gate))
+            }
+            _ => None,
+        };
+        let interior = match (&mut fourier, &a.interior_level) {
+            (Some(f), Some(m)) if m.len() == 2 => {
+                f.interior_level = Some((m[0], m[1] as usize));
+                f.interior_level
             }
             _ => None,
         };
@@ -547,7 +513,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             _ => None,
         };
         let label = format!(
-            "{name}-{}{}{}{}{}{}",
+            "{name}-{}{}{}{}{}{}{}",
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
             if seg_passes != own_passes {
@@ -562,6 +528,9 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             ))
             .unwrap_or_default(),
             fill.map(|(l, d)| format!("-fill{l:.2}x{d}"))
+                .unwrap_or_default(),
+            interior
+                .map(|(l, e)| format!("-in{l:.2}e{e}"))
                 .unwrap_or_default()
         );
         pb.set_message(label.clone());
@@ -648,6 +617,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             params: p,
             part_cm: std::array::from_fn(|i| {
                 mean(ok.iter().map(|r| r.part_cm[i]).filter(|v| v.is_finite()))
+            }),
+            part_p2s_cm: std::array::from_fn(|i| {
+                mean(
+                    ok.iter()
+                        .map(|r| r.part_p2s_cm[i])
+                        .filter(|v| v.is_finite()),
+                )
             }),
         };
         if a.json {

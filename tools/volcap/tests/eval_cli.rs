@@ -90,6 +90,21 @@ fn both_framings_score_the_truth_as_near_exact() {
                 }
                 // Feet: in the whole framing only.
                 assert_eq!(parts[5].is_null(), cut, "{framing}: feet: {r}");
+                // The parts' shares of the P2S are each non-negative and add up to it (a
+                // part not shown has no reconstructed samples nearest it: 0).
+                let shares: Vec<f64> = r["part_p2s_cm"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect();
+                assert_eq!(shares.len(), 6);
+                assert!(shares.iter().all(|v| *v >= 0.0), "{framing}: {r}");
+                let sum: f64 = shares.iter().sum();
+                assert!(
+                    (sum - p2s).abs() < 1e-9 * p2s.max(1.0),
+                    "{framing}: {sum} vs {p2s}"
+                );
             }
             assert_eq!(m[2]["failed"], 0, "{framing}");
         }
@@ -120,6 +135,9 @@ fn bad_decode_knobs_are_refused_by_name() {
         ("--peak-level", "1.5,0.2"),
         ("--peak-level", "0.5,0.2,1.5"),
         ("--peak-level", "0.5,0.2,0.5,1"),
+        ("--interior-level", "0.5"),
+        ("--interior-level", "1.2,2"),
+        ("--interior-level", "0.5,2.5"),
         ("--segment-passes", "3"),
         ("--segment-passes", "1,0"),
     ] {
@@ -165,6 +183,34 @@ fn moment_fill_rows_stand_beside_the_plain_ones() {
             "fourier-small-f32-fill0.10x4",
             "truth-k15-f32"
         ],
+        "{summaries:?}"
+    );
+}
+
+/// `--interior-level` reads every Fourier model's row at that level inside the eroded mask
+/// (named for it) and leaves the ground-truth series (no network) as they are.
+#[test]
+fn interior_level_rows_are_named_for_the_knob() {
+    let summaries: Vec<String> = run_eval(
+        "interior",
+        &[
+            &TINY[..],
+            &[
+                "--model",
+                "fourier-small,truth-k15",
+                "--interior-level",
+                "0.5,2",
+            ],
+        ]
+        .concat(),
+    )
+    .iter()
+    .filter(|r| r.get("family").is_some())
+    .map(|r| r["model"].as_str().unwrap().to_string())
+    .collect();
+    assert_eq!(
+        summaries,
+        ["fourier-small-f32-in0.50e2", "truth-k15-f32"],
         "{summaries:?}"
     );
 }

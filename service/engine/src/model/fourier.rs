@@ -190,6 +190,23 @@ impl FourierMaps {
         self
     }
 
+    /// The surface at `level` instead of the maps' own on the pixels `gate` marks (`size x
+    /// size`, row-major; e.g. the person mask eroded by a few map pixels, where the blurred
+    /// halo around a silhouette cannot be): folded into each such pixel's constant term, as
+    /// [`Self::with_peak_relative_level_in`]. A gate of another length, or a level outside
+    /// (0, 1), leaves the maps unchanged.
+    pub fn with_level_in(mut self, level: f32, gate: &[bool]) -> Self {
+        if !(level > 0.0 && level < 1.0) || gate.len() != self.size * self.size {
+            return self;
+        }
+        let c = 2 * self.k + 1;
+        let lift = self.iso_level() - level;
+        for (px, _) in self.data.chunks_exact_mut(c).zip(gate).filter(|(_, g)| **g) {
+            px[0] += lift;
+        }
+        self
+    }
+
     /// The basis at the 129 depths the peak tests sample (`zeta = -1 + 2 i / 128`: the
     /// series is band-limited to K cycles), flat: depth `i`'s is the `i`-th chunk of `2K + 1`.
     fn sample_basis(&self) -> Vec<f32> {
@@ -454,6 +471,11 @@ pub struct FourierNet {
     /// [`FourierMaps::with_moment_fill`] `(min_len, max_len, away)` on every frame's maps
     /// (`volcap eval --moment-fill`, `Models::with_moment_fill`); off by default.
     pub moment_fill: Option<(f32, f32, usize)>,
+    /// Experimental: [`FourierMaps::with_level_in`] `(level, erode)` on every frame's maps,
+    /// gated by the person mask (the encoder input's fourth channel, half its pixel's
+    /// footprint or more) eroded by `erode` map pixels (`volcap eval --interior-level`);
+    /// off by default.
+    pub interior_level: Option<(f32, usize)>,
 }
 
 /// A Fourier file's `volcap.segment_passes` (absent: 1), checked against
@@ -568,6 +590,7 @@ impl FourierNet {
             peak_level: None,
             peak_gate: None,
             moment_fill: None,
+            interior_level: None,
         })
     }
 
@@ -578,6 +601,20 @@ impl FourierNet {
         FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale)
             .map(|m| {
                 let m = m.with_iso_level(self.iso_level).with_basis(self.basis);
+                let m = match self.interior_level {
+                    Some((level, erode)) => {
+                        let outside: Vec<bool> = mask_gate(&x[3 * s * s..], s, self.size, 0.5)
+                            .iter()
+                            .map(|g| !g)
+                            .collect();
+                        let gate: Vec<bool> = dilate(&outside, self.size, erode)
+                            .iter()
+                            .map(|o| !o)
+                            .collect();
+                        m.with_level_in(level, &gate)
+                    }
+                    None => m,
+                };
                 let m = match self.peak_level {
                     Some((frac, min_peak)) => {
                         let gate = self

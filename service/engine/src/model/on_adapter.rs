@@ -1,8 +1,8 @@
 //! [`Models::encode_steady`] on the GPU backend for the Fourier family: the shape network's
 //! maps stay on the adapter (`gpu::maps`), filtered there in time, and the frame's field
 //! reads them there (its point queries, the localizer and the renderer). Frames with a
-//! decode-time reading of the maps on the host (`peak_level`, `moment_fill`) take the host
-//! path instead.
+//! decode-time reading of the maps on the host (`peak_level`, `moment_fill`,
+//! `interior_level`) take the host path instead.
 
 use super::field::{EncodeTimings, ShapeState};
 use super::fourier::FourierNet;
@@ -16,7 +16,9 @@ impl FourierNet {
     /// What this head's maps hold, when its frames can stay on the adapter: it runs on the
     /// GPU backend and no decode-time reading changes its maps on the host.
     pub fn adapter_head(&self) -> Option<MapsHead> {
-        let plain = self.peak_level.is_none() && self.moment_fill.is_none();
+        let plain = self.peak_level.is_none()
+            && self.moment_fill.is_none()
+            && self.interior_level.is_none();
         (plain && self.net.gpu_net().is_some()).then_some(MapsHead {
             k: self.k,
             size: self.size,

@@ -36,6 +36,8 @@ pub struct ModelRow {
     pub params: Option<u64>,
     /// [`ImageRow::part_cm`] averaged over the images that show the part.
     pub part_cm: [f64; 6],
+    /// [`ImageRow::part_p2s_cm`] averaged over the images (they add up to the P2S).
+    pub part_p2s_cm: [f64; 6],
     /// How many times each frame was segmented (`Models::segment_passes`).
     pub segment_passes: u8,
 }
@@ -65,6 +67,9 @@ fn knobs(a: &EvalArgs) -> String {
     }
     if let Some(m) = &a.moment_fill {
         let _ = write!(k, " --moment-fill {}", list(m));
+    }
+    if let Some(m) = &a.interior_level {
+        let _ = write!(k, " --interior-level {}", list(m));
     }
     if !a.segment_passes.is_empty() {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
@@ -173,20 +178,35 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
          feet = foot and toes) to the reconstruction; a part the reconstruction misses (hands that end \
          at the wrist) shows as a large value.\n\n| model | head | torso | arms | hands | legs | feet |\n|---|---|---|---|---|---|---|"
     );
-    for m in summary {
-        let _ = writeln!(
-            s,
-            "| {} | {} |",
-            m.model,
-            m.part_cm
-                .iter()
-                .map(|v| if v.is_finite() {
+    let cells = |v: &[f64; 6]| {
+        v.iter()
+            .map(|v| {
+                if v.is_finite() {
                     format!("{v:.2}")
                 } else {
                     "-".into()
-                })
-                .collect::<Vec<_>>()
-                .join(" | ")
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(" | ")
+    };
+    for m in summary {
+        let _ = writeln!(s, "| {} | {} |", m.model, cells(&m.part_cm));
+    }
+    let _ = writeln!(
+        s,
+        "\n**Per body part** (accuracy): each part's share of the P2S in cm, the reconstruction's samples \
+         labelled by the body vertex nearest them, their distances to the true surface summed by part over \
+         all samples (the six add up to the P2S): where spurious or misplaced surface is.\n\n\
+         | model | head | torso | arms | hands | legs | feet | P2S |\n|---|---|---|---|---|---|---|---|"
+    );
+    for m in summary {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.2} |",
+            m.model,
+            cells(&m.part_p2s_cm),
+            m.p2s_cm
         );
     }
     let _ = writeln!(s);

@@ -475,7 +475,7 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 )?;
                 iou.push(iou_bits(&grid.binarized(), &truth.binarized()));
                 let mesh = volcap_engine::mesh::marching_cubes(&grid);
-                if let Some((c, p, _)) =
+                if let Some((c, p, _, _)) =
                     surface_distances(mesh, crop, fr.to_cam, &fr.oracle, &fr.gt_mesh, None)
                 {
                     chamfer.push(c);

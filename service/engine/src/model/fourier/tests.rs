@@ -236,6 +236,58 @@ fn iso_level_moves_the_surface_to_that_level_of_the_series() {
     );
 }
 
+/// `with_level_in` reads the gated pixels at the given level, exactly as the whole maps
+/// read at that level would, and leaves the other pixels at the maps' own; a gate of the
+/// wrong length or a level outside (0, 1) changes nothing.
+#[test]
+fn level_in_a_gate_reads_only_the_gated_pixels_at_that_level() {
+    let k = 15;
+    // 2 x 2 pixels, each the same blurred interval.
+    let c: Vec<f32> = interval_coeffs(&[[-0.2, 0.3]], k)
+        .iter()
+        .map(|v| 0.8 * *v as f32)
+        .collect();
+    let planar: Vec<f32> = c.iter().flat_map(|v| [*v; 4]).collect();
+    let own = FourierMaps::from_planar(&planar, k, 2, 1.0)
+        .unwrap()
+        .with_iso_level(0.55);
+    let low = own.clone().with_iso_level(0.45);
+    let gate = [true, false, false, true];
+    let gated = own.clone().with_level_in(0.45, &gate);
+    let c = 2 * k + 1;
+    let (mut a, mut b, mut s) = ([0.0f32], [0.0f32], Vec::new());
+    for (px, g) in gate.iter().enumerate() {
+        // The pixel centre of map pixel px (crop NDC; a 2-pixel map spans [-1, 1]).
+        let (x, y) = (
+            if px % 2 == 0 { -1.0 } else { 1.0 },
+            if px < 2 { -1.0 } else { 1.0 },
+        );
+        for i in 0..=400 {
+            let z = -1.0 + 2.0 * i as f32 / 400.0;
+            let p = [Vec3::new(x, y, z)];
+            gated.occupancy(&p, &mut a, &mut s);
+            (if *g { &low } else { &own }).occupancy(&p, &mut b, &mut s);
+            assert!(
+                (a[0] - b[0]).abs() < 1e-5,
+                "pixel {px} z {z}: {} vs {}",
+                a[0],
+                b[0]
+            );
+        }
+        // Only the constant term moved, by the difference of the levels.
+        let (g0, o0) = (gated.coefficients()[px * c], own.coefficients()[px * c]);
+        let want = if *g { 0.10 } else { 0.0 };
+        assert!((g0 - o0 - want).abs() < 1e-6, "pixel {px}: {g0} - {o0}");
+    }
+    for m in [
+        own.clone().with_level_in(0.45, &gate[..3]),
+        own.clone().with_level_in(1.0, &gate),
+        own.clone().with_level_in(f32::NAN, &gate),
+    ] {
+        assert_eq!(m.coefficients(), own.coefficients());
+    }
+}
+
 /// The peak-relative level brings back a thin part whose blurred series peaks under the
 /// surface level, at half its peak (about its true width), and leaves alone a thick part
 /// (peak over the level / frac) and an empty ray (peak under `min_peak`).
