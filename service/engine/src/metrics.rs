@@ -234,6 +234,16 @@ impl TriangleIndex {
         }
     }
 
+    /// The index of a mesh's triangles.
+    pub fn of_mesh(mesh: &Mesh) -> Self {
+        Self::new(
+            mesh.triangles
+                .iter()
+                .map(|t| t.map(|i| mesh.vertices[i as usize].as_dvec3()))
+                .collect(),
+        )
+    }
+
     pub fn is_empty(&self) -> bool {
         self.tris.is_empty()
     }
@@ -268,12 +278,7 @@ pub fn point_to_surface(points: &[DVec3], mesh: &Mesh) -> f64 {
     if points.is_empty() || mesh.triangles.is_empty() {
         return f64::INFINITY;
     }
-    let index = TriangleIndex::new(
-        mesh.triangles
-            .iter()
-            .map(|t| t.map(|i| mesh.vertices[i as usize].as_dvec3()))
-            .collect(),
-    );
+    let index = TriangleIndex::of_mesh(mesh);
     points
         .iter()
         .map(|p| index.nearest(*p).map_or(f64::INFINITY, |n| n.3))

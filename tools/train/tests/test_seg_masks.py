@@ -6,7 +6,7 @@ import torch
 from volcap_train import crop as C
 from volcap_train.seg_masks import keep_most_prominent, paste_max, second_pass
 from volcap_train.nets import sample_features
-from volcap_train.train import fourier_items
+from volcap_train.items import fourier_items
 
 from test_upper import BOTTOM, LEFT, RIGHT, TOP, BoxSplit
 

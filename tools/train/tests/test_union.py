@@ -1,9 +1,9 @@
-"""train.fourier_union: the training items of several datasets as one, built from each
+"""items.fourier_union: the training items of several datasets as one, built from each
 dataset's own cache without two copies in memory."""
 import pytest
 import torch
 
-from volcap_train.train import fourier_union
+from volcap_train.items import fourier_union
 
 K = 3
 

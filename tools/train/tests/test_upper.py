@@ -1,11 +1,11 @@
-"""The upper-body variant of the Fourier training images (train.fourier_items `keep`): the
+"""The upper-body variant of the Fourier training images (items.fourier_items `keep`): the
 person cut by the frame's lower edge, with image, mask, target series and point labels all
 empty below the cut, and the crop taken from what is left."""
 import torch
 
 from volcap_train import crop as C
 from volcap_train.nets import sample_features
-from volcap_train.train import cut_row, fourier_items
+from volcap_train.items import cut_row, fourier_items
 
 S = 64
 TOP, BOTTOM, LEFT, RIGHT = 10, 50, 26, 38  # the person: a box of rows x columns

@@ -353,7 +353,8 @@ def calibrate_level(net: FourierNet, data: Path, body: bool, images: int = 96, s
     split (never the held-out one): the level of `fourier.ISO_LEVELS` with the best mean point
     IoU over `images` training images (their labelled points, in the model's depth frame; the
     crops and mask channels from the true masks, or from `seg`'s where the run trained on them)."""
-    from .train import fourier_cached, predict_points
+    from .items import fourier_cached
+    from .train import predict_points
 
     k = net.k
     d = fourier_cached(data, "train", k, seg, passes)
@@ -374,7 +375,7 @@ def fourier_calib(data: Path, k: int, seg: Path | None, upper_every: int = 0, im
     encoder inputs built from the crops and mask channels the run trained on (`seg`'s masks
     where it trained on them, else the true ones; half of them upper bodies for a run that
     trained on those, `train --upper-every`)."""
-    from .train import fourier_cached, fourier_upper_cached
+    from .items import fourier_cached, fourier_upper_cached
 
     sets = [fourier_cached(data, "train", k, seg, passes)]
     if upper_every > 0:

@@ -21,7 +21,8 @@ import torch
 
 from . import fourier as FO
 from .nets import FourierNet, encoder_input, fourier_variant
-from .train import fourier_cached, fourier_query
+from .items import fourier_cached
+from .train import fourier_query
 
 
 def corr(a: torch.Tensor, b: torch.Tensor) -> float:

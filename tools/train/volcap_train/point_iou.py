@@ -1,5 +1,5 @@
 """Point IoU of Fourier checkpoints on held-out whole bodies and on their upper-body crops
-(train.fourier_upper_cached: the person cut by the frame's lower edge), at surface levels.
+(items.fourier_upper_cached: the person cut by the frame's lower edge), at surface levels.
 
   python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55] [--seg ../../models/seg.onnx] [--mirrored] [--ray-parts]
 
@@ -23,7 +23,8 @@ import torch
 from . import fourier as FO
 from .nets import FourierNet, fourier_variant, make_fourier, shift_series
 from .runs import init_weights
-from .train import encoder_input, fourier_cached, fourier_upper_cached, predict_points
+from .items import fourier_cached, fourier_upper_cached
+from .train import encoder_input, predict_points
 
 
 def load(path: Path, variant: str) -> FourierNet:

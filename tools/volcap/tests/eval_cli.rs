@@ -155,27 +155,28 @@ fn bad_decode_knobs_are_refused_by_name() {
 /// One image, one view, 33^3: the smallest run that still makes every row.
 const TINY: [&str; 6] = ["--poses", "1", "--views", "1", "--res", "33"];
 
+/// The models' summary rows' names of a [`TINY`] run with `args`, in order.
+fn tiny_row_names(name: &str, args: &[&str]) -> Vec<String> {
+    run_eval(name, &[&TINY[..], args].concat())
+        .iter()
+        .filter(|r| r.get("family").is_some())
+        .map(|r| r["model"].as_str().unwrap().to_string())
+        .collect()
+}
+
 /// `--moment-fill` puts each Fourier model's filled row beside its row as predicted, in one
 /// run; the ground-truth series (no network, nothing to fill) get one row.
 #[test]
 fn moment_fill_rows_stand_beside_the_plain_ones() {
-    let summaries: Vec<String> = run_eval(
+    let summaries = tiny_row_names(
         "fill",
         &[
-            &TINY[..],
-            &[
-                "--model",
-                "fourier-small,truth-k15",
-                "--moment-fill",
-                "0.02,0.1,4",
-            ],
-        ]
-        .concat(),
-    )
-    .iter()
-    .filter(|r| r.get("family").is_some())
-    .map(|r| r["model"].as_str().unwrap().to_string())
-    .collect();
+            "--model",
+            "fourier-small,truth-k15",
+            "--moment-fill",
+            "0.02,0.1,4",
+        ],
+    );
     assert_eq!(
         summaries,
         [
@@ -191,23 +192,15 @@ fn moment_fill_rows_stand_beside_the_plain_ones() {
 /// (named for it) and leaves the ground-truth series (no network) as they are.
 #[test]
 fn interior_level_rows_are_named_for_the_knob() {
-    let summaries: Vec<String> = run_eval(
+    let summaries = tiny_row_names(
         "interior",
         &[
-            &TINY[..],
-            &[
-                "--model",
-                "fourier-small,truth-k15",
-                "--interior-level",
-                "0.5,2",
-            ],
-        ]
-        .concat(),
-    )
-    .iter()
-    .filter(|r| r.get("family").is_some())
-    .map(|r| r["model"].as_str().unwrap().to_string())
-    .collect();
+            "--model",
+            "fourier-small,truth-k15",
+            "--interior-level",
+            "0.5,2",
+        ],
+    );
     assert_eq!(
         summaries,
         ["fourier-small-f32-in0.50e2", "truth-k15-f32"],

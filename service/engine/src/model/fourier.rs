@@ -668,4 +668,6 @@ pub fn mask_gate(mask: &[f32], s: usize, n: usize, t: f32) -> Vec<bool> {
 }
 
 #[cfg(test)]
+mod level_tests;
+#[cfg(test)]
 mod tests;

@@ -3,13 +3,13 @@
 
 use super::framing::{ToCamera, in_frame};
 use volcap_engine::mesh::Mesh;
-use volcap_engine::metrics::{chamfer, sample_surface};
+use volcap_engine::metrics::{TriangleIndex, chamfer, sample_surface};
 
 /// Chamfer and point-to-surface distance (cm) of a mesh in the model's crop NDC against
 /// the ground-truth world mesh, both where the frame shows them (10,000 samples each), and
 /// with `parts`, per body part the mean distance from the true surface's samples of that
 /// part to the mesh (cm, NaN for a part not shown) and the part's share of the P2S
-/// ([`ImageRow::part_p2s_cm`]); `None` for an empty surface.
+/// ([`super::ImageRow::part_p2s_cm`]); `None` for an empty surface.
 pub(super) fn surface_distances(
     mut mesh: Mesh,
     crop: volcap_engine::model::preprocess::Crop,
@@ -38,26 +38,25 @@ pub(super) fn surface_distances(
     if pred.is_empty() {
         return None;
     }
-    // Completeness per part: each true sample's distance to the reconstruction.
-    let index = volcap_engine::metrics::TriangleIndex::new(
-        mesh.triangles
-            .iter()
-            .map(|t| t.map(|i| mesh.vertices[i as usize].as_dvec3()))
-            .collect(),
-    );
-    let mut sum = [0.0f64; 6];
-    let mut n = [0usize; 6];
-    for p in gt.iter().filter(|_| parts.is_some()) {
-        let Some(part) = parts.map(|l| l.label(*p)) else {
-            continue;
-        };
-        let i = volcap_sim::parts::Part::ALL
+    // The index of a sample's part in `Part::ALL` (torso for an unknown one).
+    let part_of = |l: &volcap_sim::parts::PartLabeler, p: glam::DVec3| {
+        let part = l.label(p);
+        volcap_sim::parts::Part::ALL
             .iter()
             .position(|x| *x == part)
-            .unwrap_or(1);
-        if let Some((_, _, _, d)) = index.nearest(*p) {
-            sum[i] += d;
-            n[i] += 1;
+            .unwrap_or(1)
+    };
+    // Completeness per part: each true sample's distance to the reconstruction.
+    let mut sum = [0.0f64; 6];
+    let mut n = [0usize; 6];
+    if let Some(l) = parts {
+        let index = TriangleIndex::of_mesh(&mesh);
+        for p in &gt {
+            if let Some((_, _, _, d)) = index.nearest(*p) {
+                let i = part_of(l, *p);
+                sum[i] += d;
+                n[i] += 1;
+            }
         }
     }
     let part_cm = std::array::from_fn(|i| {
@@ -70,25 +69,14 @@ pub(super) fn surface_distances(
     // Accuracy per part: each reconstructed sample's distance to the true surface, summed
     // by the part of the body vertex nearest it (over all samples: the shares add up to
     // the P2S).
-    let truth_index = volcap_engine::metrics::TriangleIndex::new(
-        gt_mesh
-            .triangles
-            .iter()
-            .map(|t| t.map(|i| gt_mesh.vertices[i as usize].as_dvec3()))
-            .collect(),
-    );
+    let truth_index = TriangleIndex::of_mesh(gt_mesh);
     let mut p2s_sum = 0.0f64;
     let mut share = [0.0f64; 6];
     for p in &pred {
         let d = truth_index.nearest(*p).map_or(f64::INFINITY, |n| n.3);
         p2s_sum += d;
         if let Some(l) = parts {
-            let part = l.label(*p);
-            let i = volcap_sim::parts::Part::ALL
-                .iter()
-                .position(|x| *x == part)
-                .unwrap_or(1);
-            share[i] += d;
+            share[part_of(l, *p)] += d;
         }
     }
     let n_pred = pred.len() as f64;
