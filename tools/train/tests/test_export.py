@@ -249,6 +249,13 @@ def test_export_reads_a_light_checkpoint_as_a_run_s(tmp_path):
     full.mkdir()
     torch.save({"modules": {"net": net.state_dict()}, "step": 9}, full / "ckpt.pt")
     assert load_modules(full, ["net"])[1][0].keys() == sd.keys()
+    # A run trained with --ema exports its moving average, not its last weights.
+    avg = {k: v + 1 if v.is_floating_point() else v for k, v in net.state_dict().items()}
+    ema = tmp_path / "ema"
+    ema.mkdir()
+    torch.save({"modules": {"net": net.state_dict(), "ema": {"n_averaged": torch.tensor(3), **{f"module.{k}": v for k, v in avg.items()}}}, "step": 9}, ema / "ckpt.pt")
+    got = load_modules(ema, ["net"])[1][0]
+    assert got.keys() == sd.keys() and all(torch.equal(got[k], avg[k]) for k in avg)
     # A module the checkpoint lacks is refused naming the file and the module.
     with pytest.raises(SystemExit, match=r"ckpt\.pt: no module enc"):
         load_modules(run, ["enc", "net"])

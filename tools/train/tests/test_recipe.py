@@ -41,7 +41,7 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     (tmp_path / "start" / "seg2.pt").write_bytes((REPO / "models/checkpoints/shape-fourier-small-seg2.pt").read_bytes())
     missing = subprocess.run([str(bundle / "run.sh"), str(tmp_path / "refused"), "--tiny", "--init", "start/none.pt"], capture_output=True, text=True, env=env, cwd=tmp_path)
     assert missing.returncode == 2 and "--init start/none.pt: no such checkpoint" in missing.stderr, missing.stderr
-    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--init", "start/seg2.pt", "--", "--sync-parts", "--geom-weight", "0.1", "--amp", "bf16"], check=True, env=env, cwd=tmp_path)
+    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--init", "start/seg2.pt", "--", "--sync-parts", "--geom-weight", "0.1", "--amp", "bf16", "--ema", "0.5"], check=True, env=env, cwd=tmp_path)
     ck = res / "checkpoint.pt"
     assert 0 < ck.stat().st_size <= 16 * 2**20
     light = torch.load(ck, weights_only=False)
@@ -57,6 +57,13 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     assert budget["args"]["amp"] == "bf16", budget["args"]
     assert budget["args"]["init"] == str(tmp_path / "start" / "seg2.pt"), budget["args"]
     assert not any(n.startswith("geom") for n in w), sorted(w)[:5]
+    # --ema: the run keeps the weights' moving average beside them, and the light checkpoint
+    # (what ships and what --init resumes) is the average, not the last step's weights.
+    assert budget["args"]["ema"] == "0.5", budget["args"]
+    run = torch.load(res / "run" / "ckpt.pt", weights_only=False)["modules"]
+    avg = {n[len("module."):]: v for n, v in run["ema"].items() if n.startswith("module.")}
+    assert avg.keys() == w.keys() and all(torch.equal(w[n], avg[n].float()) for n in w)
+    assert any(not torch.equal(run["net"][n].float(), w[n]) for n in w if w[n].is_floating_point())
     assert {"ds-0", "ds-1"} <= {p.name for p in res.iterdir()}
     # The log says where the training's time went (the batches made among the steps).
     log = (res / "recipe.log").read_text()

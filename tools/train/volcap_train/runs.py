@@ -30,13 +30,42 @@ def hardware():
     return {"cpu": platform.processor() or platform.machine(), "threads": torch.get_num_threads(), "torch": torch.__version__, "cuda": torch.cuda.is_available()}
 
 
+def ema_weights(modules) -> dict | None:
+    """The weights' moving average of a run trained with `--ema` (torch's AveragedModel state:
+    the net's tensors under `module.`, its `n_averaged` dropped), or None without one."""
+    ema = modules.get("ema") if isinstance(modules, dict) else None
+    if not isinstance(ema, dict):
+        return None
+    return {n[len("module."):]: v for n, v in ema.items() if n.startswith("module.")}
+
+
+def make_ema(net, decay: float):
+    """`train --ema DECAY`: torch's AveragedModel of `net`, its weights and buffers (BatchNorm's
+    running statistics) averaged e <- decay * e + (1 - decay) * w at every update, the first
+    update a copy. A decay outside (0, 1) is refused by value."""
+    if not 0.0 < decay < 1.0:
+        raise SystemExit(f"--ema {decay}: the decay must be in (0, 1), e.g. 0.999")
+    from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
+
+    return AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(decay), use_buffers=True)
+
+
+def run_net(modules) -> dict | None:
+    """A run's net as it ships: the moving average when the run kept one (`--ema`), the
+    trained weights otherwise."""
+    if not isinstance(modules, dict):
+        return None
+    return ema_weights(modules) or modules.get("net")
+
+
 def init_weights(ckpt, path) -> dict:
     """The net's weights (as f32) from a light checkpoint (models/checkpoints/*.pt:
     {"net": ...}) or from a run's full one ({"modules": {"net": ...}, "opt": ...}: the
-    optimizer state is dropped); anything else is refused naming the file."""
+    optimizer state is dropped; a run with `--ema` gives its moving average, the weights it
+    ships); anything else is refused naming the file."""
     weights = None
     if isinstance(ckpt, dict):
-        weights = ckpt["net"] if "net" in ckpt else (ckpt.get("modules") or {}).get("net")
+        weights = ckpt["net"] if "net" in ckpt else run_net(ckpt.get("modules"))
     if not isinstance(weights, dict):
         raise SystemExit(f"--init {path}: neither a light checkpoint (key `net`) nor a run checkpoint (key `modules.net`)")
     return {n: v.float().cpu() for n, v in weights.items()}

@@ -25,7 +25,7 @@ from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, FourierGeomNet, make_fourier, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
 from .ray_losses import ray_level_bce, thin_mask
-from .runs import Run, device, init_weights, loop
+from .runs import Run, device, init_weights, loop, make_ema
 from .surfaces import GeomHead, geometry_loss, surface_depths
 from .items import fourier_cached, fourier_union, fourier_upper_cached
 
@@ -321,20 +321,22 @@ def train_fourier(args):
         if not two_nets:
             modules["geom"] = GeomHead(2 * width)
 
-    def predict_f32(x):
-        """(series, depth centre or None, surfaces or None) of an encoder input."""
+    def predict_f32(x, n=net):
+        """(series, depth centre or None, surfaces or None) of an encoder input, through `n`
+        (the net, or its moving average for the validation)."""
         if two_nets:
-            surf = net.surfaces(x)
-            return net.series_of(x, surf), None, surf
-        feat = net.features(x)
-        pred, d = net.head(feat, with_centre=True)
+            surf = n.surfaces(x)
+            return n.series_of(x, surf), None, surf
+        feat = n.features(x)
+        pred, d = n.head(feat, with_centre=True)
         return pred, d, (modules["geom"](feat) if "geom" in modules else None)
 
     train_forward = training_forward(predict_f32, modules.values(), args.amp, args.compile)
 
     def predict(x, train=True):
-        # The validation runs in float32, uncompiled, so runs compare on one footing.
-        return train_forward(x) if train else predict_f32(x)
+        # The validation runs in float32, uncompiled, so runs compare on one footing, and on
+        # the weights that ship (the moving average with --ema).
+        return train_forward(x) if train else predict_f32(x, modules["ema"].module if "ema" in modules else net)
 
     ohem = OhemState(len(tr["rgb"]), tr["points"].shape[1], args.ohem)
     opt = torch.optim.Adam([p for m in modules.values() for p in m.parameters()], lr=args.lr)
@@ -368,6 +370,11 @@ def train_fourier(args):
     on_dev = data_on_device(args.data_device, dev, [tr, va])
     if on_dev:
         tr, va = ({n: v.to(dev) if torch.is_tensor(v) else v for n, v in d.items()} for d in (tr, va))
+    if args.ema != 0:
+        # --ema: a moving average of the weights and BatchNorm statistics, updated after every
+        # step from the starting weights (--init's); it is what validates and ships (export,
+        # light checkpoints, --init from this run). A checkpoint keeps it beside the net.
+        modules["ema"] = make_ema(net, args.ema)
     # The augmentations draw on the device they run on (`gen` stays the host's: OHEM, flips).
     agen = gen if dev.type == "cpu" else torch.Generator(device=dev).manual_seed(args.seed + 1)
     print(f"training on {dev}, items on {'the device' if on_dev else 'the host'}")
@@ -456,6 +463,8 @@ def train_fourier(args):
         opt.zero_grad()
         loss.backward()
         opt.step()
+        if "ema" in modules:
+            modules["ema"].update_parameters(net)
         synced()
         tb = time.time()
         ohem.update(items, pidx, bce.detach().cpu(), occ.detach().cpu(), lab.cpu())
@@ -523,6 +532,7 @@ def main(argv=None):
     ap.add_argument("--geom-slope-weight", type=float, default=1.0, help="fourier: the slopes' (normals') share of --geom-weight's loss beside the depths' (0: depths only)")
     ap.add_argument("--amp", default="off", choices=["off", "bf16"], help="fourier: the training steps' forward in bfloat16 (autocast), outputs and losses in float32; validation in float32")
     ap.add_argument("--compile", action="store_true", help="fourier: the training forward compiled (torch.compile, channels-last weights and input); the first steps pay the compilation")
+    ap.add_argument("--ema", type=float, default=0.0, help="fourier: keep a moving average of the weights with this decay per step (e.g. 0.999: about the last 1,000 steps) and validate, export and resume --init from it; 0: off")
     ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
