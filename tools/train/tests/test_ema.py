@@ -49,3 +49,23 @@ def test_a_run_ships_its_average_when_it_has_one():
 def test_a_decay_outside_the_open_interval_is_refused_by_value(decay):
     with pytest.raises(SystemExit, match=rf"--ema {decay}: the decay must be in \(0, 1\)"):
         make_ema(small_net(), decay)
+
+
+def test_batchnorm_statistics_are_recomputed_as_the_average_over_the_batches():
+    from volcap_train.runs import recompute_bn
+
+    net = small_net()
+    net[1].running_mean.fill_(7.0)  # statistics that do not belong to these weights
+    w = net[0].weight.detach().clone()
+    torch.manual_seed(1)
+    batches = [torch.randn(4, 2, 6, 6) * 3 + 1 for _ in range(5)]
+    assert recompute_bn(net, iter(batches)) == 1
+    with torch.no_grad():
+        conv = torch.cat([net[0](x) for x in batches])
+    want = conv.double().mean((0, 2, 3))
+    assert torch.allclose(net[1].running_mean.double(), want, atol=1e-5)
+    assert torch.equal(net[0].weight, w)
+    # A net without BatchNorm has nothing to recompute and runs no batch.
+    plain = nn.Sequential(nn.Conv2d(2, 3, 3))
+    untouched = iter(batches)
+    assert recompute_bn(plain, untouched) == 0 and len(list(untouched)) == len(batches)

@@ -46,3 +46,29 @@ def test_checkpoints_log_and_the_budgets_time_split(tmp_path, monkeypatch):
     # What step_fn measured of its own time comes through as a part of the steps.
     assert t["steps: batch"] == round(12 * 0.1, 1)
     assert torch.load(run.out / "ckpt.pt", weights_only=False)["step"] == 12
+
+
+def test_the_hook_before_the_last_checkpoint_runs_once_and_the_checkpoint_holds_it(tmp_path):
+    # `train --ema`: the average's BatchNorm statistics are recomputed at the run's end, before
+    # its last checkpoint (what export and --init read), and nowhere else.
+    net = torch.nn.Linear(2, 1)
+    opt = torch.optim.SGD(net.parameters(), lr=0.1)
+    run = Run(tmp_path / "run", argparse.Namespace(max_minutes=0))
+    calls = []
+
+    def finish():
+        calls.append(1)
+        with torch.no_grad():
+            net.bias.fill_(42.0)
+
+    def step_fn(step):
+        loss = (net(torch.ones(1, 2)) - 1.0).pow(2).sum()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        return float(loss)
+
+    b = loop(run, {"net": net}, opt, 7, step_fn, lambda: {"ok": 1.0}, {"gen": torch.Generator().manual_seed(0), "before_last_checkpoint": finish}, ckpt_every=3)
+    assert calls == [1]
+    assert torch.load(run.out / "ckpt.pt", weights_only=False)["modules"]["net"]["bias"].item() == 42.0
+    assert "finishing" in b["time_s"]

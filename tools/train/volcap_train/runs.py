@@ -50,6 +50,17 @@ def make_ema(net, decay: float):
     return AveragedModel(net, multi_avg_fn=get_ema_multi_avg_fn(decay), use_buffers=True)
 
 
+def recompute_bn(net, batches) -> int:
+    """The BatchNorm running statistics of `net` recomputed as plain averages over `batches`
+    (an iterable of its inputs) in training mode, the weights untouched (torch's `update_bn`):
+    an average of weights is not matched by the average of their statistics. Returns how many
+    BatchNorm layers there were (0: nothing to do, no batch is run)."""
+    n = sum(isinstance(m, torch.nn.modules.batchnorm._BatchNorm) for m in net.modules())
+    if n:
+        torch.optim.swa_utils.update_bn(batches, net)
+    return n
+
+
 def run_net(modules) -> dict | None:
     """A run's net as it ships: the moving average when the run kept one (`--ema`), the
     trained weights otherwise."""
@@ -163,6 +174,12 @@ def loop(run: Run, modules, opt, steps, step_fn, eval_fn, extra_state=None, ckpt
         if run.out_of_time():
             stopped = f"--max-minutes {run.deadline / 60:g} reached at step {step}"
         if step % ckpt_every == 0 or step == steps or stopped:
+            if (step == steps or stopped) and extra_state.get("before_last_checkpoint") is not None:
+                # What the run finishes with before its last checkpoint (--ema: the average's
+                # BatchNorm statistics recomputed), so that the checkpoint holds it.
+                ts = time.time()
+                extra_state["before_last_checkpoint"]()
+                spent["finishing"] = time.time() - ts
             ts = time.time()
             state = {"modules": {n: m.state_dict() for n, m in modules.items()}, "opt": opt.state_dict(), "gen": gen.get_state(), "torch_rng": torch.get_rng_state(), "step": step, "wall": time.time() - t0}
             if agen is not None:

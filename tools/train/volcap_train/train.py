@@ -25,7 +25,7 @@ from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, FourierGeomNet, make_fourier, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
 from .ray_losses import ray_level_bce, thin_mask
-from .runs import Run, device, init_weights, loop, make_ema
+from .runs import Run, device, init_weights, loop, make_ema, recompute_bn
 from .surfaces import GeomHead, geometry_loss, surface_depths
 from .items import fourier_cached, fourier_union, fourier_upper_cached
 
@@ -492,7 +492,17 @@ def train_fourier(args):
             out["geom_loss"] = sum(geos) / len(geos)
         return out
 
-    return loop(run, modules, opt, args.steps, step_fn, eval_fn, {"gen": gen, "agen": agen if agen is not gen else None, "ohem": ohem, "parts": parts}, ckpt_every=args.ckpt_every)
+    def ema_statistics():
+        # --ema-bn-images: the average's BatchNorm statistics recomputed for its weights on a
+        # seeded draw of training images as the engine gives them (no augmentation).
+        n = min(args.ema_bn_images, len(tr["rgb"]))
+        idx = torch.randperm(len(tr["rgb"]), generator=torch.Generator().manual_seed(args.seed + 2))[:n]
+        layers = recompute_bn(modules["ema"].module, (inputs(tr, idx[s : s + args.batch], None) for s in range(0, n, args.batch)))
+        print(f"--ema: BatchNorm statistics of the average recomputed on {n} training images ({layers} layers)")
+
+    finish = ema_statistics if "ema" in modules and args.ema_bn_images > 0 else None
+    extra = {"gen": gen, "agen": agen if agen is not gen else None, "ohem": ohem, "parts": parts, "before_last_checkpoint": finish}
+    return loop(run, modules, opt, args.steps, step_fn, eval_fn, extra, ckpt_every=args.ckpt_every)
 
 
 def main(argv=None):
@@ -533,6 +543,7 @@ def main(argv=None):
     ap.add_argument("--amp", default="off", choices=["off", "bf16"], help="fourier: the training steps' forward in bfloat16 (autocast), outputs and losses in float32; validation in float32")
     ap.add_argument("--compile", action="store_true", help="fourier: the training forward compiled (torch.compile, channels-last weights and input); the first steps pay the compilation")
     ap.add_argument("--ema", type=float, default=0.0, help="fourier: keep a moving average of the weights with this decay per step (e.g. 0.999: about the last 1,000 steps) and validate, export and resume --init from it; 0: off")
+    ap.add_argument("--ema-bn-images", type=int, default=800, help="fourier with --ema: at the run's end, the average's BatchNorm statistics recomputed on this many training images (its weights' own, not the average of the net's); 0: keep the averaged statistics")
     ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
