@@ -19,6 +19,8 @@
 #   (fourier-small-seg2: fourier-small resumed on two-pass masks), each made by
 #   cargo run --release -p volcap -- sim dataset --subjects 48 --poses 16 --views 3 --val-fraction 0.15 --seed 11 --pose-seed P --lighting varied --out DIR
 #   with P = 13, 14 and 15.
+#   DATA_SEG2_NEW (optional): three more such folders, P = 16, 17 and 18 (fourier-small-seg2's run
+#   (14)); unset: DATA_SEG2's.
 set -euo pipefail
 cd "$(dirname "$0")"
 DATA=${DATA:?set DATA to a volcap sim dataset folder}
@@ -72,13 +74,18 @@ $T fourier --data "$DATA_POSES2" --more-data "$DATA_LIGHT" "$DATA_LIGHT2" --out 
 # 257^3, segmented twice, 1.99 / 1.15 / 0.669 -> 1.92 / 0.99 / 0.668 (docs/eval/hands.md section 9);
 # (11) resumed on the same for 7,390 steps (100 minutes on 2 threads): 1.92 / 0.99 / 0.668 ->
 # 1.81 / 0.92 / 0.692 (section 10); (12) resumed in bfloat16 (`--amp bf16`), 5,034 steps at lr 2e-4
-# then 13,459 at 1e-4: 1.81 / 0.92 / 0.692 -> 1.79 / 0.89 / 0.688 (section 11; the default model).
+# then 13,459 at 1e-4: 1.81 / 0.92 / 0.692 -> 1.79 / 0.89 / 0.688 (section 11); (14) resumed on
+# three new 16-pose sets (DATA_SEG2_NEW, else DATA_SEG2's) with a moving average of the weights
+# (`--ema 0.9995`, BatchNorm recomputed for it at the end): 1.79 / 0.89 / 0.688 -> 1.78 / 0.89 /
+# 0.701 (section 14; the default model).
 if [ -n "${DATA_SEG2:-}" ]; then
   read -r -a SEG2 <<< "$DATA_SEG2"
+  read -r -a SEG2N <<< "${DATA_SEG2_NEW:-$DATA_SEG2}"
   $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/stages/fourier-small-seg2-10" --variant fourier-small --steps 5000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --init "$RUNS/fourier-small/ckpt.pt"
   $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/stages/fourier-small-seg2-11" --variant fourier-small --steps 7390 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --init "$RUNS/stages/fourier-small-seg2-10/ckpt.pt"
   $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/stages/fourier-small-seg2-12a" --variant fourier-small --steps 5034 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --init "$RUNS/stages/fourier-small-seg2-11/ckpt.pt"
-  $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 13459 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 1 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --init "$RUNS/stages/fourier-small-seg2-12a/ckpt.pt"
+  $T fourier --data "${SEG2[0]}" --more-data "${SEG2[@]:1}" --out "$RUNS/stages/fourier-small-seg2-12" --variant fourier-small --steps 13459 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 1 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --init "$RUNS/stages/fourier-small-seg2-12a/ckpt.pt"
+  $T fourier --data "${SEG2N[0]}" --more-data "${SEG2N[@]:1}" --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 23585 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-small-seg2-12/ckpt.pt"
 fi
 # fourier-medium: fourier-small widened from c = 8 to 12 without changing its function
 # (volcap_train.widen: the new channels start unread), then trained on as fourier-small's last
@@ -94,7 +101,7 @@ $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 #   volcap eval --subjects train --poses 1 --views 2 --res 129 --seed 7 --model fourier-small --iso-level 0.45,0.5,0.55,0.6
 $PY -m volcap_train.export --data "$DATA_POSES2" --runs "$RUNS" --out ../../models --only fourier-small --iso-level "${FOURIER_SMALL_ISO:-0.55}"
 if [ -n "${DATA_SEG2:-}" ]; then
-  $PY -m volcap_train.export --data "${SEG2[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55
+  $PY -m volcap_train.export --data "${SEG2N[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55
 fi
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5
 # The product's segmentation is MediaPipe's (pinned PyPI wheel, converted to ONNX); ours is seg-sim.onnx.
