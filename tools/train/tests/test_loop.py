@@ -9,6 +9,15 @@ import torch
 from volcap_train.runs import Run, loop
 
 
+def sgd_step(net, opt) -> float:
+    """One step of fitting net(1, 1) to 1: the loops' step_fn."""
+    loss = (net(torch.ones(1, 2)) - 1.0).pow(2).sum()
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    return float(loss)
+
+
 def test_checkpoints_log_and_the_budgets_time_split(tmp_path, monkeypatch):
     saved = []
     save = Run.save
@@ -27,11 +36,7 @@ def test_checkpoints_log_and_the_budgets_time_split(tmp_path, monkeypatch):
 
     def step_fn(step):
         parts["batch"] += 0.1
-        loss = (net(torch.ones(1, 2)) - 1.0).pow(2).sum()
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        return float(loss)
+        return sgd_step(net, opt)
 
     b = loop(run, {"net": net}, opt, 12, step_fn, lambda: {"ok": 1.0}, {"gen": torch.Generator().manual_seed(0), "parts": parts}, ckpt_every=5)
     assert saved == [5, 10, 12]
@@ -61,14 +66,7 @@ def test_the_hook_before_the_last_checkpoint_runs_once_and_the_checkpoint_holds_
         with torch.no_grad():
             net.bias.fill_(42.0)
 
-    def step_fn(step):
-        loss = (net(torch.ones(1, 2)) - 1.0).pow(2).sum()
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        return float(loss)
-
-    b = loop(run, {"net": net}, opt, 7, step_fn, lambda: {"ok": 1.0}, {"gen": torch.Generator().manual_seed(0), "before_last_checkpoint": finish}, ckpt_every=3)
+    b = loop(run, {"net": net}, opt, 7, lambda step: sgd_step(net, opt), lambda: {"ok": 1.0}, {"gen": torch.Generator().manual_seed(0), "before_last_checkpoint": finish}, ckpt_every=3)
     assert calls == [1]
     assert torch.load(run.out / "ckpt.pt", weights_only=False)["modules"]["net"]["bias"].item() == 42.0
     assert "finishing" in b["time_s"]

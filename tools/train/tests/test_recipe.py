@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from volcap_train.nets import make_fourier
-from volcap_train.runs import init_weights
+from volcap_train.runs import ema_weights, init_weights
 
 REPO = Path(__file__).resolve().parents[3]
 BINARY = REPO / "target" / "release" / "volcap"
@@ -61,7 +61,7 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     # (what ships and what --init resumes) is the average, not the last step's weights.
     assert budget["args"]["ema"] == "0.5", budget["args"]
     run = torch.load(res / "run" / "ckpt.pt", weights_only=False)["modules"]
-    avg = {n[len("module."):]: v for n, v in run["ema"].items() if n.startswith("module.")}
+    avg = ema_weights(run)
     assert avg.keys() == w.keys() and all(torch.equal(w[n], avg[n].float()) for n in w)
     assert any(not torch.equal(run["net"][n].float(), w[n]) for n in w if w[n].is_floating_point())
     assert {"ds-0", "ds-1"} <= {p.name for p in res.iterdir()}

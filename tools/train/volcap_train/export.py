@@ -30,7 +30,7 @@ from . import light
 from .data import Split
 from . import fourier as FO
 from .onnx_rewrite import resize_to_shifts
-from .runs import ema_weights, run_net
+from .runs import run_net
 from .nets import FOURIER_VARIANTS, SOFTZ_BINS, fourier_variant, make_fourier, ColorEncoder, ColorMlp, FourierNet, SegNet, SHAPE_VARIANTS, encode_z, encoder_input, make_shape, sample_features
 
 OPSET = 17
@@ -118,7 +118,7 @@ def load_modules(run: Path, names):
     missing = [n for n in names if not isinstance(modules, dict) or n not in modules]
     if missing:
         raise SystemExit(f"{run / 'ckpt.pt'}: no module {', '.join(missing)} (neither a run checkpoint with `modules` nor a light one with `net`)")
-    if "net" in names and ema_weights(modules) is not None:
+    if "net" in names and "ema" in modules:
         print(f"{run}: exporting the weights' moving average (trained with --ema)")
     return st, [run_net(modules) if n == "net" else modules[n] for n in names]
 

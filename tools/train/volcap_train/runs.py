@@ -54,11 +54,9 @@ def recompute_bn(net, batches) -> int:
     """The BatchNorm running statistics of `net` recomputed as plain averages over `batches`
     (an iterable of its inputs) in training mode, the weights untouched (torch's `update_bn`):
     an average of weights is not matched by the average of their statistics. Returns how many
-    BatchNorm layers there were (0: nothing to do, no batch is run)."""
-    n = sum(isinstance(m, torch.nn.modules.batchnorm._BatchNorm) for m in net.modules())
-    if n:
-        torch.optim.swa_utils.update_bn(batches, net)
-    return n
+    BatchNorm layers there were (0: `update_bn` has nothing to do and runs no batch)."""
+    torch.optim.swa_utils.update_bn(batches, net)
+    return sum(isinstance(m, torch.nn.modules.batchnorm._BatchNorm) for m in net.modules())
 
 
 def run_net(modules) -> dict | None:
