@@ -128,6 +128,11 @@ pub struct EvalArgs {
     /// (`FourierMaps::with_level_in`; the silhouette's blurred halo keeps the model's level).
     #[arg(long, value_delimiter = ',')]
     pub interior_level: Option<Vec<f32>>,
+    /// Experimental, Fourier models: `LEVEL,RADIUS`: the surface read at LEVEL instead of the
+    /// model's own on the thin parts only: the person mask's map pixels that an opening by
+    /// RADIUS map pixels removes (hands, wrists, arms edge-on; `fourier::thin_gate`).
+    #[arg(long, value_delimiter = ',')]
+    pub thin_level: Option<Vec<f32>>,
     /// Segmentation passes, comma-separated, each 1 or 2 (`Models::person_mask`; the
     /// daemon's `[model] segment_passes`): 2 segments the person's crop again. Every model
     /// gets a row per value, side by side, named for the count where it is not the one the
@@ -362,6 +367,29 @@ fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, Option<u64>
     )
 }
 
+/// A `LEVEL,PIXELS` decode knob (`flag`): LEVEL in (0, 1), then a whole number of map pixels
+/// in `px` (named `what` in the error).
+fn level_in_pixels(
+    flag: &str,
+    what: &str,
+    m: &Option<Vec<f32>>,
+    px: std::ops::RangeInclusive<u16>,
+) -> anyhow::Result<()> {
+    if let Some(m) = m
+        && (m.len() != 2
+            || !(m[0] > 0.0 && m[0] < 1.0)
+            || !(f32::from(*px.start())..=f32::from(*px.end())).contains(&m[1])
+            || m[1].fract() != 0.0)
+    {
+        bail!(
+            "{flag} {m:?}: LEVEL,{what} with LEVEL in (0, 1) and {what} a whole number of map pixels in {}..={}",
+            px.start(),
+            px.end()
+        );
+    }
+    Ok(())
+}
+
 pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let spec = GridSpec::from_resolution(a.res).with_context(|| format!("--res {}", a.res))?;
     let mut specs = Vec::new();
@@ -397,16 +425,8 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             "--moment-fill {m:?}: MIN_LEN,MAX_LEN,AWAY with 0 < MIN_LEN <= MAX_LEN <= 2 and AWAY a whole number of map pixels in 1..=32"
         );
     }
-    if let Some(m) = &a.interior_level
-        && (m.len() != 2
-            || !(m[0] > 0.0 && m[0] < 1.0)
-            || !(0.0..=32.0).contains(&m[1])
-            || m[1].fract() != 0.0)
-    {
-        bail!(
-            "--interior-level {m:?}: LEVEL,ERODE with LEVEL in (0, 1) and ERODE a whole number of map pixels in 0..=32"
-        );
-    }
+    level_in_pixels("--interior-level", "ERODE", &a.interior_level, 0..=32)?;
+    level_in_pixels("--thin-level", "RADIUS", &a.thin_level, 1..=16)?;
     if !a.segment_passes.is_empty() {
         crate::backend::check_segment_passes(&a.segment_passes)?;
     }
@@ -466,7 +486,8 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         let knobs = a.peak_level.is_some()
             || a.moment_fill.is_some()
             || level.is_some()
-            || a.interior_level.is_some();
+            || a.interior_level.is_some()
+            || a.thin_level.is_some();
         let mut fourier = match &mut models.shape {
             ShapeModel::Fourier(f) if truth_k.is_none() && knobs => {
                 Some(Arc::get_mut(f).ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?)
@@ -485,6 +506,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             (Some(f), Some(m)) if m.len() == 2 => {
                 f.interior_level = Some((m[0], m[1] as usize));
                 f.interior_level
+            }
+            _ => None,
+        };
+        let thin = match (&mut fourier, &a.thin_level) {
+            (Some(f), Some(m)) if m.len() == 2 => {
+                f.thin_level = Some((m[0], m[1] as usize));
+                f.thin_level
             }
             _ => None,
         };
@@ -513,7 +541,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             _ => None,
         };
         let label = format!(
-            "{name}-{}{}{}{}{}{}{}",
+            "{name}-{}{}{}{}{}{}{}{}",
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
             if seg_passes != own_passes {
@@ -531,6 +559,8 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 .unwrap_or_default(),
             interior
                 .map(|(l, e)| format!("-in{l:.2}e{e}"))
+                .unwrap_or_default(),
+            thin.map(|(l, r)| format!("-thin{l:.2}r{r}"))
                 .unwrap_or_default()
         );
         pb.set_message(label.clone());

@@ -138,6 +138,9 @@ fn bad_decode_knobs_are_refused_by_name() {
         ("--interior-level", "0.5"),
         ("--interior-level", "1.2,2"),
         ("--interior-level", "0.5,2.5"),
+        ("--thin-level", "0.45"),
+        ("--thin-level", "0.45,0"),
+        ("--thin-level", "0,2"),
         ("--segment-passes", "3"),
         ("--segment-passes", "1,0"),
     ] {
@@ -204,6 +207,26 @@ fn interior_level_rows_are_named_for_the_knob() {
     assert_eq!(
         summaries,
         ["fourier-small-f32-in0.50e2", "truth-k15-f32"],
+        "{summaries:?}"
+    );
+}
+
+/// `--thin-level` reads every Fourier model's thin parts at that level (the row named for
+/// it) and leaves the ground-truth series as they are.
+#[test]
+fn thin_level_rows_are_named_for_the_knob() {
+    let summaries = tiny_row_names(
+        "thin",
+        &[
+            "--model",
+            "fourier-small,truth-k15",
+            "--thin-level",
+            "0.45,2",
+        ],
+    );
+    assert_eq!(
+        summaries,
+        ["fourier-small-f32-thin0.45r2", "truth-k15-f32"],
         "{summaries:?}"
     );
 }

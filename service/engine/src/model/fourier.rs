@@ -476,6 +476,11 @@ pub struct FourierNet {
     /// footprint or more) eroded by `erode` map pixels (`volcap eval --interior-level`);
     /// off by default.
     pub interior_level: Option<(f32, usize)>,
+    /// Experimental: [`FourierMaps::with_level_in`] `(level, radius)` on the thin parts only:
+    /// the person mask's map pixels (half their footprint or more) that an opening by
+    /// `radius` map pixels removes ([`thin_gate`]: hands, wrists, arms seen edge-on), so the
+    /// blurred edges of thick parts keep the model's level (`volcap eval --thin-level`).
+    pub thin_level: Option<(f32, usize)>,
 }
 
 /// A Fourier file's `volcap.segment_passes` (absent: 1), checked against
@@ -591,6 +596,7 @@ impl FourierNet {
             peak_gate: None,
             moment_fill: None,
             interior_level: None,
+            thin_level: None,
         })
     }
 
@@ -612,6 +618,13 @@ impl FourierNet {
                             .map(|o| !o)
                             .collect();
                         m.with_level_in(level, &gate)
+                    }
+                    None => m,
+                };
+                let m = match self.thin_level {
+                    Some((level, r)) => {
+                        let mask = mask_gate(&x[3 * s * s..], s, self.size, 0.5);
+                        m.with_level_in(level, &thin_gate(&mask, self.size, r))
                     }
                     None => m,
                 };
@@ -645,6 +658,15 @@ fn centre_weights(k: usize) -> Vec<f32> {
             2.0 * sign / (m as f32 * std::f32::consts::PI)
         })
         .collect()
+}
+
+/// The pixels of an `n x n` mask that its opening (erosion, then dilation, by a square of
+/// radius `r`) removes: the parts narrower than `2 r + 1` pixels.
+pub fn thin_gate(mask: &[bool], n: usize, r: usize) -> Vec<bool> {
+    let outside: Vec<bool> = mask.iter().map(|m| !m).collect();
+    let eroded: Vec<bool> = dilate(&outside, n, r).iter().map(|o| !o).collect();
+    let opened = dilate(&eroded, n, r);
+    mask.iter().zip(opened).map(|(m, o)| *m && !o).collect()
 }
 
 /// The `n x n` map pixels whose `s x s` mask, averaged over each pixel's footprint (`s / n`

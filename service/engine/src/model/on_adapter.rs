@@ -2,7 +2,7 @@
 //! maps stay on the adapter (`gpu::maps`), filtered there in time, and the frame's field
 //! reads them there (its point queries, the localizer and the renderer). Frames with a
 //! decode-time reading of the maps on the host (`peak_level`, `moment_fill`,
-//! `interior_level`) take the host path instead.
+//! `interior_level`, `thin_level`) take the host path instead.
 
 use super::field::{EncodeTimings, ShapeState};
 use super::fourier::FourierNet;
@@ -18,7 +18,8 @@ impl FourierNet {
     pub fn adapter_head(&self) -> Option<MapsHead> {
         let plain = self.peak_level.is_none()
             && self.moment_fill.is_none()
-            && self.interior_level.is_none();
+            && self.interior_level.is_none()
+            && self.thin_level.is_none();
         (plain && self.net.gpu_net().is_some()).then_some(MapsHead {
             k: self.k,
             size: self.size,

@@ -71,6 +71,9 @@ fn knobs(a: &EvalArgs) -> String {
     if let Some(m) = &a.interior_level {
         let _ = write!(k, " --interior-level {}", list(m));
     }
+    if let Some(m) = &a.thin_level {
+        let _ = write!(k, " --thin-level {}", list(m));
+    }
     if !a.segment_passes.is_empty() {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
         let _ = write!(k, " --segment-passes {}", passes.join(","));

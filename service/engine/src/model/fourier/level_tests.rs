@@ -195,3 +195,33 @@ fn gated_peak_level_reads_only_the_gated_pixels() {
         "a short mask"
     );
 }
+
+/// The thin-part gate keeps a 2-pixel bar and a 1-pixel finger off a thick block, and none
+/// of the block, its edges and corners included: an opening removes only what is narrower
+/// than its square.
+#[test]
+fn thin_gate_takes_the_narrow_parts_and_leaves_thick_edges() {
+    let n = 32;
+    let mut mask = vec![false; n * n];
+    let mut set = |y0: usize, y1: usize, x0: usize, x1: usize| {
+        for y in y0..y1 {
+            for x in x0..x1 {
+                mask[y * n + x] = true;
+            }
+        }
+    };
+    set(4, 20, 4, 16); // the block (torso), 16 x 12
+    set(8, 10, 16, 28); // a 2-pixel bar off its side (an arm seen edge-on)
+    set(20, 27, 9, 10); // a 1-pixel finger under it
+    let gate = thin_gate(&mask, n, 2);
+    for y in 0..n {
+        for x in 0..n {
+            let block = (4..20).contains(&y) && (4..16).contains(&x);
+            let thin = mask[y * n + x] && !block;
+            assert_eq!(gate[y * n + x], thin, "pixel ({y}, {x})");
+        }
+    }
+    // Radius 0 opens nothing; an empty mask has no thin parts.
+    assert!(thin_gate(&mask, n, 0).iter().all(|g| !g));
+    assert!(thin_gate(&vec![false; n * n], n, 2).iter().all(|g| !g));
+}
