@@ -372,7 +372,7 @@ fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, Option<u64>
 fn level_in_pixels(
     flag: &str,
     what: &str,
-    m: &Option<Vec<f32>>,
+    m: Option<&[f32]>,
     px: std::ops::RangeInclusive<u16>,
 ) -> anyhow::Result<()> {
     if let Some(m) = m
@@ -425,8 +425,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             "--moment-fill {m:?}: MIN_LEN,MAX_LEN,AWAY with 0 < MIN_LEN <= MAX_LEN <= 2 and AWAY a whole number of map pixels in 1..=32"
         );
     }
-    level_in_pixels("--interior-level", "ERODE", &a.interior_level, 0..=32)?;
-    level_in_pixels("--thin-level", "RADIUS", &a.thin_level, 1..=16)?;
+    level_in_pixels(
+        "--interior-level",
+        "ERODE",
+        a.interior_level.as_deref(),
+        0..=32,
+    )?;
+    level_in_pixels("--thin-level", "RADIUS", a.thin_level.as_deref(), 1..=16)?;
     if !a.segment_passes.is_empty() {
         crate::backend::check_segment_passes(&a.segment_passes)?;
     }

@@ -58,6 +58,13 @@ fn dilate(m: &[bool], n: usize, r: usize) -> Vec<bool> {
     out
 }
 
+/// A square erosion of radius `r` of an `n x n` row-major mask: what [`dilate`] of its
+/// outside leaves (the map's own edge does not erode).
+fn erode(m: &[bool], n: usize, r: usize) -> Vec<bool> {
+    let outside: Vec<bool> = m.iter().map(|v| !v).collect();
+    dilate(&outside, n, r).iter().map(|o| !o).collect()
+}
+
 /// Per-pixel Fourier coefficients over the crop: `size x size` pixels, `2K + 1` each,
 /// pixel-interleaved.
 #[derive(Debug, Clone)]
@@ -608,16 +615,9 @@ impl FourierNet {
             .map(|m| {
                 let m = m.with_iso_level(self.iso_level).with_basis(self.basis);
                 let m = match self.interior_level {
-                    Some((level, erode)) => {
-                        let outside: Vec<bool> = mask_gate(&x[3 * s * s..], s, self.size, 0.5)
-                            .iter()
-                            .map(|g| !g)
-                            .collect();
-                        let gate: Vec<bool> = dilate(&outside, self.size, erode)
-                            .iter()
-                            .map(|o| !o)
-                            .collect();
-                        m.with_level_in(level, &gate)
+                    Some((level, r)) => {
+                        let mask = mask_gate(&x[3 * s * s..], s, self.size, 0.5);
+                        m.with_level_in(level, &erode(&mask, self.size, r))
                     }
                     None => m,
                 };
@@ -663,9 +663,7 @@ fn centre_weights(k: usize) -> Vec<f32> {
 /// The pixels of an `n x n` mask that its opening (erosion, then dilation, by a square of
 /// radius `r`) removes: the parts narrower than `2 r + 1` pixels.
 pub fn thin_gate(mask: &[bool], n: usize, r: usize) -> Vec<bool> {
-    let outside: Vec<bool> = mask.iter().map(|m| !m).collect();
-    let eroded: Vec<bool> = dilate(&outside, n, r).iter().map(|o| !o).collect();
-    let opened = dilate(&eroded, n, r);
+    let opened = dilate(&erode(mask, n, r), n, r);
     mask.iter().zip(opened).map(|(m, o)| *m && !o).collect()
 }
 
