@@ -259,12 +259,11 @@ impl Rig {
             let flex = Mat3::from_rotation_x(-r(a.shoulder_flex[s]));
             let across = Mat3::from_rotation_y(-sign * r(a.shoulder_across[s]));
             set(self.upperarm[s], across * flex * abd);
-            // Elbow flexes about the axis across the arm and the forward direction.
+            // Elbow flexes about the axis across the arm and the forward direction, the
+            // same sense on both sides: (d x z) x d = z for the rest direction d, so a
+            // positive angle brings the forearm forward (+z) on the left and on the right.
             let axis = self.arm_dir[s].cross(Vec3::Z).normalize_or(Vec3::X);
-            set(
-                self.lowerarm[s],
-                Mat3::from_axis_angle(axis, -sign * r(a.elbow[s])),
-            );
+            set(self.lowerarm[s], Mat3::from_axis_angle(axis, r(a.elbow[s])));
         }
     }
 }
@@ -309,6 +308,88 @@ mod tests {
         for st in Style::ALL {
             let parsed: Style = serde_json::from_value(serde_json::json!(st.name())).unwrap();
             assert_eq!(parsed, st);
+        }
+    }
+
+    /// The centroids of `part` (world metres; [left (+x), right]) on the default subject
+    /// posed with `a` (the body's vertices of that part, split by the side they rest on).
+    fn centroids(a: &Angles, part: crate::parts::Part) -> [Vec3; 2] {
+        use crate::assets::HumanAssets;
+        use crate::parts::vertex_parts;
+        use crate::subject::{Posed, Subject, SubjectSpec};
+        let assets = HumanAssets::embedded().unwrap();
+        let subject = Subject::new(&assets, &SubjectSpec::default()).unwrap();
+        let rig = Rig::new(&assets, &subject.heads);
+        let (mut rot, mut posed) = (Vec::new(), Posed::default());
+        rig.rotations(a, &mut rot);
+        subject.pose(&assets, &rot, &mut posed);
+        let mut sum = [(Vec3::ZERO, 0.0f32); 2];
+        for (i, p) in vertex_parts(&assets).iter().enumerate() {
+            if *p == part {
+                let s = usize::from(subject.rest[i].x < 0.0);
+                sum[s].0 += posed.verts[i];
+                sum[s].1 += 1.0;
+            }
+        }
+        sum.map(|(p, n)| p / n.max(1.0))
+    }
+
+    /// The angles of the mirror image (x -> -x) of the pose `a`: sides swapped, the yaw and
+    /// the side bend negated.
+    fn mirrored(a: &Angles) -> Angles {
+        let sw = |v: [f32; 2]| [v[1], v[0]];
+        Angles {
+            root_yaw: -a.root_yaw,
+            spine_side: -a.spine_side,
+            hip_flex: sw(a.hip_flex),
+            knee: sw(a.knee),
+            ankle: sw(a.ankle),
+            shoulder_abd: sw(a.shoulder_abd),
+            shoulder_flex: sw(a.shoulder_flex),
+            shoulder_across: sw(a.shoulder_across),
+            elbow: sw(a.elbow),
+            ..*a
+        }
+    }
+
+    #[test]
+    fn both_elbows_bend_forward() {
+        // The character faces +z, its rest arms hang with the elbows a little bent (the
+        // forearms forward of the upper arms). Flexing an elbow further brings its hand
+        // forward, never behind the body (hyperextension), on either side.
+        let hands = |a: &Angles| centroids(a, crate::parts::Part::Hands);
+        let rest = hands(&Angles::default());
+        let bent = hands(&Angles {
+            elbow: [30.0, 30.0],
+            ..Default::default()
+        });
+        for s in 0..2 {
+            let dz = bent[s].z - rest[s].z;
+            assert!(dz > 0.05, "side {s}: the hand moved {dz} m along +z");
+        }
+    }
+
+    #[test]
+    fn the_rig_is_mirror_symmetric() {
+        // A pose and its mirror image put the hands and the feet at mirrored places (x
+        // negated, the sides swapped): no joint bends one way on the left and another on
+        // the right (the left elbow once bent backward, a chirality every dataset had).
+        use crate::parts::Part;
+        for style in Style::ALL {
+            for seed in 0..4 {
+                let a = Procedural::new(style, seed, 1.3).angles(0.4);
+                for part in [Part::Hands, Part::Feet] {
+                    let (h, m) = (centroids(&a, part), centroids(&mirrored(&a), part));
+                    for s in 0..2 {
+                        let want = Vec3::new(-h[s].x, h[s].y, h[s].z);
+                        let got = m[1 - s];
+                        assert!(
+                            (got - want).length() < 0.02,
+                            "{style:?} seed {seed} {part:?} side {s}: mirror {got} against {want}"
+                        );
+                    }
+                }
+            }
         }
     }
 

@@ -44,6 +44,17 @@ def test_only_the_chosen_images_change_and_twice_is_nothing():
     assert mirror_some(t, None) is t
 
 
+def _items(seed: int, size: int, points: int) -> dict:
+    """Two random point_iou items: images and masks `size` px a side, `points` labelled points."""
+    g = torch.Generator().manual_seed(seed)
+    return {
+        "rgb": torch.randint(0, 255, (2, 3, size, size), dtype=torch.uint8, generator=g),
+        "mask": torch.randint(0, 255, (2, 1, size, size), dtype=torch.uint8, generator=g),
+        "points": torch.rand(2, points, 3, generator=g) * 2 - 1,
+        "occ": (torch.rand(2, points, generator=g) > 0.5).float(),
+    }
+
+
 def test_point_iou_mirrored_items_are_the_same_people_seen_mirrored():
     # point_iou --mirrored: a net's answer for a mirrored item at its mirrored point is its
     # answer for the mirrored input's maps mirrored back at the original point: one mirror.
@@ -51,13 +62,7 @@ def test_point_iou_mirrored_items_are_the_same_people_seen_mirrored():
     from volcap_train.point_iou import mirrored
     from volcap_train.train import predict_points
 
-    g = torch.Generator().manual_seed(2)
-    d = {
-        "rgb": torch.randint(0, 255, (2, 3, 256, 256), dtype=torch.uint8, generator=g),
-        "mask": torch.randint(0, 255, (2, 1, 256, 256), dtype=torch.uint8, generator=g),
-        "points": torch.rand(2, 300, 3, generator=g) * 2 - 1,
-        "occ": (torch.rand(2, 300, generator=g) > 0.5).float(),
-    }
+    d = _items(2, 256, 300)
     m = mirrored(d)
     assert torch.equal(m["occ"], d["occ"]) and torch.equal(mirrored(m)["points"], d["points"])
     torch.manual_seed(0)
@@ -69,3 +74,17 @@ def test_point_iou_mirrored_items_are_the_same_people_seen_mirrored():
         maps = net(encoder_input(m["rgb"].float() / 255, m["mask"].float() / 255))
     want = fourier_query(mirror_some(maps, torch.tensor([True, True])), d["points"], K)
     assert torch.allclose(got, want, atol=1e-4)
+
+
+def test_turned_items_are_mirrored_inputs_with_the_labels_half_turned():
+    # point_iou's `turned`: the mirrored inputs, the labels' x and depth negated (a half
+    # turn about the vertical axis), the labels themselves and the input items untouched.
+    from volcap_train.point_iou import mirrored, turned
+
+    d = _items(3, 8, 50)
+    before = d["points"].clone()
+    t, m = turned(d), mirrored(d)
+    assert torch.equal(d["points"], before)
+    assert torch.equal(t["rgb"], m["rgb"]) and torch.equal(t["mask"], m["mask"])
+    assert torch.equal(t["points"], before * torch.tensor([-1.0, 1.0, -1.0]))
+    assert torch.equal(t["occ"], d["occ"])

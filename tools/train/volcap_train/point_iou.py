@@ -4,7 +4,13 @@
   python -m volcap_train.point_iou --data /work/data/ds2 --ckpt RUN [RUN ...] [--levels 0.5,0.55] [--seg ../../models/seg.onnx] [--mirrored] [--ray-parts]
 
 `--mirrored` also scores the whole bodies mirrored left-right (`mirrored`): a person of the
-other handedness, which a net that never saw mirrored images scores far lower.
+other handedness. People are mirror symmetric, so a net trained on symmetric data scores both
+alike; a gap means it reads a chirality of its data. It also scores the mirrored inputs
+against the labels turned around (`turned`: depth negated as well, the same silhouette seen
+from the other side): high there means the net takes a mirrored person for one facing the other
+way, i.e. it reads which way a person faces from that chirality. (The simulator's left elbow
+bent backward until 2026-11-28: the default then scored 0.814 plain, 0.503 mirrored, and its
+mirrored maps matched the turned-around truth as well as its plain maps matched the truth.)
 
 RUN is a run folder (its ckpt.pt) or a light checkpoint (models/checkpoints/*.pt). Depth in the
 body frame (fourier.centre_depth), as the committed models are trained.
@@ -50,6 +56,16 @@ def mirrored(d: dict) -> dict:
     pts = d["points"].clone()
     pts[..., 0] = -pts[..., 0]
     return {**d, "rgb": d["rgb"].flip(-1), "mask": d["mask"].flip(-1), "points": pts}
+
+
+def turned(d: dict) -> dict:
+    """The items of `d` mirrored left-right (`mirrored`) and scored as the same people turned
+    around: the labelled points' depth negated as well (body frame: about the mean depth;
+    x and z negated is a half turn about the vertical axis, as an orthographic camera sees
+    it), labels unchanged."""
+    m = mirrored(d)
+    m["points"][..., 2] = -m["points"][..., 2]
+    return m
 
 
 GROSS_BINS = 8  # of 64 over zeta [-1, 1]: 0.25 zeta
@@ -153,6 +169,7 @@ def main(argv=None):
         FO.centre_depth(d["coeff"], d["points"], k)
     if args.mirrored:
         sets["whole, mirrored"] = mirrored(sets["whole"])
+        sets["whole, mirrored, scored as turned around"] = turned(sets["whole"])
     for ck in args.ckpt:
         net = load(ck, args.variant)
         for name, d in sets.items():
