@@ -311,27 +311,45 @@ mod tests {
         }
     }
 
-    /// The centroids of `part` (world metres; [left (+x), right]) on the default subject
-    /// posed with `a` (the body's vertices of that part, split by the side they rest on).
-    fn centroids(a: &Angles, part: crate::parts::Part) -> [Vec3; 2] {
-        use crate::assets::HumanAssets;
-        use crate::parts::vertex_parts;
-        use crate::subject::{Posed, Subject, SubjectSpec};
-        let assets = HumanAssets::embedded().unwrap();
-        let subject = Subject::new(&assets, &SubjectSpec::default()).unwrap();
-        let rig = Rig::new(&assets, &subject.heads);
-        let (mut rot, mut posed) = (Vec::new(), Posed::default());
-        rig.rotations(a, &mut rot);
-        subject.pose(&assets, &rot, &mut posed);
-        let mut sum = [(Vec3::ZERO, 0.0f32); 2];
-        for (i, p) in vertex_parts(&assets).iter().enumerate() {
-            if *p == part {
-                let s = usize::from(subject.rest[i].x < 0.0);
-                sum[s].0 += posed.verts[i];
-                sum[s].1 += 1.0;
+    /// The default subject, its rig and its vertices' parts, built once per test.
+    struct Body {
+        assets: crate::assets::HumanAssets,
+        subject: crate::subject::Subject,
+        rig: Rig,
+        parts: Vec<crate::parts::Part>,
+    }
+
+    impl Body {
+        fn new() -> Self {
+            use crate::subject::{Subject, SubjectSpec};
+            let assets = crate::assets::HumanAssets::embedded().unwrap();
+            let subject = Subject::new(&assets, &SubjectSpec::default()).unwrap();
+            let rig = Rig::new(&assets, &subject.heads);
+            let parts = crate::parts::vertex_parts(&assets);
+            Self {
+                assets,
+                subject,
+                rig,
+                parts,
             }
         }
-        sum.map(|(p, n)| p / n.max(1.0))
+
+        /// The centroids of `part` (world metres; [left (+x), right]) posed with `a` (the
+        /// body's vertices of that part, split by the side they rest on).
+        fn centroids(&self, a: &Angles, part: crate::parts::Part) -> [Vec3; 2] {
+            let (mut rot, mut posed) = (Vec::new(), crate::subject::Posed::default());
+            self.rig.rotations(a, &mut rot);
+            self.subject.pose(&self.assets, &rot, &mut posed);
+            let mut sum = [(Vec3::ZERO, 0.0f32); 2];
+            for (i, p) in self.parts.iter().enumerate() {
+                if *p == part {
+                    let s = usize::from(self.subject.rest[i].x < 0.0);
+                    sum[s].0 += posed.verts[i];
+                    sum[s].1 += 1.0;
+                }
+            }
+            sum.map(|(p, n)| p / n.max(1.0))
+        }
     }
 
     /// The angles of the mirror image (x -> -x) of the pose `a`: sides swapped, the yaw and
@@ -357,7 +375,8 @@ mod tests {
         // The character faces +z, its rest arms hang with the elbows a little bent (the
         // forearms forward of the upper arms). Flexing an elbow further brings its hand
         // forward, never behind the body (hyperextension), on either side.
-        let hands = |a: &Angles| centroids(a, crate::parts::Part::Hands);
+        let body = Body::new();
+        let hands = |a: &Angles| body.centroids(a, crate::parts::Part::Hands);
         let rest = hands(&Angles::default());
         let bent = hands(&Angles {
             elbow: [30.0, 30.0],
@@ -375,11 +394,15 @@ mod tests {
         // negated, the sides swapped): no joint bends one way on the left and another on
         // the right (the left elbow once bent backward, a chirality every dataset had).
         use crate::parts::Part;
+        let body = Body::new();
         for style in Style::ALL {
             for seed in 0..4 {
                 let a = Procedural::new(style, seed, 1.3).angles(0.4);
                 for part in [Part::Hands, Part::Feet] {
-                    let (h, m) = (centroids(&a, part), centroids(&mirrored(&a), part));
+                    let (h, m) = (
+                        body.centroids(&a, part),
+                        body.centroids(&mirrored(&a), part),
+                    );
                     for s in 0..2 {
                         let want = Vec3::new(-h[s].x, h[s].y, h[s].z);
                         let got = m[1 - s];
