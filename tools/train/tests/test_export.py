@@ -279,3 +279,13 @@ def test_fourier_export_writes_the_segmentation_passes_of_a_two_pass_run():
     two = fourier_meta("fourier-small", 15, "body", 0.55, "x", passes=2)
     assert "segment_passes" not in one and two["segment_passes"] == "2"
     assert {k: v for k, v in two.items() if k != "segment_passes"} == one
+
+
+def test_the_card_names_the_calibration_count_and_a_bad_count_is_refused(tmp_path):
+    from volcap_train.export import INT8_CALIB_IMAGES, calib_row, main
+
+    assert f"from {INT8_CALIB_IMAGES} training images" in calib_row(None, 0)
+    row = calib_row(Path("seg.onnx"), 0, True, 99.9999, 320)
+    assert "from 320 training images, the product's masks" in row and "99.9999" in row
+    with pytest.raises(SystemExit, match="--int8-calib-images 0"):
+        main(["--data", str(tmp_path), "--runs", str(tmp_path), "--out", str(tmp_path), "--int8-calib-images", "0"])

@@ -88,3 +88,43 @@ def test_turned_items_are_mirrored_inputs_with_the_labels_half_turned():
     assert torch.equal(t["rgb"], m["rgb"]) and torch.equal(t["mask"], m["mask"])
     assert torch.equal(t["points"], before * torch.tensor([-1.0, 1.0, -1.0]))
     assert torch.equal(t["occ"], d["occ"])
+
+
+def test_depth_reversed_items_negate_only_the_labels_depth():
+    from volcap_train.point_iou import depth_reversed
+
+    d = _items(2, 8, 40)
+    before = d["points"].clone()
+    r = depth_reversed(d)
+    assert torch.equal(d["points"], before)
+    assert torch.equal(r["points"], before * torch.tensor([1.0, 1.0, -1.0]))
+    assert torch.equal(r["rgb"], d["rgb"]) and torch.equal(r["occ"], d["occ"])
+
+
+def test_facing_split_counts_the_images_closer_to_the_reversed_truth():
+    from volcap_train.point_iou import facing_split
+
+    plain = torch.tensor([0.8, 0.3, 0.7, 0.4])
+    rev = torch.tensor([0.4, 0.6, 0.2, 0.5])
+    r = facing_split(plain, rev)
+    assert (r["errors"], r["images"]) == (2, 4)
+    assert abs(r["iou_errors"] - 0.35) < 1e-6 and abs(r["iou_rest"] - 0.75) < 1e-6
+    none = facing_split(plain, plain * 0.5)
+    assert none["errors"] == 0 and none["iou_errors"] != none["iou_errors"]  # nan: no errors
+
+
+def test_a_net_that_reverses_depth_is_all_facing_errors():
+    # Predictions that are the labels with depth reversed, through the real scoring path:
+    # occupancy at a point = the truth at the point with its depth negated.
+    from volcap_train import fourier as FO
+    from volcap_train.point_iou import depth_reversed, facing_split
+
+    g = torch.Generator().manual_seed(3)
+    pts = torch.rand(3, 400, 3, generator=g) * 2 - 1
+    inside = lambda p: ((p[..., 0] ** 2 + (p[..., 2] - 0.3) ** 2) < 0.25).float()  # off-centre in depth
+    lab = inside(pts) > 0.5
+    wrong = lambda p: inside(p * torch.tensor([1.0, 1.0, -1.0]))
+    plain = FO.level_iou(wrong(pts), lab, 0.5)
+    rev = FO.level_iou(wrong(depth_reversed({"points": pts})["points"]), lab, 0.5)
+    r = facing_split(plain, rev)
+    assert r["errors"] == 3 and r["iou_errors"] < 0.6

@@ -137,8 +137,11 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--only", nargs="*", default=None, help="run names to export (default: all present)")
     ap.add_argument("--iso-level", default="auto", help="Fourier runs: the series level read as the surface (`volcap.iso_level`): `auto` (calibrated by point IoU on the training split, fourier.best_level) or a number in (0, 1) chosen from a sweep on training subjects (`volcap eval --subjects train --iso-level ...`)")
+    ap.add_argument("--int8-calib-images", type=int, default=None, help=f"Fourier runs: training images the int8 activation ranges are calibrated on (default {INT8_CALIB_IMAGES}); the card names the count. Where no scheme reads the golden query within the limit, another count can (run (17) of fourier-small-seg2: 256 -> 0.028, 320 -> 0.010)")
     ap.add_argument("--overfit", default=None, help="export only this Fourier run as the overfit test model (f32 ONNX + overfit.json: scene, frame, yaws of its training images)")
     args = ap.parse_args(argv)
+    if args.int8_calib_images is not None and args.int8_calib_images < 1:
+        raise SystemExit(f"--int8-calib-images {args.int8_calib_images}: must be at least 1")
     if args.iso_level != "auto":
         try:
             level = float(args.iso_level)
@@ -214,7 +217,7 @@ def main(argv=None):
             continue
         variant = budget.get("args", {}).get("variant", "compact")
         if variant in FOURIER_VARIANTS:
-            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, common, gen, va, args.data, args.iso_level)
+            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, common, gen, va, args.data, args.iso_level, args.int8_calib_images or INT8_CALIB_IMAGES)
             continue
         if variant not in SHAPE_VARIANTS:
             continue
@@ -424,11 +427,11 @@ def scheme_text(fine: bool, percentile: float) -> str:
     return f"weights per output channel, activation ranges ({100 - percentile:.5g}-{percentile:.8g} percentiles, per tensor)"
 
 
-def calib_row(seg: Path | None, upper_every: int, fine: bool = False, percentile: float = 99.999) -> str:
+def calib_row(seg: Path | None, upper_every: int, fine: bool = False, percentile: float = 99.999, images: int = INT8_CALIB_IMAGES) -> str:
     """The model card's int8 calibration row (`fine`: quantize(fine=True, percentile)'s scheme)."""
     masks = "the product's masks" if seg is not None else "true masks"
     upper = ", half of them upper bodies" if upper_every > 0 else ""
-    return f"{scheme_text(fine, percentile)} from {INT8_CALIB_IMAGES} training images, {masks}{upper}"
+    return f"{scheme_text(fine, percentile)} from {images} training images, {masks}{upper}"
 
 
 def fourier_meta(variant: str, k: int, frame: str, iso: float, name: str, passes: int, size: int = 128) -> dict:
@@ -445,7 +448,7 @@ def fourier_meta(variant: str, k: int, frame: str, iso: float, name: str, passes
     return meta
 
 
-def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, common, gen, va: Split, data: Path, level: str = "auto") -> dict:
+def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, common, gen, va: Split, data: Path, level: str = "auto", calib_images: int = INT8_CALIB_IMAGES) -> dict:
     net = load_fourier(run, variant)
     k = net.k
     base = f"shape-{name}"
@@ -469,7 +472,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     upper_every = int(budget.get("args", {}).get("upper_every", 0) or 0)
     int8_path = out / f"{base}.fourier.int8.onnx"
     # Every scheme of FOURIER_INT8_SCHEMES is tried; the one closest to f32 is kept.
-    feeds = fourier_calib(data, k, seg, upper_every, passes=passes)
+    feeds = fourier_calib(data, k, seg, upper_every, images=calib_images, passes=passes)
     tried = []  # (drift, fine, percentile, file)
     for tag, fine, pct in FOURIER_INT8_SCHEMES:
         tmp = out / f"{base}.fourier.int8.{tag}.tmp"
@@ -480,7 +483,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     shutil.move(best, int8_path)
     for *_, tmp in rest:
         tmp.unlink()
-    scheme = calib_row(seg, upper_every, fine, pct)
+    scheme = calib_row(seg, upper_every, fine, pct, calib_images)
     others = "; ".join(f"{scheme_text(f, p)} {d:.3f}" for d, f, p, _ in rest)
     calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the others: {others})"
     if drift < INT8_MAX_DRIFT:

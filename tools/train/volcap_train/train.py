@@ -291,7 +291,8 @@ def train_fourier(args):
     k, width, shift = fourier_variant(args.variant)
     # --seg: the crops and mask channels from the product's segmentation (what the engine
     # feeds the encoder), for training and validation alike; targets stay the ground truth's.
-    # --more-data: further datasets' training images (same subjects' split), one set of items;
+    # --more-data: further datasets' training images (new poses of the same identities, or new
+    # identities from another seed), one set of items;
     # validation stays --data's.
     tr = fourier_union([args.data, *args.more_data], "train", k, args.seg, args.segment_passes)
     va = fourier_cached(args.data, "val", k, args.seg, args.segment_passes)
@@ -509,7 +510,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(prog="volcap_train.train")
     ap.add_argument("task", choices=["seg", "shape", "color", "fourier"])
     ap.add_argument("--data", type=Path, required=True)
-    ap.add_argument("--more-data", type=Path, nargs="*", default=[], help="fourier: more datasets (same subjects' split, e.g. new poses or lighting) whose training images join --data's (fourier_union); validation stays --data's")
+    ap.add_argument("--more-data", type=Path, nargs="*", default=[], help="fourier: more datasets whose training images join --data's (fourier_union): the same identities and split in new poses or lighting (`--pose-seed`), or new identities (another `--seed`; never --data's held-out ones, so only their train split is read); validation stays --data's")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--variant", default="compact")
     ap.add_argument("--ohem", default="P+I", choices=["none", "P", "P+I"])
