@@ -137,10 +137,10 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--only", nargs="*", default=None, help="run names to export (default: all present)")
     ap.add_argument("--iso-level", default="auto", help="Fourier runs: the series level read as the surface (`volcap.iso_level`): `auto` (calibrated by point IoU on the training split, fourier.best_level) or a number in (0, 1) chosen from a sweep on training subjects (`volcap eval --subjects train --iso-level ...`)")
-    ap.add_argument("--int8-calib-images", type=int, default=None, help=f"Fourier runs: training images the int8 activation ranges are calibrated on (default {INT8_CALIB_IMAGES}); the card names the count. Where no scheme reads the golden query within the limit, another count can (run (17) of fourier-small-seg2: 256 -> 0.028, 320 -> 0.010)")
+    ap.add_argument("--int8-calib-images", type=int, default=INT8_CALIB_IMAGES, help="Fourier runs: training images the int8 activation ranges are calibrated on (default %(default)s); the card names the count. Where no scheme reads the golden query within the limit, another count can (run (17) of fourier-small-seg2: 256 -> 0.028, 320 -> 0.010)")
     ap.add_argument("--overfit", default=None, help="export only this Fourier run as the overfit test model (f32 ONNX + overfit.json: scene, frame, yaws of its training images)")
     args = ap.parse_args(argv)
-    if args.int8_calib_images is not None and args.int8_calib_images < 1:
+    if args.int8_calib_images < 1:
         raise SystemExit(f"--int8-calib-images {args.int8_calib_images}: must be at least 1")
     if args.iso_level != "auto":
         try:
@@ -217,7 +217,7 @@ def main(argv=None):
             continue
         variant = budget.get("args", {}).get("variant", "compact")
         if variant in FOURIER_VARIANTS:
-            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, common, gen, va, args.data, args.iso_level, args.int8_calib_images or INT8_CALIB_IMAGES)
+            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, common, gen, va, args.data, args.iso_level, args.int8_calib_images)
             continue
         if variant not in SHAPE_VARIANTS:
             continue

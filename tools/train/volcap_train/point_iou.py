@@ -93,13 +93,13 @@ def facing_split(iou_plain: torch.Tensor, iou_reversed: torch.Tensor) -> dict:
     return {"errors": int(wrong.sum()), "images": len(wrong), "iou_errors": mean(iou_plain[wrong]), "iou_rest": mean(iou_plain[~wrong])}
 
 
-def facing_errors(net: FourierNet, d: dict, level: float) -> dict:
-    """`facing_split` of a net on the items of `d` at a surface level."""
-    lab = d["occ"] > 0.5
-    plain = FO.level_iou(predict_points(net, d["rgb"], d["mask"], d["points"], 16), lab, level)
-    r = depth_reversed(d)
-    rev = FO.level_iou(predict_points(net, r["rgb"], r["mask"], r["points"], 16), lab, level)
-    return facing_split(plain, rev)
+def facing_errors(net: FourierNet, d: dict, levels) -> dict:
+    """level -> `facing_split` of a net on the items of `d`: one pass of the encoder, its maps
+    read at the labelled points and at the same points with their depth reversed."""
+    lab, n = d["occ"] > 0.5, d["points"].shape[1]
+    both = torch.cat([d["points"], depth_reversed(d)["points"]], 1)
+    occ = predict_points(net, d["rgb"], d["mask"], both, 16)
+    return {lv: facing_split(FO.level_iou(occ[:, :n], lab, lv), FO.level_iou(occ[:, n:], lab, lv)) for lv in levels}
 
 
 GROSS_BINS = 8  # of 64 over zeta [-1, 1]: 0.25 zeta
@@ -211,8 +211,7 @@ def main(argv=None):
             r = point_iou(net, d, levels)
             print(f"{ck} {name} ({len(d['rgb'])} images): " + ", ".join(f"level {lv}: {m:.3f} (worst-10 {w:.3f})" for lv, (m, w) in r.items()), flush=True)
         if args.facing:
-            for lv in levels:
-                r = facing_errors(net, sets["whole"], lv)
+            for lv, r in facing_errors(net, sets["whole"], levels).items():
                 print(f"{ck} whole, facing errors at level {lv}: {r['errors']} of {r['images']} images ({r['errors'] / max(r['images'], 1):.1%}) match the person facing the other way better; point IoU on them {r['iou_errors']:.3f}, on the rest {r['iou_rest']:.3f}", flush=True)
         if args.ray_parts:
             for lv in levels:

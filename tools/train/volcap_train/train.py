@@ -292,8 +292,7 @@ def train_fourier(args):
     # --seg: the crops and mask channels from the product's segmentation (what the engine
     # feeds the encoder), for training and validation alike; targets stay the ground truth's.
     # --more-data: further datasets' training images (new poses of the same identities, or new
-    # identities from another seed), one set of items;
-    # validation stays --data's.
+    # identities from another seed), one set of items; validation stays --data's.
     tr = fourier_union([args.data, *args.more_data], "train", k, args.seg, args.segment_passes)
     va = fourier_cached(args.data, "val", k, args.seg, args.segment_passes)
     if args.upper_every:
