@@ -32,6 +32,15 @@ pub enum FieldError {
 /// of `points[i]`. Implementations may be expensive (a network); callers batch.
 pub trait OccupancyField: Sync {
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError>;
+
+    /// Points (in the field's own coordinates) that the field already knows to be inside,
+    /// where a part may be thinner than a coarse-to-fine localizer's strides (a hand, an arm
+    /// seen edge-on): the hierarchical localizer evaluates each at every level, so the
+    /// conflict loop traces a part that fell between its coarse samples instead of losing
+    /// it (docs/eval/hands.md section 19). None by default.
+    fn seeds(&self) -> Vec<Vec3> {
+        Vec::new()
+    }
 }
 
 /// A batch-evaluated colour field: linear RGB in [0, 1] at surface points.
@@ -42,6 +51,10 @@ pub trait ColorField: Sync {
 impl<F: OccupancyField + ?Sized> OccupancyField for &F {
     fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
         (**self).occupancy(points, out)
+    }
+
+    fn seeds(&self) -> Vec<Vec3> {
+        (**self).seeds()
     }
 }
 
@@ -126,6 +139,11 @@ impl<'f> Evaluator<'f> {
     /// Evaluations so far.
     pub fn count(&self) -> u64 {
         self.count
+    }
+
+    /// The field's inside seeds ([`OccupancyField::seeds`]); not evaluated or counted here.
+    pub fn seeds(&self) -> Vec<Vec3> {
+        self.field.seeds()
     }
 
     /// Wall time spent in the field's evaluations so far.
@@ -221,6 +239,23 @@ impl<F: Fn(Vec3) -> f32 + Sync> OccupancyField for FnField<F> {
             *o = (self.0)(*p);
         }
         Ok(())
+    }
+}
+
+/// A field with the seeds given ([`OccupancyField::seeds`]) in place of its own (tests and
+/// benches of the localizers; a caller that knows where a thin part is).
+pub struct Seeded<F> {
+    pub field: F,
+    pub seeds: Vec<Vec3>,
+}
+
+impl<F: OccupancyField> OccupancyField for Seeded<F> {
+    fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+        self.field.occupancy(points, out)
+    }
+
+    fn seeds(&self) -> Vec<Vec3> {
+        self.seeds.clone()
     }
 }
 

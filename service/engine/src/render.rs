@@ -8,7 +8,8 @@
 //! 2. Upsample and binarize to level `L`; per pixel, the first inside node from the front
 //!    (largest `k`) is the *coarse hit*. Nodes behind it (`k < hit`) are **shadow nodes**
 //!    and are never evaluated.
-//! 3. Evaluate the remaining boundary candidates (1-ring dilated), run the conflict loop
+//! 3. Evaluate the remaining boundary candidates (1-ring dilated; with the field's seeds,
+//!    as at every level of step 1: [`crate::localize::Hierarchical`]), run the conflict loop
 //!    under the same culling, and take the first hit again. Our additions: the conflict loop
 //!    at this level, and a hit is only trusted once confirmed: where the predicted hit
 //!    evaluates as outside (a grazing ray), the culled candidates in front of the new first
@@ -152,8 +153,10 @@ impl Renderer {
             &mut self.coarse_hit,
         );
 
-        // 3. Evaluate the candidates in front of (or at) the coarse hit.
+        // 3. Evaluate the candidates (and the field's seeds) in front of (or at) the coarse
+        // hit.
         self.hier.dilate(grid, big_l, |_| true);
+        self.hier.queue_seeds(grid, big_l, |_| true);
         self.final_nodes.clear();
         self.culled.clear();
         for &q in &self.hier.batch {

@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec3};
 use volcap_engine::analytic::AnalyticScene;
-use volcap_engine::field::{FieldError, FnColor, FnField, OccupancyField};
+use volcap_engine::field::{FieldError, FnColor, FnField, OccupancyField, Seeded};
 use volcap_engine::grid::{Grid, GridSpec, is_inside};
 use volcap_engine::localize::{Localizer, Method};
 use volcap_engine::render::{RenderOptions, Renderer};
@@ -112,6 +112,43 @@ fn rear_body_is_culled_and_front_body_is_seen() {
             );
         }
     }
+}
+
+/// The thin plate falls between the samples of a 33^3 start: the render shows nothing of
+/// it. With one seed on it (`OccupancyField::seeds`) every pixel whose column dense
+/// evaluation finds inside is drawn, and no other.
+#[test]
+fn a_seed_brings_a_thin_part_into_the_render() {
+    let scene = AnalyticScene::by_name("thin-plate").unwrap();
+    let spec = GridSpec::new(7).unwrap();
+    let d = dense(&scene, spec);
+    let n = spec.n();
+    let covered: Vec<bool> = (0..n * n)
+        .map(|c| (0..n).any(|k| is_inside(d.value([c % n, c / n, k]))))
+        .collect();
+    let seed = (0..spec.len())
+        .find(|&q| is_inside(d.values[q]))
+        .map(|q| spec.world(spec.unlinear(q)))
+        .unwrap();
+    let opts = RenderOptions {
+        coarse_level: 5,
+        ..RenderOptions::default()
+    };
+    let drawn = |f: &dyn OccupancyField| -> Vec<bool> {
+        let mut r = Renderer::new();
+        r.render(f, &scene, spec, &opts).unwrap();
+        r.rgba().chunks_exact(4).map(|p| p[3] == 255).collect()
+    };
+    assert!(covered.iter().filter(|c| **c).count() > 100);
+    assert!(
+        !drawn(&scene).iter().any(|a| *a),
+        "the plate was seen from 33^3"
+    );
+    let seeded = Seeded {
+        field: &scene,
+        seeds: vec![seed],
+    };
+    assert_eq!(drawn(&seeded), covered);
 }
 
 #[test]

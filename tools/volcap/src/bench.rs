@@ -537,14 +537,14 @@ fn markdown(rows: &[Row], a: &LocalizeArgs, plot_scene: &str) -> String {
                     .join(",")
             )
         },
-        if a.scenes.is_empty() {
-            String::new()
-        } else {
-            a.scenes
-                .iter()
-                .map(|s| format!(" --scene {s}"))
-                .collect::<String>()
-        },
+        // Every flag that changes what was measured.
+        a.scenes
+            .iter()
+            .map(|s| format!(" --scene {s}"))
+            .chain(a.models.iter().map(|m| format!(" --model {m}")))
+            .chain((!a.methods.is_empty()).then(|| format!(" --methods {}", a.methods.join(","))))
+            .chain(a.coarse_level.map(|c| format!(" --coarse-level {c}")))
+            .collect::<String>(),
         if a.threads > 1 {
             format!("{}-thread", a.threads)
         } else {
@@ -563,7 +563,9 @@ fn markdown(rows: &[Row], a: &LocalizeArgs, plot_scene: &str) -> String {
     let _ = writeln!(s, "![accuracy vs time](accuracy-vs-time.png)\n");
     let _ = writeln!(
         s,
-        "Methods: `hierarchical` is the paper's (binarize, upsample, boundary + 1-ring, conflict loop; exact); \
+        "Methods: `hierarchical` is the paper's (binarize, upsample, boundary + 1-ring, conflict loop; exact) \
+         with the field's seeds (a network field's points known inside along its silhouette and thin parts, \
+         evaluated at every level; analytic fields have none); `hierarchical-unseeded` the paper's without them; \
          `hierarchical-no-conflict` the same without the conflict loop; `hierarchical-tight` ours (no dilation, \
          conflict loop with sign-change closure; exact on these scenes); `demo-faster` the public demo's \
          \"faster\" mode as its code runs it (`Seg3dLossless._forward_faster`: continuous trilinear upsampling, \

@@ -189,9 +189,9 @@ pub struct LocalizeArgs {
     #[arg(long, value_delimiter = ',', default_value = "65,129,257,513")]
     pub res: Vec<usize>,
     /// Methods (comma-separated): dense, mise, octree-threshold (every threshold) or
-    /// octree-threshold@T, hierarchical, hierarchical-no-conflict, hierarchical-tight,
-    /// demo-faster (the public demo's "faster" mode). Default: all. Dense always runs (it is
-    /// the reference).
+    /// octree-threshold@T, hierarchical, hierarchical-unseeded (the field's seeds ignored: the
+    /// paper's method exactly), hierarchical-no-conflict, hierarchical-tight, demo-faster (the
+    /// public demo's "faster" mode). Default: all. Dense always runs (it is the reference).
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
     #[arg(long, help = coarse_level_help())]

@@ -23,6 +23,7 @@ fn method_color(method: &str) -> RGBColor {
         "mise" => RGBColor(230, 120, 0),
         "octree-threshold" => RGBColor(30, 110, 200),
         "hierarchical" => RGBColor(200, 30, 40),
+        "hierarchical-unseeded" => RGBColor(240, 150, 150),
         "hierarchical-no-conflict" => RGBColor(150, 80, 170),
         "hierarchical-tight" => RGBColor(20, 150, 60),
         "demo-faster" => RGBColor(0, 170, 190),

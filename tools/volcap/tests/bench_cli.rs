@@ -50,9 +50,23 @@ fn json_rows_cover_every_method_and_nothing_else_is_on_stdout() {
         .lines()
         .map(|l| serde_json::from_str(l).expect("each line is JSON"))
         .collect();
-    // 2 scenes x 2 resolutions x (dense + mise + 7 thresholds + 3 hierarchical + demo-faster).
-    assert_eq!(rows.len(), 2 * 2 * 13);
+    // 2 scenes x 2 resolutions x (dense + mise + 7 thresholds + 4 hierarchical (with and
+    // without the field's seeds, no conflict, tight) + demo-faster).
+    assert_eq!(rows.len(), 2 * 2 * 14);
     assert!(rows.iter().any(|r| r["method"] == "demo-faster"));
+    // Analytic fields have no seeds: the two hierarchical rows evaluate the same points.
+    let evals = |m: &str, scene: &str, res: u64| {
+        rows.iter()
+            .find(|r| r["method"] == m && r["scene"] == scene && r["resolution"] == res)
+            .map(|r| r["evaluations"].clone())
+            .expect("a row")
+    };
+    for (scene, res) in [("sphere", 33), ("capsule-human", 65)] {
+        assert_eq!(
+            evals("hierarchical", scene, res),
+            evals("hierarchical-unseeded", scene, res)
+        );
+    }
     for r in &rows {
         for key in [
             "scene",

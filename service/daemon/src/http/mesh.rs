@@ -105,6 +105,10 @@ impl OccupancyField for Cancellable<'_> {
         }
         self.field.occupancy(points, out)
     }
+
+    fn seeds(&self) -> Vec<glam::Vec3> {
+        self.field.seeds()
+    }
 }
 
 const CANCELLED: &str = "cancelled: the client left";

@@ -69,6 +69,9 @@ pub(super) struct Pipes {
     pub(super) prep_eval: wgpu::ComputePipeline,
     pub(super) prep_round: wgpu::ComputePipeline,
     pub(super) seed: wgpu::ComputePipeline,
+    /// The field's seeds at a level (`localize.wgsl` `seeds`).
+    pub(super) seeds: wgpu::ComputePipeline,
+    pub(super) layout_seeds: wgpu::BindGroupLayout,
     pub(super) upsample: wgpu::ComputePipeline,
     pub(super) dilate: wgpu::ComputePipeline,
     pub(super) conflict: wgpu::ComputePipeline,
@@ -156,6 +159,7 @@ impl Pipes {
         e0.extend((2..7).map(|b| storage(b, false)));
         let layout0 = bind_layout(d, "localize", &e0);
         let layout_args = bind_layout(d, "localize args", &[storage(0, false)]);
+        let layout_seeds = bind_layout(d, "localize seeds", &[storage(1, true)]);
         let layout_field = field.cloned().unwrap_or_else(|| {
             bind_layout(
                 d,
@@ -170,6 +174,7 @@ impl Pipes {
         let plain = pipeline_layout(d, &[&layout0]);
         let with_args = pipeline_layout(d, &[&layout0, &layout_args]);
         let with_field = pipeline_layout(d, &[&layout0, &layout_field]);
+        let with_seeds = pipeline_layout(d, &[&layout0, &layout_seeds]);
         let pipe = |m, layout, entry| super::kit::pipeline(d, m, layout, entry);
         let p = Pipes {
             zero: pipe(&book, &plain, "zero"),
@@ -178,6 +183,7 @@ impl Pipes {
             prep_eval: pipe(&book, &with_args, "prep_eval"),
             prep_round: pipe(&book, &with_args, "prep_round"),
             seed: pipe(&book, &plain, "seed"),
+            seeds: pipe(&book, &with_seeds, "seeds"),
             upsample: pipe(&book, &plain, "upsample"),
             dilate: pipe(&book, &plain, "dilate"),
             conflict: pipe(&book, &plain, "conflict"),
@@ -187,6 +193,7 @@ impl Pipes {
             layout0,
             layout_args,
             layout_field,
+            layout_seeds,
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("the localization kernels: {e}"));

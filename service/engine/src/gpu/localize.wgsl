@@ -23,6 +23,8 @@
 @group(0) @binding(6) var<storage, read_write> counts: array<atomic<u32>>;
 // Only the prep kernels bind it (a group of its own: the indirect dispatches read it).
 @group(1) @binding(0) var<storage, read_write> args: array<u32>;
+// Only `seeds` binds it: the field's seeds, their count then the finest grid's indices.
+@group(1) @binding(1) var<storage, read> seed_nodes: array<u32>;
 
 const CAND: u32 = 0u;
 
@@ -138,6 +140,22 @@ fn seed(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     let s = pp(1u);
     let q = linear((t % nl) * s, ((t / nl) % nl) * s, (t / (nl * nl)) * s);
     if claim(q) { push(q, 0.0); }
+}
+
+// Our addition (localize/hierarchical.rs `queue_seeds`): each of the field's seeds at the
+// level's nearest point, listed with its value before evaluation unless handled.
+@compute @workgroup_size(64)
+fn seeds(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+         @builtin(local_invocation_id) lid: vec3<u32>) {
+    let t = index(wg, nwg, lid);
+    if t >= seed_nodes[0] { return; }
+    let q0 = seed_nodes[1u + t];
+    let n = pp(0u);
+    let s = pp(1u);
+    let c = vec3<u32>(q0 % n, (q0 / n) % n, q0 / (n * n));
+    let at = min((c + vec3<u32>(s / 2u)) / s * s, vec3<u32>(n - 1u));
+    let q = linear(at.x, at.y, at.z);
+    if claim(q) { push(q, vget(q)); }
 }
 
 // Step 1: every new point of the level gets the mean of its coarse parents' binarized

@@ -292,13 +292,18 @@ impl GpuRenderer {
         let ev = rec.eval_pipe();
         let r0 = &cb.binds[0];
         let pts = rec.level_points(big_l);
-        // Upsample to L, coarse hits, dilate, split into the front (list 1) and culled 0.
+        // Upsample to L, coarse hits, dilate (and the seeds), split into the front (list 1) and
+        // culled 0.
         rec.pass(&[
             (&p.zero, big_l, 1, Dispatch::One),
             (&p.upsample, big_l, 1, Dispatch::Points(pts)),
             (&rp.first_hits, big_l, 0, Dispatch::With(r0, Some(plane))),
             (&p.prep_cand, big_l, 1, Dispatch::Prep),
             (&p.dilate, big_l, 1, Dispatch::Indirect),
+        ]);
+        // The field's seeds join the dilated list (as render.rs), then the split.
+        rec.seeds(big_l, 1);
+        rec.pass(&[
             (&p.zero, big_l, 0, Dispatch::One),
             (&p.prep_src, big_l, 0, Dispatch::Prep),
             (&rp.split, big_l, 0, Dispatch::With(r0, None)),

@@ -14,6 +14,12 @@
 //!    left. It terminates: the evaluated set only grows and is bounded by the grid.
 //! 4. Points never evaluated keep their interpolated value (0 or 1).
 //!
+//! Our addition, **seeds**: the field's [`crate::field::OccupancyField::seeds`] (points it knows to be
+//! inside, e.g. along thin parts), each at its nearest point of every level, join step 2's
+//! evaluations; one that comes out inside where the interpolation said outside is a
+//! conflict, and step 3 traces the part from it. Without seeds (every analytic field) the
+//! method is the paper's.
+//!
 //! Buffers (index lists, the queued bitset) are kept between frames.
 //!
 //! **Sparse upsampling.** A new point all of whose parents are outside gets 0, which is what
@@ -72,6 +78,8 @@ pub struct Hierarchical {
     /// Per row `j + n k` of the grid, x indices `[lo, hi]` holding every inside point of
     /// the row (`lo > hi`: none); see the module's doc.
     rows: Vec<[u32; 2]>,
+    /// The field's seeds as indices of the finest grid (set by [`Hierarchical::start`]).
+    seeds: Vec<[u32; 3]>,
 }
 
 /// A row with no inside point.
@@ -98,6 +106,7 @@ impl Hierarchical {
                 }
                 HierarchicalMode::Tight => self.candidates_only(grid),
             }
+            self.queue_seeds(grid, l, |_| true);
             ev.eval_grid(grid, &self.batch)?;
             grow_inside(&mut self.inside, &mut self.rows, grid, &self.batch);
             if mode != HierarchicalMode::NoConflict {
@@ -127,6 +136,7 @@ impl Hierarchical {
         let n = grid.spec().n();
         self.rows.clear();
         self.rows.resize(n * n, NO_ROW);
+        self.seeds = super::seed_nodes(grid.spec(), &ev.seeds());
         eval_level(ev, grid, coarse, &mut self.batch)?;
         for &q in &self.batch {
             self.queued.set(q as usize);
@@ -325,6 +335,20 @@ impl Hierarchical {
             }
         }
         self.cand = cand;
+    }
+
+    /// The seeds, each at its nearest level-`l` point, not yet queued and accepted by `keep`,
+    /// to the batch (after step 2's points).
+    pub(crate) fn queue_seeds(&mut self, grid: &Grid, l: u32, keep: impl Fn(usize) -> bool) {
+        let spec = grid.spec();
+        let (n, s) = (spec.n(), spec.stride(l));
+        let seeds = std::mem::take(&mut self.seeds);
+        for q in &seeds {
+            // Nearest multiple of the stride (the last index, n - 1, is one).
+            let q = q.map(|v| ((v as usize + s / 2) / s * s).min(n - 1));
+            self.queue(grid, spec.linear(q), &keep);
+        }
+        self.seeds = seeds;
     }
 
     /// Point `q` to the batch with its value before evaluation, if not queued yet and kept.

@@ -15,6 +15,7 @@ pub use hierarchical::{Hierarchical, HierarchicalMode};
 
 use crate::field::{Evaluator, FieldError, OccupancyField};
 use crate::grid::{BitSet, Grid, GridError, GridSpec, is_inside};
+use glam::Vec3;
 
 /// Coarsest level used unless told otherwise: 9^3 points. (The public demo, `RTL/main.py`,
 /// starts at 17^3: resolutions 17, 33, 65, 129, 257; the 8 + 1 comes from a test of the
@@ -43,8 +44,12 @@ pub enum Method {
     Mise,
     /// PIFu's threshold octree with the given threshold on max - min of a cell's corners.
     OctreeThreshold(f32),
-    /// The paper's algorithm: binarize, upsample, boundary, 1-ring dilation, conflict loop.
+    /// The paper's algorithm: binarize, upsample, boundary, 1-ring dilation, conflict loop;
+    /// plus the field's seeds ([`OccupancyField::seeds`]) at every level (the product's).
     Hierarchical,
+    /// [`Method::Hierarchical`] with the field's seeds ignored: the paper's method exactly (what
+    /// the seeds cost and buy, side by side in `volcap bench localize`).
+    HierarchicalUnseeded,
     /// The paper's method without the conflict loop (dilation by the 1-ring at every level,
     /// every level evaluated). Not the public demo's mode: that is [`Method::DemoFaster`].
     HierarchicalNoConflict,
@@ -65,6 +70,7 @@ impl Method {
             Method::Mise => "mise",
             Method::OctreeThreshold(_) => "octree-threshold",
             Method::Hierarchical => "hierarchical",
+            Method::HierarchicalUnseeded => "hierarchical-unseeded",
             Method::HierarchicalNoConflict => "hierarchical-no-conflict",
             Method::HierarchicalTight => "hierarchical-tight",
             Method::DemoFaster => "demo-faster",
@@ -108,13 +114,14 @@ impl Method {
                 .map(|&t| Method::OctreeThreshold(t))
                 .collect(),
             "hierarchical" => vec![Method::Hierarchical],
+            "hierarchical-unseeded" => vec![Method::HierarchicalUnseeded],
             "hierarchical-no-conflict" => vec![Method::HierarchicalNoConflict],
             "hierarchical-tight" => vec![Method::HierarchicalTight],
             "demo-faster" => vec![Method::DemoFaster],
             _ => {
                 return Err(format!(
                     "unknown method '{s}' (known: dense, mise, octree-threshold[@T], hierarchical, \
-                     hierarchical-no-conflict, hierarchical-tight, demo-faster)"
+                     hierarchical-unseeded, hierarchical-no-conflict, hierarchical-tight, demo-faster)"
                 ));
             }
         })
@@ -130,6 +137,7 @@ impl Method {
         );
         v.extend([
             Method::Hierarchical,
+            Method::HierarchicalUnseeded,
             Method::HierarchicalNoConflict,
             Method::HierarchicalTight,
             Method::DemoFaster,
@@ -208,11 +216,21 @@ impl Localizer {
         let coarse = check_coarse(spec, coarse_level)?;
         match method {
             // The hierarchical methods write only where values are non-zero.
-            Method::Hierarchical | Method::HierarchicalNoConflict | Method::HierarchicalTight => {
-                grid.reset_sparse(spec)
-            }
+            Method::Hierarchical
+            | Method::HierarchicalUnseeded
+            | Method::HierarchicalNoConflict
+            | Method::HierarchicalTight => grid.reset_sparse(spec),
             _ => grid.reset(spec),
         }
+        let unseeded = crate::field::Seeded {
+            field,
+            seeds: Vec::new(),
+        };
+        let field: &dyn OccupancyField = if method == Method::HierarchicalUnseeded {
+            &unseeded
+        } else {
+            field
+        };
         let mut ev = Evaluator::new(field).with_threads(self.threads);
         let mut stats = LocalizeStats::default();
         match method {
@@ -222,9 +240,12 @@ impl Localizer {
             Method::DemoFaster => {
                 stats.empty = !demo::run(&mut ev, grid, coarse, &mut self.scratch)?;
             }
-            Method::Hierarchical | Method::HierarchicalNoConflict | Method::HierarchicalTight => {
+            Method::Hierarchical
+            | Method::HierarchicalUnseeded
+            | Method::HierarchicalNoConflict
+            | Method::HierarchicalTight => {
                 let mode = match method {
-                    Method::Hierarchical => HierarchicalMode::Paper,
+                    Method::Hierarchical | Method::HierarchicalUnseeded => HierarchicalMode::Paper,
                     Method::HierarchicalNoConflict => HierarchicalMode::NoConflict,
                     _ => HierarchicalMode::Tight,
                 };
@@ -235,6 +256,16 @@ impl Localizer {
         self.field_time = ev.field_time();
         Ok(stats)
     }
+}
+
+/// The finest grid's points nearest to `seeds` (NDC; those outside the cube or not finite
+/// dropped), as the hierarchical localizers take them ([`Hierarchical`], the GPU's).
+pub fn seed_nodes(spec: GridSpec, seeds: &[Vec3]) -> Vec<[u32; 3]> {
+    seeds
+        .iter()
+        .filter_map(|p| spec.index_of(*p))
+        .map(|q| q.map(|v| v as u32))
+        .collect()
 }
 
 /// Validate the coarse level against the grid: `1 <= coarse <= level`.

@@ -186,6 +186,7 @@ impl ModelField {
             mask: &self.mask,
             mask_size: INPUT_SIZE,
             to_crop: self.to_crop,
+            seeds: self.seeds(),
         }
     }
 
@@ -274,6 +275,28 @@ impl OccupancyField for ModelField {
             out[i] = occ[k];
         }
         Ok(())
+    }
+
+    /// The Fourier maps' seeds ([`FourierMaps::seeds`]) in the render view, those on the
+    /// person's mask (elsewhere the field is 0); none for the point-MLP family. Maps made on
+    /// the adapter are read back for them once ([`Self::fourier_maps`]: 31 x 128 x 128
+    /// floats a frame; a read-back that fails gives no seeds, the paper's method).
+    fn seeds(&self) -> Vec<Vec3> {
+        let Ok(Some(maps)) = self.fourier_maps() else {
+            return Vec::new();
+        };
+        let from_crop = self.to_crop.inverse();
+        if !from_crop.is_finite() {
+            return Vec::new();
+        }
+        let s = INPUT_SIZE;
+        let gate = super::fourier::mask_gate(&self.mask, s, maps.size(), 0.5);
+        maps.seeds_in(Some(&gate))
+            .into_iter()
+            .filter(|u| sample::bilinear1(&self.mask, s, s, u.x, u.y) >= 0.5)
+            .map(|u| from_crop * u)
+            .filter(|p| p.abs().max_element() <= 1.0)
+            .collect()
     }
 }
 

@@ -32,8 +32,10 @@ use glam::Vec3;
 use std::path::{Path, PathBuf};
 
 mod basis;
+mod seeds;
 pub use basis::{Basis, basis, cosine_basis, cosine_interval_coeffs, interval_coeffs};
 use basis::{LANES, lane_basis};
+pub use seeds::SEED_THIN;
 
 /// A square dilation of radius `r` (Chebyshev) of an `n x n` row-major mask.
 fn dilate(m: &[bool], n: usize, r: usize) -> Vec<bool> {
@@ -235,39 +237,6 @@ impl FourierMaps {
                 zs.chunks_exact(c)
                     .map(|b| px.iter().zip(b).map(|(x, y)| x * y).sum::<f32>())
                     .fold(f32::MIN, f32::max)
-            })
-            .collect()
-    }
-
-    /// Whether each pixel's series reaches the surface level at one of the 129 depths
-    /// [`Self::peaks`] samples: the same answer as `peak >= iso`, without scanning every ray.
-    /// A ray whose coefficients' absolute sum is under the level cannot reach it (every basis
-    /// value lies in [-1, 1]; the background); a Fourier ray that reaches it at the sample
-    /// nearest its depth centre (`int z f / int f`) does (most of the body); only the others
-    /// are scanned, stopping at the first sample that reaches it.
-    fn decodes(&self) -> Vec<bool> {
-        let (k, c) = (self.k, 2 * self.k + 1);
-        let iso = self.iso_level();
-        let zs = self.sample_basis();
-        let at = |px: &[f32], b: &[f32]| px.iter().zip(b).map(|(x, y)| x * y).sum::<f32>();
-        let w = centre_weights(k);
-        self.data
-            .chunks_exact(c)
-            .map(|px| {
-                // (The margin covers the sum's rounding: a ray at the level is scanned.)
-                if px.iter().map(|v| v.abs()).sum::<f32>() + 1e-4 < iso {
-                    return false;
-                }
-                let mass = 2.0 * px[0];
-                if self.basis == Basis::Fourier && mass > 0.0 {
-                    let m1: f32 = (1..=k).map(|m| px[2 * m] * w[m - 1]).sum();
-                    let mid = (m1 / mass).clamp(-1.0, 1.0);
-                    let i = ((mid + 1.0) * 64.0).round().clamp(0.0, 128.0) as usize;
-                    if at(px, &zs[i * c..(i + 1) * c]) >= iso {
-                        return true;
-                    }
-                }
-                zs.chunks_exact(c).any(|b| at(px, b) >= iso)
             })
             .collect()
     }

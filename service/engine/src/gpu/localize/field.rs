@@ -20,7 +20,20 @@ pub enum GpuField<'a> {
         mask: &'a [f32],
         mask_size: usize,
         to_crop: Mat3,
+        /// Points known inside, in render NDC (`OccupancyField::seeds`: `ModelField`'s);
+        /// evaluated at every level as the CPU's localizer does.
+        seeds: Vec<glam::Vec3>,
     },
+}
+
+impl GpuField<'_> {
+    /// The field's seeds (none for a table).
+    pub fn seeds(&self) -> &[glam::Vec3] {
+        match self {
+            GpuField::Table(_) => &[],
+            GpuField::Fourier { seeds, .. } => seeds,
+        }
+    }
 }
 
 /// Where a frame's Fourier maps are: on the host (written to the adapter with the field), or
@@ -67,6 +80,20 @@ pub(in crate::gpu) struct FieldBufs {
     /// Points per axis of the grid whose coordinates `aux` holds (0: none yet).
     pub(in crate::gpu) coords_n: usize,
     pub(in crate::gpu) bind: wgpu::BindGroup,
+    /// The seeds as the finest grid's linear indices after their count (`localize.wgsl`
+    /// `seeds`), their capacity and bind group, and how many this frame has.
+    seeds: Option<(wgpu::Buffer, usize, wgpu::BindGroup)>,
+    pub(in crate::gpu) n_seeds: u32,
+}
+
+impl FieldBufs {
+    /// The seeds' bind group and count, when the frame has any.
+    pub(in crate::gpu) fn seeds(&self) -> Option<(&wgpu::BindGroup, u32)> {
+        self.seeds
+            .as_ref()
+            .filter(|_| self.n_seeds > 0)
+            .map(|(_, _, g)| (g, self.n_seeds))
+    }
 }
 
 impl GpuLocalizer {
@@ -93,6 +120,7 @@ impl GpuLocalizer {
                 mask,
                 mask_size,
                 to_crop,
+                ..
             } => {
                 if mask.len() != mask_size * mask_size || *mask_size < 2 {
                     return Err(format!(
@@ -152,9 +180,47 @@ impl GpuLocalizer {
                 aux_cap,
                 coords_n: 0,
                 bind,
+                seeds: old.and_then(|o| o.seeds),
+                n_seeds: 0,
             });
         }
         let f = self.field.as_mut().expect("made above");
+        // The seeds, as the CPU's localizer snaps them (`localize::seed_nodes`).
+        let nodes: Vec<u32> = crate::localize::seed_nodes(spec, field.seeds())
+            .into_iter()
+            .map(|q| spec.linear(q.map(|v| v as usize)) as u32)
+            .collect();
+        f.n_seeds = nodes.len() as u32;
+        if !nodes.is_empty() {
+            if f.seeds
+                .as_ref()
+                .is_none_or(|(_, cap, _)| *cap < nodes.len())
+            {
+                let cap = nodes.len().next_power_of_two();
+                let d = &self.gpu.device;
+                let b = d.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("localize seeds"),
+                    size: (cap as u64 + 1) * 4,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                let g = d.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: None,
+                    layout: &self.pipes.layout_seeds,
+                    entries: &[entry(1, &b)],
+                });
+                f.seeds = Some((b, cap, g));
+            }
+            if let Some((b, _, _)) = &f.seeds {
+                let mut up = vec![f.n_seeds];
+                up.extend(&nodes);
+                self.gpu.queue.write_buffer(b, 0, bytemuck::cast_slice(&up));
+                self.gpu
+                    .count()
+                    .bytes_up
+                    .fetch_add(up.len() as u64 * 4, Ordering::Relaxed);
+            }
+        }
         let mut params = [0u32; 20];
         params[..6].copy_from_slice(&head);
         for (i, v) in to_crop.to_cols_array().iter().enumerate() {

@@ -76,6 +76,15 @@ impl<'a> Rec<'a> {
         }
     }
 
+    /// The field's seeds at level `l` into the list orientation `o` writes (after the
+    /// level's dilation, as the CPU's `queue_seeds`), when the frame has any.
+    pub(in crate::gpu) fn seeds(&mut self, l: u32, o: usize) {
+        let (f, p) = (self.f, self.p);
+        if let Some((g, n)) = f.seeds() {
+            self.pass(&[(&p.seeds, l, o, Dispatch::With(g, Some(n)))]);
+        }
+    }
+
     /// The evaluation kernel of the field uploaded.
     pub(in crate::gpu) fn eval_pipe(&self) -> &'a wgpu::ComputePipeline {
         self.eval
@@ -140,6 +149,9 @@ impl<'a> Rec<'a> {
                 (&p.upsample, l, 1, Dispatch::Points(pts)),
                 (&p.prep_cand, l, 1, Dispatch::Prep),
                 (&p.dilate, l, 1, Dispatch::Indirect),
+            ]);
+            self.seeds(l, 1);
+            self.pass(&[
                 (&p.prep_eval, l, 0, Dispatch::Prep),
                 (ev, l, 0, Dispatch::Eval),
             ]);
