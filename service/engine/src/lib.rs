@@ -22,6 +22,7 @@ mod mc_tables;
 pub mod mesh;
 pub mod metrics;
 pub mod model;
+pub mod pieces;
 pub mod render;
 pub mod softz;
 

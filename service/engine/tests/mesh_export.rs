@@ -97,3 +97,47 @@ fn ply_header_and_body_sizes_match() {
     let y = f32::from_le_bytes(buf[end + 4..end + 8].try_into().unwrap());
     assert_eq!((x, y), (m.vertices[0].x, -m.vertices[0].y));
 }
+
+/// A body, a hand a little apart from it and a floater far from it: the mesh outputs' pass
+/// (`pieces::MESH_GAP`) leaves the floater out of the mesh and keeps the body and the hand,
+/// through localization and marching cubes.
+#[test]
+fn the_mesh_outputs_leave_a_floater_out_and_keep_a_hand() {
+    use glam::Vec3;
+    use volcap_engine::field::{FieldError, OccupancyField};
+    use volcap_engine::pieces::{MESH_GAP, Pieces, gap_points};
+    struct Balls(Vec<(Vec3, f32)>);
+    impl OccupancyField for Balls {
+        fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
+            for (o, p) in out.iter_mut().zip(points) {
+                let sdf = self
+                    .0
+                    .iter()
+                    .map(|(c, r)| (*p - *c).length() - r)
+                    .fold(f32::INFINITY, f32::min);
+                *o = (0.5 - sdf / 0.02).clamp(0.0, 1.0);
+            }
+            Ok(())
+        }
+    }
+    let (hand, floater) = (Vec3::new(0.6, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.88));
+    // Gaps in NDC (the side is 2): hand 0.15 (7.5 % of the side), floater 0.42 (21 %).
+    let field = Balls(vec![(Vec3::ZERO, 0.4), (hand, 0.05), (floater, 0.06)]);
+    let spec = GridSpec::new(6).unwrap();
+    let mut g = Grid::new(spec);
+    Localizer::new()
+        .run(Method::Dense, &field, spec, 3, &mut g)
+        .unwrap();
+    let near = |m: &Mesh, c: Vec3| m.vertices.iter().any(|v| (*v - c).length() < 0.1);
+    let before = marching_cubes(&g);
+    assert!(near(&before, hand) && near(&before, floater));
+    let s = Pieces::new().drop_apart(&mut g, [gap_points(spec, MESH_GAP); 3]);
+    assert_eq!((s.components, s.dropped), (3, 1));
+    let after = marching_cubes(&g);
+    assert!(near(&after, hand), "the hand is kept");
+    assert!(!near(&after, floater), "the floater is left out");
+    assert_eq!(after.boundary_edges(), 0);
+    let lost = before.volume() - after.volume();
+    let ball = 4.0 / 3.0 * std::f64::consts::PI * 0.06f64.powi(3);
+    assert!((lost - ball).abs() < 0.3 * ball, "{lost} vs {ball}");
+}

@@ -11,7 +11,7 @@ use anyhow::{Context, anyhow, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 use volcap_engine::grid::{Grid, GridSpec};
@@ -151,6 +151,11 @@ pub struct EvalArgs {
     /// left out.
     #[arg(long, value_enum, default_value_t = Framing::Whole)]
     pub framing: Framing,
+    /// Experimental: `XY,Z`: drop inside pieces farther than XY across and Z in depth
+    /// (fractions of the grid's side) from the largest before IoU and mesh (`pieces`; its
+    /// time in the mesh column).
+    #[arg(long, value_delimiter = ',')]
+    pub drop_apart: Option<Vec<f32>>,
 }
 
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -246,6 +251,7 @@ fn run_case(
     gt_mask: bool,
     truth_k: Option<(Basis, usize)>,
     to_cam: ToCamera,
+    drop_apart: Option<&[f32]>,
 ) -> anyhow::Result<ImageRow> {
     let mut row = ImageRow {
         model: label.into(),
@@ -325,6 +331,12 @@ fn run_case(
     let stats = stages.localize(&field, spec, grid)?;
     row.localize_ms = t.elapsed().as_secs_f64() * 1e3;
     row.evaluations = stats.evaluations;
+    let t = Instant::now();
+    if let Some(f) = drop_apart {
+        let gap = |f| volcap_engine::pieces::gap_points(spec, f);
+        volcap_engine::pieces::Pieces::new().drop_apart(grid, [gap(f[0]), gap(f[0]), gap(f[1])]);
+    }
+    let pieces_ms = t.elapsed().as_secs_f64() * 1e3;
     // IoU against the oracle on the same grid (dense oracle: cheap, it is a lookup).
     stages.cpu_localizer().run(
         Method::Dense,
@@ -340,7 +352,7 @@ fn run_case(
     row.iou = iou_bits(&grid.binarized(), &truth.binarized());
     let t = Instant::now();
     let mesh = marching_cubes(grid);
-    row.mesh_ms = t.elapsed().as_secs_f64() * 1e3;
+    row.mesh_ms = t.elapsed().as_secs_f64() * 1e3 + pieces_ms;
     match surface_distances(mesh, crop, to_cam, &c.oracle, &c.gt_mesh, Some(&c.parts)) {
         Some((ch, p2s, parts, part_p2s)) => {
             row.chamfer_cm = ch;
@@ -351,20 +363,6 @@ fn run_case(
         None => row.status = "empty surface".into(),
     }
     Ok(row)
-}
-
-fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, Option<u64>) {
-    let idx = std::fs::read_to_string(models_dir.join("models.json"))
-        .ok()
-        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
-    let Some(c) = idx.as_ref().map(|v| &v[format!("shape-{name}")]) else {
-        return (None, None, None);
-    };
-    (
-        c["gmacs_frame"].as_f64(),
-        c["macs_point"].as_f64(),
-        c["params"].as_u64(),
-    )
 }
 
 /// A `LEVEL,PIXELS` decode knob (`flag`): LEVEL in (0, 1), then a whole number of map pixels
@@ -407,6 +405,13 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             && (0.0..1.0).contains(&pl[1])
             && pl.get(2).is_none_or(|g| *g > 0.0 && *g <= 1.0)
     };
+    if let Some(g) = a
+        .drop_apart
+        .as_ref()
+        .filter(|g| g.len() != 2 || g.iter().any(|g| !(0.0..=1.0).contains(g)))
+    {
+        bail!("--drop-apart {g:?}: XY,Z, each a fraction of the grid's side in [0, 1]");
+    }
     if let Some(pl) = &a.peak_level
         && !peak_ok(pl)
     {
@@ -546,7 +551,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             _ => None,
         };
         let label = format!(
-            "{name}-{}{}{}{}{}{}{}{}",
+            "{name}-{}{}{}{}{}{}{}{}{}",
             prec.name(),
             if a.gt_mask { "-gtmask" } else { "" },
             if seg_passes != own_passes {
@@ -566,6 +571,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 .map(|(l, e)| format!("-in{l:.2}e{e}"))
                 .unwrap_or_default(),
             thin.map(|(l, r)| format!("-thin{l:.2}r{r}"))
+                .unwrap_or_default(),
+            a.drop_apart
+                .as_ref()
+                .map(|g| format!("-apart{}x{}", g[0], g[1]))
                 .unwrap_or_default()
         );
         pb.set_message(label.clone());
@@ -595,6 +604,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 a.gt_mask,
                 truth_k,
                 ToCamera::new(frame, c, truth_k.is_some()),
+                a.drop_apart.as_deref(),
             )
             .with_context(|| format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw))?;
             if a.json {
@@ -613,7 +623,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 f64::INFINITY
             }
         };
-        let (g, mp, p) = card(&a.models_dir, name);
+        let (g, mp, p) = report::card(&a.models_dir, name);
         let m = ModelRow {
             model: label.clone(),
             depth_frame: frame.name().to_string(),

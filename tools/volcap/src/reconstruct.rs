@@ -204,6 +204,9 @@ fn one(
     stages.localize(&field, spec, &mut grid)?;
     rep.localize_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
+    // Pieces apart from the body (the network's floaters) are left out of the mesh.
+    let gap = volcap_engine::pieces::gap_points(spec, volcap_engine::pieces::MESH_GAP);
+    volcap_engine::pieces::Pieces::new().drop_apart(&mut grid, [gap; 3]);
     let mut mesh = marching_cubes(&grid);
     mesh.paint(&field)?;
     rep.triangles = mesh.triangles.len();

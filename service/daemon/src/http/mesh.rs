@@ -153,6 +153,9 @@ fn compute(
     if cancel.load(Ordering::Relaxed) {
         return Err(CANCELLED.into());
     }
+    // Pieces apart from the body (the network's floaters) are left out of the mesh.
+    let gap = volcap_engine::pieces::gap_points(spec, volcap_engine::pieces::MESH_GAP);
+    volcap_engine::pieces::Pieces::new().drop_apart(&mut grid, [gap; 3]);
     let mut mesh = volcap_engine::mesh::marching_cubes(&grid);
     drop(grid);
     if cancel.load(Ordering::Relaxed) {
@@ -163,7 +166,8 @@ fn compute(
 }
 
 /// The current frame as a coloured mesh: hierarchical localization at the render
-/// resolution, marching cubes, glTF binary. Slower than a frame (hundreds of ms): it runs on
+/// resolution, pieces apart from the body dropped (`volcap_engine::pieces`), marching cubes,
+/// glTF binary. Slower than a frame (hundreds of ms): it runs on
 /// the mesh worker's thread at a lower priority ([`MeshWorker`], [`MESH_NICE`]),
 /// [`MESH_CONCURRENCY`] at a time (others get 503 with Retry-After), and its bytes are cached
 /// for the frame, so a repeated request for the same frame costs nothing. The gate's permit

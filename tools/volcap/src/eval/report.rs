@@ -74,6 +74,9 @@ fn knobs(a: &EvalArgs) -> String {
     if let Some(m) = &a.thin_level {
         let _ = write!(k, " --thin-level {}", list(m));
     }
+    if let Some(g) = &a.drop_apart {
+        let _ = write!(k, " --drop-apart {}", list(g));
+    }
     if !a.segment_passes.is_empty() {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
         let _ = write!(k, " --segment-passes {}", passes.join(","));
@@ -93,7 +96,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         s,
         "# Evaluation: full pipeline on held-out simulator subjects\n\n\
          `volcap eval --subjects {} --poses {} --views {} --res {} --model {} --seed {}{}` (manifest `{}`, assets {}).\n\
-         Pipeline: segmentation -> crop -> shape encoder -> hierarchical localization at {}^3 -> marching cubes.\n\
+         Pipeline: segmentation -> crop -> shape encoder -> hierarchical localization at {}^3{} -> marching cubes.\n\
          Chamfer / P2S in cm against the ground-truth clothed mesh (10k surface samples each); IoU against the\n\
          simulator's occupancy oracle on the same grid; mask IoU of the segmentation; worst-10 = mean of the 10\n\
          worst images (a failed image counts as infinitely far). Times are per frame on this machine.\n\n\
@@ -113,6 +116,11 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             .map(|p| p.display().to_string())
             .unwrap_or_else(|| "embedded pack".into()),
         a.res,
+        if a.drop_apart.is_some() {
+            " -> pieces apart from the body dropped"
+        } else {
+            ""
+        },
     );
     if a.framing == Framing::Upper {
         let _ = writeln!(
@@ -257,6 +265,21 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         );
     }
     s
+}
+
+/// A model's GMACs per frame, MACs per point and parameters from its card in models.json.
+pub(super) fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, Option<u64>) {
+    let idx = std::fs::read_to_string(models_dir.join("models.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+    let Some(c) = idx.as_ref().map(|v| &v[format!("shape-{name}")]) else {
+        return (None, None, None);
+    };
+    (
+        c["gmacs_frame"].as_f64(),
+        c["macs_point"].as_f64(),
+        c["params"].as_u64(),
+    )
 }
 
 pub(super) fn plot(summary: &[ModelRow], path: &Path) -> anyhow::Result<()> {
