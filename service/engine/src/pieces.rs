@@ -4,9 +4,9 @@
 //!
 //! Components are 26-connected sets of inside points ([`crate::grid::is_inside`]). The largest
 //! is the body. Another component is kept when any of its points lies within `gap[a]` grid
-//! points of a body point along every axis `a` (a box, integer), or when it holds at least [`KEEP_FRACTION`] of
-//! the body's points (a second person-sized piece is not a floater). A dropped component's
-//! values are set to 0 (outside); `evaluated` is left as it was.
+//! points of a body point along every axis `a` (a box, integer), or when it holds at least
+//! [`KEEP_FRACTION`] of the body's points (a second person-sized piece is not a floater). A
+//! dropped component's values are set to 0 (outside); `evaluated` is left as it was.
 //!
 //! The mesh outputs (`volcapd`'s `/mesh.glb`, `volcap reconstruct`) run it at [`MESH_GAP`];
 //! the mesh-free render does not yet; `volcap eval --drop-apart XY,Z` measures it as a knob
@@ -39,7 +39,7 @@ pub struct PiecesStats {
     pub dropped_points: usize,
 }
 
-/// Buffers of the post-pass, reused across frames.
+/// The post-pass, holding the dilation's buffers from call to call.
 #[derive(Debug, Default)]
 pub struct Pieces {
     /// The body dilated by the gap, over the inside points' box (a `u8` per point).
