@@ -28,7 +28,7 @@ pub fn gap_points(spec: GridSpec, frac: f32) -> usize {
     (frac.clamp(0.0, 1.0) * (spec.n() - 1) as f32).round() as usize
 }
 
-/// What [`Pieces::drop_apart`] found.
+/// What [`drop_apart`] found.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct PiecesStats {
     /// Inside components of the grid (26-connected).
@@ -39,103 +39,89 @@ pub struct PiecesStats {
     pub dropped_points: usize,
 }
 
-/// The post-pass, holding the dilation's buffers from call to call.
-#[derive(Debug, Default)]
-pub struct Pieces {
-    /// The body dilated by the gap, over the inside points' box (a `u8` per point).
-    near: Vec<u8>,
-    tmp: Vec<u8>,
-}
-
-impl Pieces {
-    pub fn new() -> Self {
-        Self::default()
+/// Drops the inside components of `grid` farther than `gap` grid points (per axis: a box)
+/// from the largest (see the module's text). A gap of 0 keeps only the body and the large
+/// components.
+pub fn drop_apart(grid: &mut Grid, gap: [usize; 3]) -> PiecesStats {
+    let spec = grid.spec();
+    let n = spec.n();
+    let comps = components(spec, &grid.binarized());
+    let mut stats = PiecesStats {
+        components: comps.len(),
+        ..Default::default()
+    };
+    // The body: the largest (the first found among equals).
+    let Some(body) = (0..comps.len()).rev().max_by_key(|&c| comps[c].len()) else {
+        return stats;
+    };
+    if comps.len() < 2 {
+        return stats;
     }
-
-    /// Drops the inside components of `grid` farther than `gap` grid points (per axis: a
-    /// box) from the largest (see the module's text). A gap of 0 keeps only the body and the
-    /// large components.
-    pub fn drop_apart(&mut self, grid: &mut Grid, gap: [usize; 3]) -> PiecesStats {
-        let spec = grid.spec();
-        let n = spec.n();
-        let comps = components(spec, &grid.binarized());
-        let mut stats = PiecesStats {
-            components: comps.len(),
-            ..Default::default()
-        };
-        // The body: the largest (the first found among equals).
-        let Some(body) = (0..comps.len()).rev().max_by_key(|&c| comps[c].len()) else {
-            return stats;
-        };
-        if comps.len() < 2 {
-            return stats;
+    let big = (comps[body].len() as f32 * KEEP_FRACTION).ceil() as usize;
+    // The box of every inside point, padded by the gap (nothing outside it is inside,
+    // so nothing there needs the dilated body).
+    let (mut lo, mut hi) = ([n; 3], [0usize; 3]);
+    for &g in comps.iter().flatten() {
+        let idx = spec.unlinear(g as usize);
+        for a in 0..3 {
+            lo[a] = lo[a].min(idx[a]);
+            hi[a] = hi[a].max(idx[a]);
         }
-        let big = (comps[body].len() as f32 * KEEP_FRACTION).ceil() as usize;
-        // The box of every inside point, padded by the gap (nothing outside it is inside,
-        // so nothing there needs the dilated body).
-        let (mut lo, mut hi) = ([n; 3], [0usize; 3]);
-        for &g in comps.iter().flatten() {
-            let idx = spec.unlinear(g as usize);
-            for a in 0..3 {
-                lo[a] = lo[a].min(idx[a]);
-                hi[a] = hi[a].max(idx[a]);
-            }
-        }
-        let lo = [0, 1, 2].map(|a| lo[a].saturating_sub(gap[a]));
-        let hi = [0, 1, 2].map(|a| (hi[a] + gap[a]).min(n - 1));
-        let dims = [hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1];
-        let at = |g: u32| {
-            let [i, j, k] = spec.unlinear(g as usize);
-            (i - lo[0]) + dims[0] * ((j - lo[1]) + dims[1] * (k - lo[2]))
-        };
-        self.near.clear();
-        self.near.resize(dims[0] * dims[1] * dims[2], 0);
-        for &g in &comps[body] {
-            self.near[at(g)] = 1;
-        }
-        // The body dilated by the gap: a running-window maximum along each axis in turn.
-        for axis in 0..3 {
-            self.tmp.clear();
-            self.tmp.extend_from_slice(&self.near);
-            let step = [1, dims[0], dims[0] * dims[1]][axis];
-            let m = dims[axis];
-            let gap = gap[axis];
-            for line in 0..self.near.len() / m {
-                // The line's first point: its `axis` coordinate 0.
-                let base = match axis {
-                    0 => line * dims[0],
-                    1 => (line % dims[0]) + (line / dims[0]) * dims[0] * dims[1],
-                    _ => line,
-                };
-                // Set points in the window [t - gap, t + gap].
-                let mut count = 0usize;
-                for t in 0..gap.min(m) {
-                    count += self.tmp[base + t * step] as usize;
-                }
-                for t in 0..m {
-                    if t + gap < m {
-                        count += self.tmp[base + (t + gap) * step] as usize;
-                    }
-                    if t > gap {
-                        count -= self.tmp[base + (t - gap - 1) * step] as usize;
-                    }
-                    self.near[base + t * step] = (count > 0) as u8;
-                }
-            }
-        }
-        for (c, comp) in comps.iter().enumerate() {
-            let keep =
-                c == body || comp.len() >= big || comp.iter().any(|&g| self.near[at(g)] != 0);
-            if !keep {
-                for &g in comp {
-                    grid.values[g as usize] = 0.0;
-                }
-                stats.dropped += 1;
-                stats.dropped_points += comp.len();
-            }
-        }
-        stats
     }
+    let lo = [0, 1, 2].map(|a| lo[a].saturating_sub(gap[a]));
+    let hi = [0, 1, 2].map(|a| (hi[a] + gap[a]).min(n - 1));
+    let dims = [hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1];
+    let at = |g: u32| {
+        let [i, j, k] = spec.unlinear(g as usize);
+        (i - lo[0]) + dims[0] * ((j - lo[1]) + dims[1] * (k - lo[2]))
+    };
+    // The body dilated by the gap, over the box (a `u8` per point).
+    let mut near = vec![0u8; dims[0] * dims[1] * dims[2]];
+    let mut tmp = Vec::with_capacity(near.len());
+    for &g in &comps[body] {
+        near[at(g)] = 1;
+    }
+    // The body dilated by the gap: a running-window maximum along each axis in turn.
+    for axis in 0..3 {
+        tmp.clear();
+        tmp.extend_from_slice(&near);
+        let step = [1, dims[0], dims[0] * dims[1]][axis];
+        let m = dims[axis];
+        let gap = gap[axis];
+        for line in 0..near.len() / m {
+            // The line's first point: its `axis` coordinate 0.
+            let base = match axis {
+                0 => line * dims[0],
+                1 => (line % dims[0]) + (line / dims[0]) * dims[0] * dims[1],
+                _ => line,
+            };
+            // Set points in the window [t - gap, t + gap].
+            let mut count = 0usize;
+            for t in 0..gap.min(m) {
+                count += tmp[base + t * step] as usize;
+            }
+            for t in 0..m {
+                if t + gap < m {
+                    count += tmp[base + (t + gap) * step] as usize;
+                }
+                if t > gap {
+                    count -= tmp[base + (t - gap - 1) * step] as usize;
+                }
+                near[base + t * step] = (count > 0) as u8;
+            }
+        }
+    }
+    for (c, comp) in comps.iter().enumerate() {
+        let keep = c == body || comp.len() >= big || comp.iter().any(|&g| near[at(g)] != 0);
+        if !keep {
+            for &g in comp {
+                grid.values[g as usize] = 0.0;
+            }
+            stats.dropped += 1;
+            stats.dropped_points += comp.len();
+        }
+    }
+    stats
 }
 
 #[cfg(test)]
@@ -165,9 +151,8 @@ mod tests {
         cube(&mut g, [16, 4, 4], [17, 5, 5]); // 3 points from the body along x (13 -> 16)
         cube(&mut g, [4, 23, 4], [5, 24, 5]); // 10 points from it along y (13 -> 23)
         let before = g.values.clone();
-        let mut p = Pieces::new();
         let mut g3 = g.clone();
-        let s = p.drop_apart(&mut g3, [3; 3]);
+        let s = drop_apart(&mut g3, [3; 3]);
         assert_eq!(
             s,
             PiecesStats {
@@ -185,13 +170,13 @@ mod tests {
         }
         // Gap 2: the near piece is 3 away, dropped too.
         let mut g2 = g.clone();
-        assert_eq!(p.drop_apart(&mut g2, [2; 3]).dropped, 2);
+        assert_eq!(drop_apart(&mut g2, [2; 3]).dropped, 2);
         let mut g10 = g.clone();
-        assert_eq!(p.drop_apart(&mut g10, [10; 3]).dropped, 0);
+        assert_eq!(drop_apart(&mut g10, [10; 3]).dropped, 0);
         assert_eq!(g10.values, before);
         // Per axis: 10 along y reaches the far piece, 2 along x drops the near one.
         let mut gxy = g.clone();
-        let s = p.drop_apart(&mut gxy, [2, 10, 2]);
+        let s = drop_apart(&mut gxy, [2, 10, 2]);
         assert_eq!((s.dropped, s.dropped_points), (1, 8));
         assert!(is_inside(gxy.values[spec.linear([4, 23, 4])]));
         assert!(!is_inside(gxy.values[spec.linear([16, 4, 4])]));
@@ -199,7 +184,7 @@ mod tests {
         let mut g = Grid::new(spec);
         cube(&mut g, [0, 0, 0], [9, 9, 9]);
         cube(&mut g, [20, 20, 20], [26, 26, 26]); // 343 points >= 250
-        assert_eq!(p.drop_apart(&mut g, [1; 3]).dropped, 0);
+        assert_eq!(drop_apart(&mut g, [1; 3]).dropped, 0);
     }
 
     /// Diagonal neighbours are one component (26-connectivity); an empty grid and a single
@@ -211,15 +196,14 @@ mod tests {
             26
         );
         let spec = GridSpec::from_resolution(17).unwrap();
-        let mut p = Pieces::new();
         let mut g = Grid::new(spec);
-        assert_eq!(p.drop_apart(&mut g, [2; 3]), PiecesStats::default());
+        assert_eq!(drop_apart(&mut g, [2; 3]), PiecesStats::default());
         cube(&mut g, [0, 0, 0], [5, 5, 5]);
         cube(&mut g, [6, 6, 6], [6, 6, 6]); // touches the body's corner diagonally
-        assert_eq!(p.drop_apart(&mut g, [0; 3]).components, 1);
+        assert_eq!(drop_apart(&mut g, [0; 3]).components, 1);
         cube(&mut g, [16, 16, 16], [16, 16, 16]); // the far corner
         cube(&mut g, [16, 0, 8], [16, 0, 8]);
-        let s = p.drop_apart(&mut g, [4; 3]);
+        let s = drop_apart(&mut g, [4; 3]);
         assert_eq!((s.components, s.dropped, s.dropped_points), (3, 2, 2));
         assert!(!is_inside(g.values[spec.linear([16, 16, 16])]));
         assert!(is_inside(g.values[spec.linear([6, 6, 6])]));

@@ -105,7 +105,7 @@ fn ply_header_and_body_sizes_match() {
 fn the_mesh_outputs_leave_a_floater_out_and_keep_a_hand() {
     use glam::Vec3;
     use volcap_engine::field::{FieldError, OccupancyField};
-    use volcap_engine::pieces::{MESH_GAP, Pieces, gap_points};
+    use volcap_engine::pieces::{MESH_GAP, drop_apart, gap_points};
     struct Balls(Vec<(Vec3, f32)>);
     impl OccupancyField for Balls {
         fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
@@ -131,7 +131,7 @@ fn the_mesh_outputs_leave_a_floater_out_and_keep_a_hand() {
     let near = |m: &Mesh, c: Vec3| m.vertices.iter().any(|v| (*v - c).length() < 0.1);
     let before = marching_cubes(&g);
     assert!(near(&before, hand) && near(&before, floater));
-    let s = Pieces::new().drop_apart(&mut g, [gap_points(spec, MESH_GAP); 3]);
+    let s = drop_apart(&mut g, [gap_points(spec, MESH_GAP); 3]);
     assert_eq!((s.components, s.dropped), (3, 1));
     let after = marching_cubes(&g);
     assert!(near(&after, hand), "the hand is kept");

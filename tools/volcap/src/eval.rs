@@ -334,7 +334,7 @@ fn run_case(
     let t = Instant::now();
     if let Some(f) = drop_apart {
         let gap = |f| volcap_engine::pieces::gap_points(spec, f);
-        volcap_engine::pieces::Pieces::new().drop_apart(grid, [gap(f[0]), gap(f[0]), gap(f[1])]);
+        volcap_engine::pieces::drop_apart(grid, [gap(f[0]), gap(f[0]), gap(f[1])]);
     }
     let pieces_ms = t.elapsed().as_secs_f64() * 1e3;
     // IoU against the oracle on the same grid (dense oracle: cheap, it is a lookup).

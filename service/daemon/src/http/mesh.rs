@@ -155,7 +155,7 @@ fn compute(
     }
     // Pieces apart from the body (the network's floaters) are left out of the mesh.
     let gap = volcap_engine::pieces::gap_points(spec, volcap_engine::pieces::MESH_GAP);
-    volcap_engine::pieces::Pieces::new().drop_apart(&mut grid, [gap; 3]);
+    volcap_engine::pieces::drop_apart(&mut grid, [gap; 3]);
     let mut mesh = volcap_engine::mesh::marching_cubes(&grid);
     drop(grid);
     if cancel.load(Ordering::Relaxed) {
