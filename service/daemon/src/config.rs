@@ -160,6 +160,15 @@ pub struct RenderConfig {
     /// evaluation), [`DISPLAY_SIZES`]; 0 publishes the grid's own `resolution` pixels.
     #[serde(default = "d_display")]
     pub display_size: usize,
+    /// Inside pieces farther than this fraction of the grid's side from the largest (the
+    /// body) are left out of the render and `/mesh.glb` (`volcap_engine::pieces`: a network's
+    /// floaters, e.g. a rear leg placed where no limb reaches); 0 keeps them.
+    #[serde(default = "d_drop_apart")]
+    pub drop_apart: f32,
+}
+
+fn d_drop_apart() -> f32 {
+    volcap_engine::pieces::DEFAULT_GAP
 }
 
 /// Accepted `render.display_size` values besides 0.
@@ -185,6 +194,7 @@ impl Default for RenderConfig {
             field: None,
             oracle_voxel_m: d_voxel(),
             display_size: d_display(),
+            drop_apart: d_drop_apart(),
         }
     }
 }

@@ -386,6 +386,7 @@ fn render_field(
         coarse_level: live.coarse_level,
         background: live.background,
         shade: false,
+        drop_apart: live.drop_apart(),
     };
     let r = renderer.render(field, colors, spec, &opts);
     let r = r.map_err(|e| e.to_string());
@@ -545,6 +546,7 @@ impl AdapterRenderer {
             coarse_level: live.coarse_level,
             background: live.background,
             shade: false,
+            drop_apart: live.drop_apart(),
         };
         let r = renderer
             .render_gpu(&mut self.gpu, &on_gpu, field, field, spec, &opts)

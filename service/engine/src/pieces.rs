@@ -8,20 +8,21 @@
 //! [`KEEP_FRACTION`] of the body's points (a second person-sized piece is not a floater). A
 //! dropped component's values are set to 0 (outside); `evaluated` is left as it was.
 //!
-//! The mesh outputs (`volcapd`'s `/mesh.glb`, `volcap reconstruct`) run it at [`MESH_GAP`];
-//! the mesh-free render does not yet; `volcap eval --drop-apart XY,Z` measures it as a knob
-//! (off by default there, so the figures stay the render's).
+//! The mesh outputs (`volcapd`'s `/mesh.glb`, `volcap reconstruct`) run it at [`DEFAULT_GAP`],
+//! and the mesh-free render on its level `L - 1` ([`crate::render::RenderOptions::drop_apart`],
+//! [`Pieces::drop_apart`] at stride 2); `volcapd`'s `render.drop_apart` sets the gap for both.
+//! `volcap eval --drop-apart XY,Z` measures it as a knob (the product's by default; `off`
+//! keeps every piece).
 
-use crate::grid::{Grid, GridSpec};
-use crate::metrics::components;
+use crate::grid::{Grid, GridSpec, IndexBox, is_inside};
 
 /// A component at least this fraction of the body's points is always kept.
 pub const KEEP_FRACTION: f32 = 0.25;
 
-/// The mesh outputs' gap on every axis, a fraction of the grid's side (about 20 cm for an
-/// adult filling the frame): the 42 and 21 held-out images lose their floaters and keep their
-/// hands there (docs/eval/hands.md section 21).
-pub const MESH_GAP: f32 = 0.1;
+/// The product's gap on every axis (meshes and render), a fraction of the grid's side (about
+/// 20 cm for an adult filling the frame): the 42 and 21 held-out images lose their floaters
+/// and keep their hands there (docs/eval/hands.md section 21).
+pub const DEFAULT_GAP: f32 = 0.1;
 
 /// `frac` of the grid's side in whole grid points.
 pub fn gap_points(spec: GridSpec, frac: f32) -> usize {
@@ -43,85 +44,217 @@ pub struct PiecesStats {
 /// from the largest (see the module's text). A gap of 0 keeps only the body and the large
 /// components.
 pub fn drop_apart(grid: &mut Grid, gap: [usize; 3]) -> PiecesStats {
+    let mut b = IndexBox::EMPTY;
     let spec = grid.spec();
-    let n = spec.n();
-    let comps = components(spec, &grid.binarized());
-    let mut stats = PiecesStats {
-        components: comps.len(),
-        ..Default::default()
-    };
-    // The body: the largest (the first found among equals).
-    let Some(body) = (0..comps.len()).rev().max_by_key(|&c| comps[c].len()) else {
-        return stats;
-    };
-    if comps.len() < 2 {
-        return stats;
-    }
-    let big = (comps[body].len() as f32 * KEEP_FRACTION).ceil() as usize;
-    // The box of every inside point, padded by the gap (nothing outside it is inside,
-    // so nothing there needs the dilated body).
-    let (mut lo, mut hi) = ([n; 3], [0usize; 3]);
-    for &g in comps.iter().flatten() {
-        let idx = spec.unlinear(g as usize);
-        for a in 0..3 {
-            lo[a] = lo[a].min(idx[a]);
-            hi[a] = hi[a].max(idx[a]);
+    for (q, &v) in grid.values.iter().enumerate() {
+        if is_inside(v) {
+            b.add(spec.unlinear(q));
         }
     }
-    let lo = [0, 1, 2].map(|a| lo[a].saturating_sub(gap[a]));
-    let hi = [0, 1, 2].map(|a| (hi[a] + gap[a]).min(n - 1));
-    let dims = [hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1];
-    let at = |g: u32| {
-        let [i, j, k] = spec.unlinear(g as usize);
-        (i - lo[0]) + dims[0] * ((j - lo[1]) + dims[1] * (k - lo[2]))
-    };
-    // The body dilated by the gap, over the box (a `u8` per point).
-    let mut near = vec![0u8; dims[0] * dims[1] * dims[2]];
-    let mut tmp = Vec::with_capacity(near.len());
-    for &g in &comps[body] {
-        near[at(g)] = 1;
+    Pieces::default().drop_apart(grid, 1, b, gap)
+}
+
+/// [`drop_apart`] on a lattice of the grid, with buffers kept from call to call (the
+/// renderer runs it every frame on its level `L - 1`: [`crate::render::RenderOptions`]).
+///
+/// It works on runs: the maximal x intervals of inside lattice points of each row (a person
+/// at 129 lattice points a side is some ten thousand runs, not half a million points).
+/// Runs of neighbouring rows that overlap or touch diagonally are joined (union-find), which
+/// is 26-connectivity; a piece is near the body when one of its runs has a body run within
+/// the gap's box (rows within `gap[1]`, `gap[2]`, x intervals within `gap[0]`).
+#[derive(Default)]
+pub struct Pieces {
+    /// Runs in scan order (planes `k`, rows `j`, then `x`), lattice units relative to the
+    /// box: `[x0, x1]` inclusive.
+    runs: Vec<[u32; 2]>,
+    /// Per row of the box (`j + dj * k`), its first run; one more entry at the end.
+    row_start: Vec<u32>,
+    parent: Vec<u32>,
+    /// Per run, its component (0..components, in order of first run).
+    comp: Vec<u32>,
+    sizes: Vec<u64>,
+    keep: Vec<bool>,
+    dropped: Vec<u32>,
+}
+
+fn find(parent: &mut [u32], mut a: u32) -> u32 {
+    while parent[a as usize] != a {
+        let up = parent[parent[a as usize] as usize];
+        parent[a as usize] = up;
+        a = up;
     }
-    // The body dilated by the gap: a running-window maximum along each axis in turn.
-    for axis in 0..3 {
-        tmp.clear();
-        tmp.extend_from_slice(&near);
-        let step = [1, dims[0], dims[0] * dims[1]][axis];
-        let m = dims[axis];
-        let gap = gap[axis];
-        for line in 0..near.len() / m {
-            // The line's first point: its `axis` coordinate 0.
-            let base = match axis {
-                0 => line * dims[0],
-                1 => (line % dims[0]) + (line / dims[0]) * dims[0] * dims[1],
-                _ => line,
+    a
+}
+
+impl Pieces {
+    /// Drops the pieces among the points of `grid` on the lattice of stride `s` (indices
+    /// that are multiples of `s`) inside box `b`, which must hold every inside point of the
+    /// lattice; `gap` counts lattice points. Components, the body and the rule are
+    /// [`drop_apart`]'s, on the lattice (26-connected at stride `s`). The dropped points'
+    /// values are set to 0 and their grid indices kept ([`Self::dropped`]).
+    pub fn drop_apart(
+        &mut self,
+        grid: &mut Grid,
+        s: usize,
+        b: IndexBox,
+        gap: [usize; 3],
+    ) -> PiecesStats {
+        self.dropped.clear();
+        let spec = grid.spec();
+        let s = s.max(1);
+        if b.is_empty() {
+            return PiecesStats::default();
+        }
+        // The lattice's points in the box, in lattice units.
+        let lo: [usize; 3] = std::array::from_fn(|a| b.lo[a].div_ceil(s));
+        let hi: [usize; 3] = std::array::from_fn(|a| b.hi[a].min(spec.n() - 1) / s);
+        if (0..3).any(|a| lo[a] > hi[a]) {
+            return PiecesStats::default();
+        }
+        let d: [usize; 3] = std::array::from_fn(|a| hi[a] - lo[a] + 1);
+        let grid_of = |x: usize, row: usize| {
+            let (j, k) = (row % d[1], row / d[1]);
+            spec.linear([(lo[0] + x) * s, (lo[1] + j) * s, (lo[2] + k) * s])
+        };
+        // The runs, row by row; each joined to the runs it touches in the rows before it
+        // that neighbour it: (j - 1, k), (j - 1, k - 1), (j, k - 1), (j + 1, k - 1).
+        self.runs.clear();
+        self.row_start.clear();
+        self.parent.clear();
+        for row in 0..d[1] * d[2] {
+            self.row_start.push(self.runs.len() as u32);
+            let g0 = grid_of(0, row);
+            let mut x = 0;
+            while x < d[0] {
+                if !is_inside(grid.values[g0 + x * s]) {
+                    x += 1;
+                    continue;
+                }
+                let x0 = x;
+                while x + 1 < d[0] && is_inside(grid.values[g0 + (x + 1) * s]) {
+                    x += 1;
+                }
+                let r = self.runs.len() as u32;
+                self.runs.push([x0 as u32, x as u32]);
+                self.parent.push(r);
+                x += 1;
+            }
+        }
+        self.row_start.push(self.runs.len() as u32);
+        let rows_of = |row: usize| -> std::ops::Range<usize> {
+            (self.row_start[row] as usize)..(self.row_start[row + 1] as usize)
+        };
+        let touch = |a: [u32; 2], b: [u32; 2]| a[0] <= b[1] + 1 && b[0] <= a[1] + 1;
+        for row in 0..d[1] * d[2] {
+            let (j, k) = (row % d[1], row / d[1]);
+            let mut before = [None; 4];
+            if j > 0 {
+                before[0] = Some(row - 1);
+            }
+            if k > 0 {
+                let up = row - d[1];
+                before[1] = (j > 0).then(|| up - 1);
+                before[2] = Some(up);
+                before[3] = (j + 1 < d[1]).then_some(up + 1);
+            }
+            for r in rows_of(row) {
+                for q_row in before.into_iter().flatten() {
+                    for q in rows_of(q_row) {
+                        if touch(self.runs[r], self.runs[q]) {
+                            let (a, b) = (
+                                find(&mut self.parent, r as u32),
+                                find(&mut self.parent, q as u32),
+                            );
+                            // The earlier run's root stays the root (order of first run).
+                            let (lo, hi) = (a.min(b), a.max(b));
+                            self.parent[hi as usize] = lo;
+                        }
+                    }
+                }
+            }
+        }
+        // Components numbered in order of their first run, with their sizes.
+        self.comp.clear();
+        self.sizes.clear();
+        for r in 0..self.runs.len() {
+            let root = find(&mut self.parent, r as u32) as usize;
+            let c = if root == r {
+                self.sizes.push(0);
+                self.sizes.len() as u32 - 1
+            } else {
+                self.comp[root]
             };
-            // Set points in the window [t - gap, t + gap].
-            let mut count = 0usize;
-            for t in 0..gap.min(m) {
-                count += tmp[base + t * step] as usize;
-            }
-            for t in 0..m {
-                if t + gap < m {
-                    count += tmp[base + (t + gap) * step] as usize;
+            self.comp.push(c);
+            let [x0, x1] = self.runs[r];
+            self.sizes[c as usize] += (x1 - x0 + 1) as u64;
+        }
+        let mut stats = PiecesStats {
+            components: self.sizes.len(),
+            ..Default::default()
+        };
+        // The body: the largest (the first found among equals).
+        let Some(body) = (0..self.sizes.len()).rev().max_by_key(|&c| self.sizes[c]) else {
+            return stats;
+        };
+        if self.sizes.len() < 2 {
+            return stats;
+        }
+        let big = (self.sizes[body] as f32 * KEEP_FRACTION).ceil() as u64;
+        self.keep.clear();
+        self.keep.extend(
+            self.sizes
+                .iter()
+                .enumerate()
+                .map(|(c, &n)| c == body || n >= big),
+        );
+        // A piece is near when one of its runs has a body run in the gap's box.
+        let gx = gap[0] as u32;
+        for row in 0..d[1] * d[2] {
+            let (j, k) = (row % d[1], row / d[1]);
+            for r in rows_of(row) {
+                let c = self.comp[r] as usize;
+                if self.keep[c] {
+                    continue;
                 }
-                if t > gap {
-                    count -= tmp[base + (t - gap - 1) * step] as usize;
+                let [x0, x1] = self.runs[r];
+                let wide = [x0.saturating_sub(gx), x1 + gx];
+                let near = (k.saturating_sub(gap[2])..=(k + gap[2]).min(d[2] - 1)).any(|kk| {
+                    (j.saturating_sub(gap[1])..=(j + gap[1]).min(d[1] - 1)).any(|jj| {
+                        rows_of(jj + d[1] * kk).any(|q| {
+                            self.comp[q] as usize == body && {
+                                let [q0, q1] = self.runs[q];
+                                q0 <= wide[1] && wide[0] <= q1
+                            }
+                        })
+                    })
+                });
+                if near {
+                    self.keep[c] = true;
                 }
-                near[base + t * step] = (count > 0) as u8;
             }
         }
-    }
-    for (c, comp) in comps.iter().enumerate() {
-        let keep = c == body || comp.len() >= big || comp.iter().any(|&g| near[at(g)] != 0);
-        if !keep {
-            for &g in comp {
-                grid.values[g as usize] = 0.0;
+        for row in 0..d[1] * d[2] {
+            for r in rows_of(row) {
+                if self.keep[self.comp[r] as usize] {
+                    continue;
+                }
+                let [x0, x1] = self.runs[r];
+                for x in x0..=x1 {
+                    let g = grid_of(x as usize, row);
+                    grid.values[g] = 0.0;
+                    self.dropped.push(g as u32);
+                }
             }
-            stats.dropped += 1;
-            stats.dropped_points += comp.len();
         }
+        stats.dropped = self.keep.iter().filter(|k| !**k).count();
+        stats.dropped_points = self.dropped.len();
+        stats
     }
-    stats
+
+    /// Grid indices of the points the last [`Self::drop_apart`] set outside.
+    pub fn dropped(&self) -> &[u32] {
+        &self.dropped
+    }
 }
 
 #[cfg(test)]
@@ -192,7 +325,7 @@ mod tests {
     #[test]
     fn connectivity_and_edges() {
         assert_eq!(
-            gap_points(GridSpec::from_resolution(257).unwrap(), MESH_GAP),
+            gap_points(GridSpec::from_resolution(257).unwrap(), DEFAULT_GAP),
             26
         );
         let spec = GridSpec::from_resolution(17).unwrap();
@@ -207,5 +340,122 @@ mod tests {
         assert_eq!((s.components, s.dropped, s.dropped_points), (3, 2, 2));
         assert!(!is_inside(g.values[spec.linear([16, 16, 16])]));
         assert!(is_inside(g.values[spec.linear([6, 6, 6])]));
+    }
+
+    /// On a lattice of stride 2 the pass equals the whole-grid pass on the grid of that
+    /// lattice's points (a 33^3 grid's even points against a 17^3 grid), and leaves every
+    /// point off the lattice as it was; the dropped points are reported by grid index.
+    #[test]
+    fn a_lattice_pass_is_the_pass_on_the_coarser_grid() {
+        let (fine, coarse) = (
+            GridSpec::from_resolution(33).unwrap(),
+            GridSpec::from_resolution(17).unwrap(),
+        );
+        let mut c = Grid::new(coarse);
+        cube(&mut c, [2, 2, 2], [8, 8, 8]); // body
+        cube(&mut c, [10, 2, 2], [10, 3, 3]); // 2 coarse points apart
+        cube(&mut c, [2, 14, 2], [3, 15, 3]); // 6 apart
+        let mut f = Grid::new(fine);
+        for (q, &v) in c.values.iter().enumerate() {
+            let [i, j, k] = coarse.unlinear(q);
+            f.values[fine.linear([2 * i, 2 * j, 2 * k])] = v;
+        }
+        // Off the lattice: inside points the pass must neither read nor change.
+        for q in (0..fine.len()).filter(|q| fine.unlinear(*q).iter().any(|x| x % 2 == 1)) {
+            f.values[q] = 0.75;
+        }
+        let before = f.clone();
+        let want = drop_apart(&mut c, [3; 3]);
+        assert_eq!(want.dropped, 1);
+        let mut p = Pieces::default();
+        // The box in fine indices (odd bounds: the lattice points inside it).
+        let b = IndexBox {
+            lo: [3, 3, 3],
+            hi: [31, 31, 31],
+        };
+        assert_eq!(p.drop_apart(&mut f, 2, b, [3; 3]), want);
+        assert_eq!(p.dropped().len(), want.dropped_points);
+        for (q, (a, v)) in before.values.iter().zip(&f.values).enumerate() {
+            let [i, j, k] = fine.unlinear(q);
+            if [i, j, k].iter().all(|x| x % 2 == 0) {
+                assert_eq!(
+                    *v,
+                    c.values[coarse.linear([i / 2, j / 2, k / 2])],
+                    "{i} {j} {k}"
+                );
+                let dropped = p.dropped().contains(&(q as u32));
+                assert_eq!(dropped, is_inside(*a) && !is_inside(*v), "{i} {j} {k}");
+            } else {
+                assert_eq!(a, v, "{i} {j} {k}");
+            }
+        }
+        // Reused, on an empty box: nothing found, nothing reported.
+        assert_eq!(
+            p.drop_apart(&mut f, 2, IndexBox::EMPTY, [3; 3]),
+            PiecesStats::default()
+        );
+        assert!(p.dropped().is_empty());
+    }
+
+    /// On random speckled grids the run-based pass drops exactly what the definition does,
+    /// computed the plain way: 26-connected components point by point
+    /// (`metrics::components`), the body the largest first found, and a piece near when any
+    /// of its points has a body point within the gap on every axis.
+    #[test]
+    fn runs_equal_the_definition_on_random_grids() {
+        use rand::{Rng, SeedableRng};
+        let spec = GridSpec::from_resolution(17).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut dropped_some = 0;
+        for case in 0..60 {
+            let mut g = Grid::new(spec);
+            let density = [0.02, 0.05, 0.1][case % 3];
+            for v in g.values.iter_mut() {
+                *v = if rng.random::<f64>() < density {
+                    1.0
+                } else {
+                    0.0
+                };
+            }
+            let a = rng.random_range(2..12);
+            cube(&mut g, [a, 3, 4], [a + 3, 12, 8]); // a body
+            let gap = [0, 1, 2].map(|_| rng.random_range(0..5usize));
+            // The definition.
+            let comps = crate::metrics::components(spec, &g.binarized());
+            let body = (0..comps.len())
+                .rev()
+                .max_by_key(|&c| comps[c].len())
+                .unwrap();
+            let big = (comps[body].len() as f32 * KEEP_FRACTION).ceil() as usize;
+            let near = |p: u32| {
+                let p = spec.unlinear(p as usize);
+                comps[body].iter().any(|&q| {
+                    let q = spec.unlinear(q as usize);
+                    (0..3).all(|x| p[x].abs_diff(q[x]) <= gap[x])
+                })
+            };
+            let mut want: Vec<u32> = comps
+                .iter()
+                .enumerate()
+                .filter(|(c, comp)| {
+                    *c != body && comp.len() < big && !comp.iter().any(|&p| near(p))
+                })
+                .flat_map(|(_, comp)| comp.iter().copied())
+                .collect();
+            want.sort_unstable();
+            let mut p = Pieces::default();
+            let all = IndexBox {
+                lo: [0; 3],
+                hi: [16; 3],
+            };
+            let st = p.drop_apart(&mut g, 1, all, gap);
+            let mut got = p.dropped().to_vec();
+            got.sort_unstable();
+            assert_eq!(st.components, comps.len(), "case {case}");
+            assert_eq!(got, want, "case {case}, gap {gap:?}");
+            assert!(got.iter().all(|&q| g.values[q as usize] == 0.0));
+            dropped_some += (!got.is_empty()) as usize;
+        }
+        assert!(dropped_some > 10, "{dropped_some} cases dropped something");
     }
 }

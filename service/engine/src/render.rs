@@ -5,6 +5,11 @@
 //! image is `n x n` pixels for a grid of `n` points per axis.
 //!
 //! 1. Localize to level `L - 1` with the paper's hierarchical method.
+//!    Optionally ([`RenderOptions::drop_apart`], [`crate::pieces`]) the level `L - 1`
+//!    pieces apart from the body are set outside here, and the level-`L` nodes beside them
+//!    are never evaluated (not by the dilation, the field's seeds or the conflict loop):
+//!    they cast no hit and cull nothing, so what they hid is rendered. CPU path only
+//!    (`render_gpu` keeps them).
 //! 2. Upsample and binarize to level `L`; per pixel, the first inside node from the front
 //!    (largest `k`) is the *coarse hit*. Nodes behind it (`k < hit`) are **shadow nodes**
 //!    and are never evaluated.
@@ -21,7 +26,7 @@
 //!    normals from central differences of the occupancy.
 
 use crate::field::{ColorField, Evaluator, FieldError, OccupancyField};
-use crate::grid::{Grid, GridSpec};
+use crate::grid::{BitSet, Grid, GridSpec};
 use crate::localize::{Hierarchical, HierarchicalMode, LocalizeError, check_coarse};
 use columns::{col_k, crossing_depth, first_hits, update_hits};
 use glam::Vec3;
@@ -38,6 +43,11 @@ pub struct RenderOptions {
     pub background: [f32; 4],
     /// Shade with normals from central differences (6 extra evaluations per pixel).
     pub shade: bool,
+    /// Leave out inside pieces apart from the body ([`crate::pieces`]): after step 1, the
+    /// level `L - 1` pieces farther than this fraction of the grid's side from the largest
+    /// are set outside, and no level-`L` node beside them is evaluated (not the field's seeds
+    /// there, nor the conflict loop), so what they hid is rendered. `None`: off.
+    pub drop_apart: Option<f32>,
 }
 
 impl Default for RenderOptions {
@@ -46,6 +56,7 @@ impl Default for RenderOptions {
             coarse_level: crate::localize::DEFAULT_COARSE_LEVEL,
             background: [0.0; 4],
             shade: false,
+            drop_apart: None,
         }
     }
 }
@@ -65,6 +76,9 @@ pub struct RenderStats {
     pub color_evaluations: u64,
     /// Pixels with a surface.
     pub hits: u64,
+    /// Level `L - 1` points of pieces apart from the body, set outside
+    /// ([`RenderOptions::drop_apart`]).
+    pub dropped_apart: u64,
 }
 
 /// Where the last frame's time went (wall ms on the calling thread): the parts the pipeline
@@ -95,6 +109,11 @@ pub struct Renderer {
     pts: Vec<Vec3>,
     cols: Vec<[f32; 3]>,
     occ: Vec<f32>,
+    /// Pieces apart from the body ([`RenderOptions::drop_apart`]) and the level-`L` nodes
+    /// beside the points they dropped (never evaluated); `apart_set`: some bit is set.
+    pieces: crate::pieces::Pieces,
+    apart: BitSet,
+    apart_set: bool,
     size: usize,
     /// Per column of the last frame: its surface colour (columns with a hit).
     col_of: Vec<[f32; 3]>,
@@ -144,6 +163,37 @@ impl Renderer {
             .run(&mut ev, grid, coarse, big_l - 1, HierarchicalMode::Paper)?;
         stats.coarse_evaluations = ev.count();
 
+        // 1b. Pieces apart from the body left out (before the upsampling: they then have
+        // no candidates, and nothing behind them is culled).
+        if self.apart_set {
+            self.apart.drain_ones(|_| ());
+            self.apart_set = false;
+        }
+        if let Some(f) = opts.drop_apart {
+            if self.apart.len() != spec.len() {
+                self.apart.reset(spec.len());
+            }
+            let gap = crate::pieces::gap_points(fine, f);
+            let st = self
+                .pieces
+                .drop_apart(grid, 2, self.hier.inside_box(), [gap; 3]);
+            stats.dropped_apart = st.dropped_points as u64;
+            for &q in self.pieces.dropped() {
+                let c = spec.unlinear(q as usize);
+                for off in crate::grid::RING26
+                    .iter()
+                    .chain(std::iter::once(&[0, 0, 0]))
+                {
+                    if let Some(p) = crate::grid::offset(c, *off, 1, n) {
+                        self.apart.set(spec.linear(p));
+                    }
+                }
+                self.apart_set = true;
+            }
+        }
+        let (apart, any) = (&self.apart, self.apart_set);
+        let away = |q: usize| !any || !apart.get(q);
+
         // 2. Upsample to L, coarse hits per pixel.
         self.hier.upsample(grid, big_l);
         first_hits(
@@ -155,8 +205,8 @@ impl Renderer {
 
         // 3. Evaluate the candidates (and the field's seeds) in front of (or at) the coarse
         // hit.
-        self.hier.dilate(grid, big_l, |_| true);
-        self.hier.queue_seeds(grid, big_l, |_| true);
+        self.hier.dilate(grid, big_l, away);
+        self.hier.queue_seeds(grid, big_l, away);
         self.final_nodes.clear();
         self.culled.clear();
         for &q in &self.hier.batch {
@@ -179,7 +229,7 @@ impl Renderer {
             let keep = |q: usize| {
                 let (c, k) = col_k(q as u32, plane);
                 let h = hits[c];
-                h < 0 || k >= h
+                (h < 0 || k >= h) && away(q)
             };
             self.hier.conflict_loop(
                 &mut ev,

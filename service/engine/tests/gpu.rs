@@ -544,6 +544,7 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
                     coarse_level: coarse,
                     background: [0.1, 0.2, 0.3, 1.0],
                     shade,
+                    drop_apart: None,
                 };
                 let what =
                     format!("{name} {res}^3 shade {shade} from level {coarse}, tiles of {tile}");

@@ -99,13 +99,13 @@ fn ply_header_and_body_sizes_match() {
 }
 
 /// A body, a hand a little apart from it and a floater far from it: the mesh outputs' pass
-/// (`pieces::MESH_GAP`) leaves the floater out of the mesh and keeps the body and the hand,
+/// (`pieces::DEFAULT_GAP`) leaves the floater out of the mesh and keeps the body and the hand,
 /// through localization and marching cubes.
 #[test]
 fn the_mesh_outputs_leave_a_floater_out_and_keep_a_hand() {
     use glam::Vec3;
     use volcap_engine::field::{FieldError, OccupancyField};
-    use volcap_engine::pieces::{MESH_GAP, drop_apart, gap_points};
+    use volcap_engine::pieces::{DEFAULT_GAP, drop_apart, gap_points};
     struct Balls(Vec<(Vec3, f32)>);
     impl OccupancyField for Balls {
         fn occupancy(&self, points: &[Vec3], out: &mut [f32]) -> Result<(), FieldError> {
@@ -131,7 +131,7 @@ fn the_mesh_outputs_leave_a_floater_out_and_keep_a_hand() {
     let near = |m: &Mesh, c: Vec3| m.vertices.iter().any(|v| (*v - c).length() < 0.1);
     let before = marching_cubes(&g);
     assert!(near(&before, hand) && near(&before, floater));
-    let s = drop_apart(&mut g, [gap_points(spec, MESH_GAP); 3]);
+    let s = drop_apart(&mut g, [gap_points(spec, DEFAULT_GAP); 3]);
     assert_eq!((s.components, s.dropped), (3, 1));
     let after = marching_cubes(&g);
     assert!(near(&after, hand), "the hand is kept");

@@ -337,6 +337,7 @@ fn hard_frames(models: &Models) {
                     coarse_level: 3,
                     background: [0.0; 4],
                     shade: false,
+                    drop_apart: None,
                 };
                 renderer
                     .render(

@@ -180,6 +180,7 @@ fn shading_and_adversarial_fields_stay_finite() {
         let mut r = Renderer::new();
         let opts = RenderOptions {
             shade: true,
+            drop_apart: None,
             coarse_level: 3,
             ..Default::default()
         };
@@ -207,6 +208,7 @@ fn step_field_with_equal_plateaus_gives_no_nan() {
         spec,
         &RenderOptions {
             shade: true,
+            drop_apart: None,
             ..Default::default()
         },
     )
@@ -364,4 +366,78 @@ fn display_image_is_the_same_on_any_number_of_threads() {
             assert_eq!(r.display_depth(), &want_depth[..], "{size} px on {threads}");
         }
     }
+}
+
+/// Pieces apart from the body (`RenderOptions::drop_apart`): a ball floating in front of the
+/// body hides part of it. With the pass on, the frame equals, bit for bit (hits, depths, the
+/// grid image and a display image), the frame of the same field without the floater, though
+/// a seed lies inside the floater; a hand a little apart from the body stays. With it off the
+/// floater is drawn, and a renderer that ran the pass draws it again on its next frame.
+#[test]
+fn pieces_apart_from_the_body_leave_the_render() {
+    use volcap_engine::pieces::DEFAULT_GAP;
+    fn balls(list: Vec<(Vec3, f32)>) -> impl OccupancyField {
+        FnField(move |p: Vec3| {
+            let sdf = list
+                .iter()
+                .map(|(c, r)| (p - *c).length() - r)
+                .fold(f32::INFINITY, f32::min);
+            (0.5 - sdf / 0.02).clamp(0.0, 1.0)
+        })
+    }
+    let (hand, floater) = (Vec3::new(0.6, 0.0, 0.0), Vec3::new(0.0, 0.0, 0.88));
+    // Gaps in NDC (the side is 2): hand 0.15 (7.5 % of the side), floater 0.42 (21 %).
+    let with = Seeded {
+        field: balls(vec![(Vec3::ZERO, 0.4), (hand, 0.05), (floater, 0.06)]),
+        // Off the level L - 1 lattice (z index 121 of 129), where only level L's seeds reach.
+        seeds: vec![hand, floater + Vec3::new(0.0, 0.0, 0.016)],
+    };
+    let without = Seeded {
+        field: balls(vec![(Vec3::ZERO, 0.4), (hand, 0.05)]),
+        seeds: vec![hand],
+    };
+    let color = FnColor(|p: Vec3| {
+        let c = p.clamp(Vec3::splat(-1.0), Vec3::ONE);
+        [0.5 + 0.4 * c.x, 0.5, 0.5 + 0.4 * c.z]
+    });
+    let spec = GridSpec::new(7).unwrap();
+    let n = spec.n();
+    let column = |p: Vec3| {
+        let [i, j, _] = spec.index_of(p).unwrap();
+        i + n * j
+    };
+    let on = RenderOptions {
+        drop_apart: Some(DEFAULT_GAP),
+        ..Default::default()
+    };
+    let (mut a, mut b) = (Renderer::new(), Renderer::new());
+    let sa = a.render(&with, &color, spec, &on).unwrap();
+    let sb = b.render(&without, &color, spec, &on).unwrap();
+    assert!(sa.dropped_apart > 0, "{sa:?}");
+    assert_eq!(sb.dropped_apart, 0);
+    // (Whole images: a bare assert, not a printed diff.)
+    assert!(a.hits() == b.hits(), "hits differ");
+    assert!(a.depth() == b.depth(), "depths differ");
+    assert!(a.rgba() == b.rgba(), "images differ");
+    let bg = [0.1, 0.2, 0.3, 1.0];
+    let da = a.render_display(300, bg).to_vec();
+    assert!(da == b.render_display(300, bg), "display images differ");
+    // The body's front (z = 0.4) where the floater was, and the hand's (z = 0.05).
+    let body_z = a.depth()[column(floater)];
+    assert!((body_z - 0.4).abs() < 0.03, "{body_z}");
+    let hand_z = a.depth()[column(hand)];
+    assert!((hand_z - 0.05).abs() < 0.03, "{hand_z}");
+    // Off: the floater's front (z = 0.94) is drawn.
+    let mut c = Renderer::new();
+    let off = RenderOptions::default();
+    let sc = c.render(&with, &color, spec, &off).unwrap();
+    assert_eq!(sc.dropped_apart, 0);
+    let floater_z = c.depth()[column(floater)];
+    assert!((floater_z - 0.94).abs() < 0.03, "{floater_z}");
+    a.render(&with, &color, spec, &off).unwrap();
+    assert!(a.hits() == c.hits(), "hits differ from a fresh renderer's");
+    assert!(
+        a.rgba() == c.rgba(),
+        "images differ from a fresh renderer's"
+    );
 }

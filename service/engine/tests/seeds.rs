@@ -125,6 +125,7 @@ const OPTS: RenderOptions = RenderOptions {
     coarse_level: 5,
     background: [0.0; 4],
     shade: false,
+    drop_apart: None,
 };
 
 /// Pixels drawn right of the body (the part).

@@ -21,10 +21,13 @@ use volcap_engine::metrics::iou_bits;
 use volcap_engine::model::fourier::Basis;
 use volcap_engine::model::{DepthFrame, FrameError, ModelView, Models, Precision, ShapeModel};
 
+pub mod apart;
 mod cases;
 mod distances;
 mod framing;
 mod report;
+pub use apart::Apart;
+use apart::parse_apart;
 pub use report::ModelRow;
 mod turntable;
 pub mod video;
@@ -151,11 +154,12 @@ pub struct EvalArgs {
     /// left out.
     #[arg(long, value_enum, default_value_t = Framing::Whole)]
     pub framing: Framing,
-    /// Experimental: `XY,Z`: drop inside pieces farther than XY across and Z in depth
-    /// (fractions of the grid's side) from the largest before IoU and mesh (`pieces`; its
-    /// time in the mesh column).
-    #[arg(long, value_delimiter = ',')]
-    pub drop_apart: Option<Vec<f32>>,
+    /// `XY,Z`: drop inside pieces farther than XY across and Z in depth (fractions of the
+    /// grid's side) from the largest before IoU and mesh, as the product does (`pieces`; the
+    /// render and the meshes at `pieces::DEFAULT_GAP` on every axis, the default here; its
+    /// time in the mesh column); `off` keeps every piece.
+    #[arg(long, default_value = "0.1,0.1", value_parser = parse_apart)]
+    pub drop_apart: Apart,
 }
 
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -251,7 +255,7 @@ fn run_case(
     gt_mask: bool,
     truth_k: Option<(Basis, usize)>,
     to_cam: ToCamera,
-    drop_apart: Option<&[f32]>,
+    drop_apart: Option<[f32; 2]>,
 ) -> anyhow::Result<ImageRow> {
     let mut row = ImageRow {
         model: label.into(),
@@ -405,13 +409,6 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             && (0.0..1.0).contains(&pl[1])
             && pl.get(2).is_none_or(|g| *g > 0.0 && *g <= 1.0)
     };
-    if let Some(g) = a
-        .drop_apart
-        .as_ref()
-        .filter(|g| g.len() != 2 || g.iter().any(|g| !(0.0..=1.0).contains(g)))
-    {
-        bail!("--drop-apart {g:?}: XY,Z, each a fraction of the grid's side in [0, 1]");
-    }
     if let Some(pl) = &a.peak_level
         && !peak_ok(pl)
     {
@@ -572,10 +569,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 .unwrap_or_default(),
             thin.map(|(l, r)| format!("-thin{l:.2}r{r}"))
                 .unwrap_or_default(),
-            a.drop_apart
-                .as_ref()
-                .map(|g| format!("-apart{}x{}", g[0], g[1]))
-                .unwrap_or_default()
+            a.drop_apart.label()
         );
         pb.set_message(label.clone());
         let frame = frame_of(a.depth_frame, &models, truth_k);
@@ -587,6 +581,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 c,
                 a.turntable_res,
                 ToCamera::new(frame, c, false),
+                a.drop_apart.0.map(|g| g[0]),
                 &path,
             )
             .with_context(|| format!("turntable of {label}"))?;
@@ -604,7 +599,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 a.gt_mask,
                 truth_k,
                 ToCamera::new(frame, c, truth_k.is_some()),
-                a.drop_apart.as_deref(),
+                a.drop_apart.0,
             )
             .with_context(|| format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw))?;
             if a.json {

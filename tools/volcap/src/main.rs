@@ -154,6 +154,11 @@ pub struct PipelineArgs {
     /// `volcap.segment_passes`), as `volcapd` runs it.
     #[arg(long = "segment-passes", value_delimiter = ',')]
     pub segment_passes: Vec<u8>,
+    /// `render.drop_apart` values (comma-separated fractions of the grid's side in [0, 1]):
+    /// inside pieces farther than this from the body left out of the render (0: kept; what
+    /// the pass costs; its accuracy in `volcap eval --drop-apart`).
+    #[arg(long = "drop-apart", value_delimiter = ',', default_value = "0.1")]
+    pub drop_apart: Vec<f32>,
     /// Threads (`compute.threads`, comma-separated); rows with 1 are the baseline.
     #[arg(long, value_delimiter = ',', default_value = "1,2")]
     pub threads: Vec<usize>,

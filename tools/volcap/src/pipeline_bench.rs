@@ -77,6 +77,8 @@ pub struct Row {
     pub render_device: &'static str,
     /// `model.segment_passes`.
     pub segment_passes: u8,
+    /// `render.drop_apart` (0: pieces apart from the body kept).
+    pub drop_apart: f32,
     /// The adapter's milliseconds per frame, as `adapter_ms_per_frame`, of the frames'
     /// Fourier maps (interleave and temporal filter), of localization and the render's final
     /// level, and of the display image.
@@ -132,19 +134,29 @@ type Setup = (
     usize,
     bool,
     f32,
-    (usize, RenderDevice, u8),
+    (usize, RenderDevice, u8, f32),
 );
 
 /// A loaded model set: name, precision, runtime index, segmentation passes.
 type ModelKey = (String, Precision, usize, u8);
 
 fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyhow::Result<Config> {
-    let (name, prec, res, coarse, threads, split, display, temporal, yaw, (rounds, device, passes)) =
-        setup;
+    let (
+        name,
+        prec,
+        res,
+        coarse,
+        threads,
+        split,
+        display,
+        temporal,
+        yaw,
+        (rounds, device, passes, apart),
+    ) = setup;
     let device = device.name();
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
-         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\n\
+         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\ndrop_apart = {apart:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\n\
          [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nrender_device = {device:?}\n\
          [dbus]\nbus = \"none\"\n\
@@ -237,6 +249,7 @@ fn measure(
         rounds_per_wait: cfg.compute.rounds_per_wait,
         render_device: cfg.compute.render_device.name(),
         segment_passes: cfg.model.segment_passes.unwrap_or(1),
+        drop_apart: cfg.render.drop_apart,
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
         localize_ms_per_frame: (work1[7] - work0[7]) as f64 / 1e6 / published.max(1) as f64,
         display_ms_per_frame: (work1[8] - work0[8]) as f64 / 1e6 / published.max(1) as f64,
@@ -273,6 +286,9 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         .collect::<anyhow::Result<Vec<_>>>()?;
     if !a.segment_passes.is_empty() {
         crate::backend::check_segment_passes(&a.segment_passes)?;
+    }
+    if let Some(g) = a.drop_apart.iter().find(|g| !(0.0..=1.0).contains(*g)) {
+        bail!("--drop-apart {g}: a fraction of the grid's side in [0, 1] (0: pieces kept)");
     }
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);
@@ -325,7 +341,11 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                         .iter()
                                         .flat_map(|d| passes_of_model.iter().map(move |p| (d, p)))
                                     {
-                                        for &t in &a.threads {
+                                        for (&apart, &t) in a
+                                            .drop_apart
+                                            .iter()
+                                            .flat_map(|p| a.threads.iter().map(move |t| (p, t)))
+                                        {
                                             configs.push((
                                                 name.clone(),
                                                 prec,
@@ -336,7 +356,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                                 d,
                                                 tf,
                                                 yaw,
-                                                (rounds, dev, passes),
+                                                (rounds, dev, passes, apart),
                                             ));
                                         }
                                     }
@@ -433,6 +453,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.rounds_per_wait == r.rounds_per_wait
                     && b.render_device == r.render_device
                     && b.segment_passes == r.segment_passes
+                    && b.drop_apart == r.drop_apart
             })
             .map(|b| r.fps / b.fps.max(1e-9));
     }

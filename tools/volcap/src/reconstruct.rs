@@ -205,7 +205,7 @@ fn one(
     rep.localize_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     // Pieces apart from the body (the network's floaters) are left out of the mesh.
-    let gap = volcap_engine::pieces::gap_points(spec, volcap_engine::pieces::MESH_GAP);
+    let gap = volcap_engine::pieces::gap_points(spec, volcap_engine::pieces::DEFAULT_GAP);
     volcap_engine::pieces::drop_apart(&mut grid, [gap; 3]);
     let mut mesh = marching_cubes(&grid);
     mesh.paint(&field)?;
@@ -220,6 +220,7 @@ fn one(
     let opts = RenderOptions {
         background: [0.0; 4],
         shade: true,
+        drop_apart: Some(volcap_engine::pieces::DEFAULT_GAP),
         ..Default::default()
     };
     let mut r = Renderer::new();

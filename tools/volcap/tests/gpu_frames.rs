@@ -70,6 +70,7 @@ fn frame(models: &Models, rgb: &[u8], w: usize, h: usize, spec: GridSpec) -> Fra
     let opts = RenderOptions {
         background: [0.0; 4],
         shade: true,
+        drop_apart: None,
         ..Default::default()
     };
     r.render(&field, &field, spec, &opts).unwrap();
@@ -209,6 +210,7 @@ fn hard_frames_stay_finite_on_the_gpu() {
     let opts = RenderOptions {
         background: [0.0, 0.0, 0.0, 1.0],
         shade: true,
+        drop_apart: None,
         ..Default::default()
     };
     let mut accepted = 0;
@@ -531,6 +533,7 @@ fn the_renderer_on_the_adapter_draws_the_cpus_frames_of_real_photos() {
     let opts = RenderOptions {
         background: [0.0, 0.0, 0.0, 1.0],
         shade: true,
+        drop_apart: None,
         ..Default::default()
     };
     let agree = |x: &[u8], y: &[u8]| {

@@ -18,6 +18,10 @@ pub struct Live {
     pub paused: bool,
     /// Side of the published image (`render.display_size`; 0: the grid's `resolution`).
     pub display_size: usize,
+    /// Inside pieces farther than this fraction of the grid's side from the body are left
+    /// out of the render and the meshes (`render.drop_apart`, [`volcap_engine::pieces`]);
+    /// 0: kept.
+    pub drop_apart: f32,
 }
 
 impl Live {
@@ -31,6 +35,7 @@ impl Live {
             background: cfg.render.background,
             paused: false,
             display_size: cfg.render.display_size,
+            drop_apart: cfg.render.drop_apart,
         }
     }
 
@@ -88,10 +93,24 @@ impl Live {
                 ),
             );
         }
+        if !(0.0..=1.0).contains(&self.drop_apart) {
+            return bad(
+                "drop_apart",
+                format!(
+                    "drop_apart {}: a fraction of the grid's side in [0, 1] (0: keep every piece)",
+                    self.drop_apart
+                ),
+            );
+        }
         if self.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
             return bad("background", "values must be in [0, 1]".into());
         }
         Ok(())
+    }
+
+    /// The gap of [`volcap_engine::pieces`] as the renderer takes it (`None`: off).
+    pub fn drop_apart(&self) -> Option<f32> {
+        (self.drop_apart > 0.0).then_some(self.drop_apart)
     }
 
     /// Side of the published image in pixels.

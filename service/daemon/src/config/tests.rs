@@ -300,3 +300,34 @@ fn segment_passes_is_read_and_a_wrong_count_named() {
         );
     }
 }
+
+/// `render.drop_apart`: the engine's gap by default, 0 turns the pass off, and a value out
+/// of [0, 1] is refused naming the file and the key.
+#[test]
+fn drop_apart_is_read_and_a_wrong_value_named() {
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    let c = Config::parse(base, Path::new("b.toml")).unwrap();
+    let live = Live::from_config(&c);
+    assert_eq!(live.drop_apart(), Some(volcap_engine::pieces::DEFAULT_GAP));
+    let c = Config::parse(
+        &format!("{base}[render]\ndrop_apart = 0\n"),
+        Path::new("b.toml"),
+    );
+    assert_eq!(Live::from_config(&c.unwrap()).drop_apart(), None);
+    let c = Config::parse(
+        &format!("{base}[render]\ndrop_apart = 0.25\n"),
+        Path::new("b.toml"),
+    );
+    assert_eq!(Live::from_config(&c.unwrap()).drop_apart(), Some(0.25));
+    for bad in ["1.5", "-0.1", "nan"] {
+        let e = Config::parse(
+            &format!("{base}[render]\ndrop_apart = {bad}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("b.toml") && e.contains("drop_apart"),
+            "{bad}: {e}"
+        );
+    }
+}

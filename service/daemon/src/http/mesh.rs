@@ -131,11 +131,14 @@ fn lower_priority() {
     }
 }
 
-/// The mesh of `field` at `res` from `coarse`, stopping early when `cancel` is set.
+/// The mesh of `field` at `res` from `coarse`, pieces farther than `apart` (a fraction of
+/// the side, `render.drop_apart`) from the body left out, stopping early when `cancel` is
+/// set.
 fn compute(
     field: &dyn crate::pipeline::MeshField,
     res: usize,
     coarse: u32,
+    apart: Option<f32>,
     cancel: &AtomicBool,
 ) -> Result<Bytes, String> {
     let spec = volcap_engine::grid::GridSpec::from_resolution(res).map_err(|e| e.to_string())?;
@@ -153,9 +156,12 @@ fn compute(
     if cancel.load(Ordering::Relaxed) {
         return Err(CANCELLED.into());
     }
-    // Pieces apart from the body (the network's floaters) are left out of the mesh.
-    let gap = volcap_engine::pieces::gap_points(spec, volcap_engine::pieces::MESH_GAP);
-    volcap_engine::pieces::drop_apart(&mut grid, [gap; 3]);
+    // Pieces apart from the body (the network's floaters) are left out of the mesh, as
+    // they are out of the render.
+    if let Some(f) = apart {
+        let gap = volcap_engine::pieces::gap_points(spec, f);
+        volcap_engine::pieces::drop_apart(&mut grid, [gap; 3]);
+    }
     let mut mesh = volcap_engine::mesh::marching_cubes(&grid);
     drop(grid);
     if cancel.load(Ordering::Relaxed) {
@@ -179,7 +185,7 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
     };
     let live = app.shared.live();
-    let (res, coarse) = (live.resolution, live.coarse_level);
+    let (res, coarse, apart) = (live.resolution, live.coarse_level, live.drop_apart());
     let glb_response =
         |b: Bytes| ([(header::CONTENT_TYPE, "model/gltf-binary")], b).into_response();
     if let Some(b) = app.cached_mesh(&field, res, coarse) {
@@ -208,7 +214,7 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         let _permit = permit;
         let key = Arc::downgrade(&field);
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            compute(field.as_ref(), res, coarse, &flag)
+            compute(field.as_ref(), res, coarse, apart, &flag)
         }))
         .unwrap_or_else(|_| {
             tracing::warn!("a mesh computation panicked; the worker goes on");

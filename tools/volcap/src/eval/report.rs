@@ -74,8 +74,12 @@ fn knobs(a: &EvalArgs) -> String {
     if let Some(m) = &a.thin_level {
         let _ = write!(k, " --thin-level {}", list(m));
     }
-    if let Some(g) = &a.drop_apart {
-        let _ = write!(k, " --drop-apart {}", list(g));
+    match a.drop_apart {
+        d if d == super::Apart::PRODUCT => {}
+        super::Apart(Some(g)) => {
+            let _ = write!(k, " --drop-apart {}", list(&g));
+        }
+        super::Apart(None) => k.push_str(" --drop-apart off"),
     }
     if !a.segment_passes.is_empty() {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
@@ -116,7 +120,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             .map(|p| p.display().to_string())
             .unwrap_or_else(|| "embedded pack".into()),
         a.res,
-        if a.drop_apart.is_some() {
+        if a.drop_apart.0.is_some() {
             " -> pieces apart from the body dropped"
         } else {
             ""

@@ -60,6 +60,7 @@ pub(super) fn turntable(
     c: &Case,
     res: usize,
     to_cam: ToCamera,
+    apart: Option<f32>,
     path: &Path,
 ) -> anyhow::Result<()> {
     use volcap_engine::render::{RenderOptions, Renderer};
@@ -72,6 +73,7 @@ pub(super) fn turntable(
     let opts = RenderOptions {
         background: [0.85, 0.85, 0.85, 1.0],
         shade: true,
+        drop_apart: apart,
         ..Default::default()
     };
     let n = spec.n() as u32;

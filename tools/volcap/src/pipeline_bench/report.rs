@@ -7,6 +7,17 @@ use std::fmt::Write as _;
 use std::path::Path;
 use volcapd::config::RenderDevice;
 
+/// The label's note on `render.drop_apart` where it is not the daemon's default.
+fn apart_note(g: f32) -> String {
+    if g == volcap_engine::pieces::DEFAULT_GAP {
+        String::new()
+    } else if g > 0.0 {
+        format!(", pieces {g} apart dropped")
+    } else {
+        ", pieces apart kept".into()
+    }
+}
+
 pub(super) fn table(rows: &[Row]) -> String {
     let mut s = String::from(
         "| model | runtime | res | display px | coarse | threads | segment thread | temporal | yaw | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
@@ -15,13 +26,14 @@ pub(super) fn table(rows: &[Row]) -> String {
     for r in rows {
         let _ = writeln!(
             s,
-            "| {}{} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
+            "| {}{}{} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
             if r.segment_passes > 1 {
                 ", segmented twice"
             } else {
                 ""
             },
+            apart_note(r.drop_apart),
             r.runtime,
             r.resolution,
             if r.display_size == 0 {
@@ -140,7 +152,7 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
     let (left, right) = root.split_horizontally(550);
     let key = |r: &Row| {
         (
-            format!("{} {}", r.model, r.runtime),
+            format!("{}{} {}", r.model, apart_note(r.drop_apart), r.runtime),
             r.coarse_level,
             r.threads,
             r.segment_thread_up_to,

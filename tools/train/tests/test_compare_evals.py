@@ -1,0 +1,68 @@
+"""compare_evals: paired per-image differences of two `volcap eval` reports."""
+import json
+import math
+import statistics
+
+import pytest
+
+from volcap_train import compare_evals as ce
+
+
+def report(tmp_path, name, rows):
+    d = tmp_path / name
+    d.mkdir()
+    images = []
+    for (subject, pose, yaw, model, c, p, iou, hands) in rows:
+        images.append(
+            {
+                "subject": subject, "pose": pose, "yaw_deg": yaw, "model": model, "status": "ok",
+                "chamfer_cm": c, "p2s_cm": p, "iou": iou, "part_cm": [1, 1, 1, hands, 1, 1],
+            }
+        )
+    (d / "eval.json").write_text(json.dumps({"images": images, "models": []}))
+    return d
+
+
+def test_pairs_by_image_and_gives_the_mean_difference_and_its_standard_error(tmp_path):
+    # B lists its images in another order and holds one A lacks: pairing is by image.
+    a = report(tmp_path, "a", [("s1", 0, 0.0, "m", 2.0, 1.0, 0.7, 10.0), ("s1", 0, 120.0, "m", 3.0, 2.0, 0.6, 12.0),
+                               ("s2", 1, 0.0, "m", 1.0, 0.5, 0.8, 8.0)])
+    b = report(tmp_path, "b", [("s2", 1, 0.0, "m", 1.5, 0.5, 0.7, 9.0), ("s9", 0, 0.0, "m", 9.0, 9.0, 0.1, 30.0),
+                               ("s1", 0, 120.0, "m", 2.0, 2.5, 0.65, 12.0), ("s1", 0, 0.0, "m", 2.5, 1.5, 0.6, 11.0)])
+    res = {r["metric"]: r for r in ce.compare(ce.paired([ce.load_rows(a, None)], [ce.load_rows(b, None)]))}
+    d = [2.0 - 2.5, 3.0 - 2.0, 1.0 - 1.5]
+    c = res["Chamfer cm"]
+    assert c["images"] == 3
+    assert math.isclose(c["diff"], statistics.fmean(d))
+    assert math.isclose(c["se"], statistics.stdev(d) / math.sqrt(3))
+    assert math.isclose(c["a"], 2.0) and math.isclose(c["b"], 2.0)
+    assert c["a_wins"] == 2  # lower is better
+    assert res["IoU"]["a_wins"] == 2  # higher is better: 0.7 > 0.6, 0.8 > 0.7
+    assert math.isclose(res["hands cm"]["diff"], statistics.fmean([-1.0, 0.0, -1.0]))
+    assert "| Chamfer cm | 3 |" in ce.table(list(res.values()))
+
+
+def test_report_pairs_pool_and_mismatches_are_refused(tmp_path):
+    a1 = report(tmp_path, "a1", [("s1", 0, 0.0, "m", 2.0, 1.0, 0.7, 10.0)])
+    a2 = report(tmp_path, "a2", [("s1", 0, 0.0, "m", 4.0, 1.0, 0.7, 10.0)])
+    b1 = report(tmp_path, "b1", [("s1", 0, 0.0, "m", 1.0, 1.0, 0.7, 10.0)])
+    b2 = report(tmp_path, "b2", [("s2", 0, 0.0, "m", 1.0, 1.0, 0.7, 10.0)])
+    rows = lambda ps: [ce.load_rows(p, None) for p in ps]
+    # The same image key in two report pairs is two images (another seed, another pose).
+    pooled = ce.compare(ce.paired(rows([a1, a2]), rows([b1, b1])))
+    assert pooled[0]["images"] == 2 and math.isclose(pooled[0]["diff"], 2.0)
+    with pytest.raises(SystemExit, match="no image in common"):
+        ce.paired(rows([a1]), rows([b2]))
+    with pytest.raises(SystemExit, match="pair them one to one"):
+        ce.paired(rows([a1, a2]), rows([b1]))
+
+
+def test_a_report_of_several_models_needs_one_named(tmp_path):
+    r = report(tmp_path, "r", [("s1", 0, 0.0, "m1", 2.0, 1.0, 0.7, 10.0), ("s1", 0, 0.0, "m2", 1.0, 1.0, 0.7, 10.0)])
+    with pytest.raises(SystemExit, match="2 models"):
+        ce.load_rows(r, None)
+    assert ce.load_rows(r, "m2")[("s1", 0, 0.0)]["chamfer_cm"] == 1.0
+    with pytest.raises(SystemExit, match="no model 'm3'"):
+        ce.load_rows(r, "m3")
+    with pytest.raises(SystemExit, match="no eval.json"):
+        ce.load_rows(tmp_path / "missing", None)

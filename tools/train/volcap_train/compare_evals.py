@@ -1,0 +1,118 @@
+"""Paired comparison of two models through the engine: `volcap eval` reports of the same
+images, image by image, with standard errors.
+
+  python -m volcap_train.compare_evals --a A1 [A2 ...] --b B1 [B2 ...] [--model-a M] [--model-b M]
+
+Each Ai / Bi is a `volcap eval --out` folder (its eval.json) or the file itself; Ai and Bi must
+be runs on the same images (same --subjects, --poses, --views and --seed), so their images pair
+by (subject, pose, yaw); the pairs of all the reports pool. Per metric it prints both means,
+the mean of the per-image differences A - B with its standard error, and how many images A
+wins. Means of 42 images move by 0.1-0.2 cm between checkpoints of one recipe (docs/eval/
+hands.md section 23): a difference within two standard errors of 0 is not a finding.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+# (key in an image row, label, whether larger is better); part_cm[3] is the hands'
+# completeness (volcap eval's part order: head, torso, arms, hands, legs, feet).
+METRICS = [
+    ("chamfer_cm", "Chamfer cm", False),
+    ("p2s_cm", "P2S cm", False),
+    ("iou", "IoU", True),
+    ("hands_cm", "hands cm", False),
+]
+
+
+def load_rows(path: Path, model: str | None) -> dict:
+    """The ok images of one report as {(subject, pose, yaw): row}; `model` picks one of several
+    models in the report (needed when it holds more than one)."""
+    f = path / "eval.json" if path.is_dir() else path
+    if not f.exists():
+        raise SystemExit(f"{path}: no eval.json (a `volcap eval --out` folder or the file)")
+    rows = json.loads(f.read_text())["images"]
+    models = sorted({r["model"] for r in rows})
+    if model is None:
+        if len(models) != 1:
+            raise SystemExit(f"{f}: {len(models)} models ({', '.join(models)}): name one with --model-a/--model-b")
+        model = models[0]
+    elif model not in models:
+        raise SystemExit(f"{f}: no model {model!r} (it has {', '.join(models)})")
+    out = {}
+    for r in rows:
+        if r["model"] != model or r["status"] != "ok":
+            continue
+        r = dict(r)
+        parts = r.get("part_cm") or []
+        r["hands_cm"] = parts[3] if len(parts) > 3 else float("nan")
+        out[(r["subject"], r["pose"], r["yaw_deg"])] = r
+    return out
+
+
+def paired(a_rows: list[dict], b_rows: list[dict]) -> list[tuple[dict, dict]]:
+    """The image pairs of report pairs (a_rows[i], b_rows[i]), pooled."""
+    if len(a_rows) != len(b_rows):
+        raise SystemExit(f"--a has {len(a_rows)} reports and --b {len(b_rows)}: pair them one to one")
+    pairs = []
+    for i, (a, b) in enumerate(zip(a_rows, b_rows)):
+        common = sorted(set(a) & set(b))
+        if not common:
+            raise SystemExit(f"report pair {i + 1}: no image in common (not the same images?)")
+        pairs += [(a[k], b[k]) for k in common]
+    return pairs
+
+
+def compare(pairs: list[tuple[dict, dict]]) -> list[dict]:
+    """Per metric: both means, the mean per-image difference A - B, its standard error and A's
+    wins, over the pairs where both values are finite."""
+    out = []
+    for key, label, higher in METRICS:
+        d = [(a[key], b[key]) for a, b in pairs if math.isfinite(a[key]) and math.isfinite(b[key])]
+        if not d:
+            continue
+        n = len(d)
+        diff = [x - y for x, y in d]
+        mean = sum(diff) / n
+        se = math.sqrt(sum((x - mean) ** 2 for x in diff) / (n - 1) / n) if n > 1 else float("nan")
+        wins = sum((x > y) if higher else (x < y) for x, y in d)
+        out.append(
+            {
+                "metric": label,
+                "images": n,
+                "a": sum(x for x, _ in d) / n,
+                "b": sum(y for _, y in d) / n,
+                "diff": mean,
+                "se": se,
+                "a_wins": wins,
+            }
+        )
+    return out
+
+
+def table(res: list[dict]) -> str:
+    s = "| metric | images | A | B | A - B (per image) | A better on |\n|---|---|---|---|---|---|\n"
+    for r in res:
+        s += (
+            f"| {r['metric']} | {r['images']} | {r['a']:.3f} | {r['b']:.3f} | "
+            f"{r['diff']:+.3f} ± {r['se']:.3f} | {r['a_wins']} |\n"
+        )
+    return s
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--a", type=Path, nargs="+", required=True)
+    ap.add_argument("--b", type=Path, nargs="+", required=True)
+    ap.add_argument("--model-a", default=None)
+    ap.add_argument("--model-b", default=None)
+    args = ap.parse_args(argv)
+    a = [load_rows(p, args.model_a) for p in args.a]
+    b = [load_rows(p, args.model_b) for p in args.b]
+    print(table(compare(paired(a, b))), end="")
+
+
+if __name__ == "__main__":
+    main()
