@@ -77,6 +77,11 @@ pub struct TemporalArgs {
         default_value = "off,default,map_change_cutoff_hz=1.5,mask_low=0.5+mask_high=0.5"
     )]
     pub settings: Vec<String>,
+    /// Inside pieces farther than this fraction of the grid's side from the body are left
+    /// out of the model's grid, as the daemon's render does (`render.drop_apart`; 0 keeps
+    /// them: whether the pass makes pieces come and go between frames).
+    #[arg(long, default_value_t = volcap_engine::pieces::DEFAULT_GAP)]
+    pub drop_apart: f32,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
@@ -397,6 +402,12 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
     }
     let spec = GridSpec::from_resolution(a.res).with_context(|| format!("--res {}", a.res))?;
     let coarse = a.coarse_level.min(spec.level());
+    if !(0.0..=1.0).contains(&a.drop_apart) {
+        bail!(
+            "--drop-apart {}: a fraction of the grid's side in [0, 1] (0 keeps every piece)",
+            a.drop_apart
+        );
+    }
     let settings = a
         .settings
         .iter()
@@ -461,6 +472,10 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                     temporal.as_mut(),
                 )?;
                 loc.run(Method::Hierarchical, &field, spec, coarse, &mut grid)?;
+                if a.drop_apart > 0.0 {
+                    let gap = volcap_engine::pieces::gap_points(spec, a.drop_apart);
+                    volcap_engine::pieces::drop_apart(&mut grid, [gap; 3]);
+                }
                 let oracle = OracleInCrop {
                     oracle: &fr.oracle,
                     crop,

@@ -46,7 +46,7 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
     let _ = writeln!(
         md,
         "# A steady render: flicker, accuracy, jitter and lag per temporal setting\n\n\
-         `volcap bench temporal --res {} --coarse-level {} --model {} --frames {} --settle {}` ({} scenes x {} settings). \
+         `volcap bench temporal --res {} --coarse-level {} --model {} --frames {} --settle {} --drop-apart {}` ({} scenes x {} settings). \
          Flicker is what the display shows (the crop's cube, consecutive frames; flicker and jitter leave out the first {} frames of each scene); accuracy is \
          against the simulator's truth of each frame; jitter is the model's frame-to-frame depth \
          change minus the truth's (camera frame); lag is the shift that best lines the \
@@ -56,6 +56,7 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
         a.model,
         a.frames,
         a.settle,
+        a.drop_apart,
         a.scenes.len(),
         a.settings.len(),
         a.settle
