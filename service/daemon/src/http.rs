@@ -45,7 +45,7 @@ pub struct App {
     pub rtsp: Arc<crate::rtsp::Status>,
 }
 
-pub use mesh::{MESH_CONCURRENCY, MESH_NICE, MeshCache, MeshWorker};
+pub use mesh::{MESH_CONCURRENCY, MESH_NICE, MeshCache, MeshSettings, MeshWorker};
 
 impl App {
     pub fn new(
@@ -72,21 +72,18 @@ impl App {
         }
     }
 
-    /// The cached mesh of `field` at (`res`, `coarse`), if it is the one in the cache.
+    /// The cached mesh of `field` made with `set`, if it is the one in the cache.
     fn cached_mesh(
         &self,
         field: &Arc<dyn crate::pipeline::MeshField>,
-        res: usize,
-        coarse: u32,
+        set: MeshSettings,
     ) -> Option<axum::body::Bytes> {
         self.mesh_cache
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .as_ref()
-            .filter(|(k, r, c, _)| {
-                std::ptr::addr_eq(k.as_ptr(), Arc::as_ptr(field)) && (*r, *c) == (res, coarse)
-            })
-            .map(|(_, _, _, b)| b.clone())
+            .filter(|(k, s, _)| std::ptr::addr_eq(k.as_ptr(), Arc::as_ptr(field)) && *s == set)
+            .map(|(_, _, b)| b.clone())
     }
 
     /// Who may use the view controls: `token` (a token is configured: whoever sends it),

@@ -11,13 +11,30 @@ use std::sync::{Arc, Mutex};
 use volcap_engine::field::{FieldError, OccupancyField};
 
 /// The last mesh: its field (a `Weak` keeps the allocation, so a new frame's field can never
-/// share its address), resolution, coarse level, and the bytes.
+/// share its address), what it was made with, and the bytes.
 pub type MeshCache = (
     std::sync::Weak<dyn crate::pipeline::MeshField>,
-    usize,
-    u32,
+    MeshSettings,
     Bytes,
 );
+
+/// The live settings a mesh is made with: resolution, coarse level and `render.drop_apart`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshSettings {
+    pub res: usize,
+    pub coarse: u32,
+    pub apart: Option<f32>,
+}
+
+impl MeshSettings {
+    pub fn of(live: &crate::config::Live) -> Self {
+        Self {
+            res: live.resolution,
+            coarse: live.coarse_level,
+            apart: live.drop_apart(),
+        }
+    }
+}
 
 /// Mesh computations at once. Each holds one grid at the live resolution (4 bytes a point:
 /// 68 MB at 257^3, 540 MB at 513^3) and its mesh; the localization is the paper's
@@ -131,16 +148,15 @@ fn lower_priority() {
     }
 }
 
-/// The mesh of `field` at `res` from `coarse`, pieces farther than `apart` (a fraction of
-/// the side, `render.drop_apart`) from the body left out, stopping early when `cancel` is
-/// set.
+/// The mesh of `field` at `set.res` from `set.coarse`, pieces farther than `set.apart` (a
+/// fraction of the side, `render.drop_apart`) from the body left out, stopping early when
+/// `cancel` is set.
 fn compute(
     field: &dyn crate::pipeline::MeshField,
-    res: usize,
-    coarse: u32,
-    apart: Option<f32>,
+    set: MeshSettings,
     cancel: &AtomicBool,
 ) -> Result<Bytes, String> {
+    let MeshSettings { res, coarse, apart } = set;
     let spec = volcap_engine::grid::GridSpec::from_resolution(res).map_err(|e| e.to_string())?;
     let mut grid = volcap_engine::grid::Grid::new(spec);
     let guarded = Cancellable { field, cancel };
@@ -185,10 +201,10 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         return (StatusCode::SERVICE_UNAVAILABLE, "no frame yet\n").into_response();
     };
     let live = app.shared.live();
-    let (res, coarse, apart) = (live.resolution, live.coarse_level, live.drop_apart());
+    let set = MeshSettings::of(&live);
     let glb_response =
         |b: Bytes| ([(header::CONTENT_TYPE, "model/gltf-binary")], b).into_response();
-    if let Some(b) = app.cached_mesh(&field, res, coarse) {
+    if let Some(b) = app.cached_mesh(&field, set) {
         return glb_response(b);
     }
     let busy = || {
@@ -203,7 +219,7 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         return busy();
     };
     // The frame may have been meshed while we waited for the gate.
-    if let Some(b) = app.cached_mesh(&field, res, coarse) {
+    if let Some(b) = app.cached_mesh(&field, set) {
         return glb_response(b);
     }
     let cancel = Arc::new(AtomicBool::new(false));
@@ -214,7 +230,7 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         let _permit = permit;
         let key = Arc::downgrade(&field);
         let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            compute(field.as_ref(), res, coarse, apart, &flag)
+            compute(field.as_ref(), set, &flag)
         }))
         .unwrap_or_else(|_| {
             tracing::warn!("a mesh computation panicked; the worker goes on");
@@ -229,7 +245,7 @@ pub(super) async fn mesh_glb(State(app): State<Arc<App>>) -> Response {
         counter.fetch_add(1, Ordering::Relaxed);
         if let Ok(bytes) = &r {
             *app2.mesh_cache.lock().unwrap_or_else(|p| p.into_inner()) =
-                Some((key, res, coarse, bytes.clone()));
+                Some((key, set, bytes.clone()));
         }
         let _ = tx.send(r);
     }));
@@ -257,7 +273,7 @@ pub(super) async fn mesh_head(State(app): State<Arc<App>>) -> Response {
         return StatusCode::SERVICE_UNAVAILABLE.into_response();
     };
     let live = app.shared.live();
-    match app.cached_mesh(&field, live.resolution, live.coarse_level) {
+    match app.cached_mesh(&field, MeshSettings::of(&live)) {
         Some(b) => ([(header::CONTENT_TYPE, "model/gltf-binary")], b).into_response(),
         None => Response::builder()
             .header(header::CONTENT_TYPE, "model/gltf-binary")
