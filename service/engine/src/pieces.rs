@@ -24,6 +24,18 @@ pub const KEEP_FRACTION: f32 = 0.25;
 /// and keep their hands there (docs/eval/hands.md section 21).
 pub const DEFAULT_GAP: f32 = 0.1;
 
+/// A gap as the product's settings give it (`volcapd`'s `render.drop_apart`, the tools'
+/// `--drop-apart`): a fraction of the grid's side in [0, 1], where 0 turns the pass off
+/// (`Ok(None)`). The error says what was given and what is accepted.
+pub fn gap_setting(frac: f32) -> Result<Option<f32>, String> {
+    if !(0.0..=1.0).contains(&frac) {
+        return Err(format!(
+            "{frac}: a fraction of the grid's side in [0, 1] (0 keeps every piece)"
+        ));
+    }
+    Ok((frac > 0.0).then_some(frac))
+}
+
 /// `frac` of the grid's side in whole grid points.
 pub fn gap_points(spec: GridSpec, frac: f32) -> usize {
     (frac.clamp(0.0, 1.0) * (spec.n() - 1) as f32).round() as usize
@@ -318,6 +330,22 @@ mod tests {
         cube(&mut g, [0, 0, 0], [9, 9, 9]);
         cube(&mut g, [20, 20, 20], [26, 26, 26]); // 343 points >= 250
         assert_eq!(drop_apart(&mut g, [1; 3]).dropped, 0);
+    }
+
+    /// Settings: 0 is off, a fraction in (0, 1] is the gap, anything else (NaN too) refused
+    /// with the value.
+    #[test]
+    fn gap_settings() {
+        assert_eq!(gap_setting(0.0), Ok(None));
+        assert_eq!(gap_setting(0.1), Ok(Some(0.1)));
+        assert_eq!(gap_setting(1.0), Ok(Some(1.0)));
+        for bad in [-0.1, 1.5, f32::NAN] {
+            assert!(
+                gap_setting(bad)
+                    .unwrap_err()
+                    .starts_with(&format!("{bad}:"))
+            );
+        }
     }
 
     /// Diagonal neighbours are one component (26-connectivity); an empty grid and a single

@@ -287,8 +287,8 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     if !a.segment_passes.is_empty() {
         crate::backend::check_segment_passes(&a.segment_passes)?;
     }
-    if let Some(g) = a.drop_apart.iter().find(|g| !(0.0..=1.0).contains(*g)) {
-        bail!("--drop-apart {g}: a fraction of the grid's side in [0, 1] (0: pieces kept)");
+    for &g in &a.drop_apart {
+        volcap_engine::pieces::gap_setting(g).map_err(|e| anyhow!("--drop-apart {e}"))?;
     }
     if a.frames == 0 || a.frames > 600 {
         bail!("--frames {} must be in 1..=600", a.frames);

@@ -93,14 +93,8 @@ impl Live {
                 ),
             );
         }
-        if !(0.0..=1.0).contains(&self.drop_apart) {
-            return bad(
-                "drop_apart",
-                format!(
-                    "drop_apart {}: a fraction of the grid's side in [0, 1] (0: keep every piece)",
-                    self.drop_apart
-                ),
-            );
+        if let Err(e) = volcap_engine::pieces::gap_setting(self.drop_apart) {
+            return bad("drop_apart", format!("drop_apart {e}"));
         }
         if self.background.iter().any(|v| !(0.0..=1.0).contains(v)) {
             return bad("background", "values must be in [0, 1]".into());
@@ -110,7 +104,9 @@ impl Live {
 
     /// The gap of [`volcap_engine::pieces`] as the renderer takes it (`None`: off).
     pub fn drop_apart(&self) -> Option<f32> {
-        (self.drop_apart > 0.0).then_some(self.drop_apart)
+        volcap_engine::pieces::gap_setting(self.drop_apart)
+            .ok()
+            .flatten()
     }
 
     /// Side of the published image in pixels.

@@ -78,8 +78,9 @@ pub struct TemporalArgs {
     )]
     pub settings: Vec<String>,
     /// Inside pieces farther than this fraction of the grid's side from the body are left
-    /// out of the model's grid, as the daemon's render does (`render.drop_apart`; 0 keeps
-    /// them: whether the pass makes pieces come and go between frames).
+    /// out of the model's grid, as the meshes do (`render.drop_apart`; the render drops the
+    /// same pieces on its level `L - 1`; 0 keeps them: whether the pass makes pieces come
+    /// and go between frames).
     #[arg(long, default_value_t = volcap_engine::pieces::DEFAULT_GAP)]
     pub drop_apart: f32,
     /// Folder of the ONNX models.
@@ -402,12 +403,8 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
     }
     let spec = GridSpec::from_resolution(a.res).with_context(|| format!("--res {}", a.res))?;
     let coarse = a.coarse_level.min(spec.level());
-    if !(0.0..=1.0).contains(&a.drop_apart) {
-        bail!(
-            "--drop-apart {}: a fraction of the grid's side in [0, 1] (0 keeps every piece)",
-            a.drop_apart
-        );
-    }
+    let apart = volcap_engine::pieces::gap_setting(a.drop_apart)
+        .map_err(|e| anyhow!("--drop-apart {e}"))?;
     let settings = a
         .settings
         .iter()
@@ -472,8 +469,8 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                     temporal.as_mut(),
                 )?;
                 loc.run(Method::Hierarchical, &field, spec, coarse, &mut grid)?;
-                if a.drop_apart > 0.0 {
-                    let gap = volcap_engine::pieces::gap_points(spec, a.drop_apart);
+                if let Some(f) = apart {
+                    let gap = volcap_engine::pieces::gap_points(spec, f);
                     volcap_engine::pieces::drop_apart(&mut grid, [gap; 3]);
                 }
                 let oracle = OracleInCrop {
