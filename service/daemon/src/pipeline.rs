@@ -459,8 +459,6 @@ pub(crate) struct AdapterRenderer {
     /// On a device of its own (`compute.render_device = "own"`): the frame's maps come from
     /// the host (read back by the field stage), not from the networks' device.
     own_device: bool,
-    /// Whether the log said that the adapter's render keeps the pieces apart from the body.
-    apart_said: bool,
 }
 
 #[cfg(feature = "wgpu")]
@@ -499,7 +497,6 @@ impl AdapterRenderer {
                 gpu: gpu.with_rounds_per_wait(rounds_per_wait),
                 cpu_because: None,
                 own_device,
-                apart_said: false,
             }),
             Err(e) => {
                 tracing::warn!("the renderer stays on the CPU: {e}");
@@ -544,12 +541,6 @@ impl AdapterRenderer {
         let (Some(on_gpu), None) = (on_gpu, why) else {
             return render_field(renderer, sh, field, field, live);
         };
-        if let Some(g) = live.drop_apart().filter(|_| !self.apart_said) {
-            tracing::info!(
-                "render.drop_apart = {g}: the adapter's render keeps the pieces apart from the body (the pass runs in the CPU render and /mesh.glb)"
-            );
-            self.apart_said = true;
-        }
         let t = Instant::now();
         let opts = RenderOptions {
             coarse_level: live.coarse_level,

@@ -41,6 +41,13 @@ pub fn gap_points(spec: GridSpec, frac: f32) -> usize {
     (frac.clamp(0.0, 1.0) * (spec.n() - 1) as f32).round() as usize
 }
 
+/// Words of [`Pieces::drop_apart_bits`]'s inside bits for the lattice of stride `s` of
+/// `spec`'s grid: each row of `nl` points in whole 32-bit words.
+pub fn lattice_words(spec: GridSpec, s: usize) -> usize {
+    let nl = (spec.n() - 1) / s.max(1) + 1;
+    nl.div_ceil(32) * nl * nl
+}
+
 /// What [`drop_apart`] found.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct PiecesStats {
@@ -128,6 +135,77 @@ impl Pieces {
             let (j, k) = (row % d[1], row / d[1]);
             spec.linear([(lo[0] + x) * s, (lo[1] + j) * s, (lo[2] + k) * s])
         };
+        let values = &grid.values;
+        let stats = self.find(d, gap, |x, row| is_inside(values[grid_of(x, row)]), grid_of);
+        for &g in &self.dropped {
+            grid.values[g as usize] = 0.0;
+        }
+        stats
+    }
+
+    /// [`Self::drop_apart`] on the lattice of stride `s` of `spec`'s grid given as bits (the
+    /// GPU renderer reads its level `L - 1` back so: [`lattice_words`]): lattice point
+    /// `(x, j, k)` is bit `x % 32` of word `x / 32 + w (j + nl k)`, `nl` points a side, `w`
+    /// words a row. Nothing is written: the dropped points' grid indices are
+    /// [`Self::dropped`]. An error when the bits are not the lattice's size.
+    pub fn drop_apart_bits(
+        &mut self,
+        spec: GridSpec,
+        s: usize,
+        bits: &[u32],
+        gap: [usize; 3],
+    ) -> Result<PiecesStats, String> {
+        self.dropped.clear();
+        let s = s.max(1);
+        let nl = (spec.n() - 1) / s + 1;
+        let w = nl.div_ceil(32);
+        if bits.len() != lattice_words(spec, s) {
+            return Err(format!(
+                "{} words of inside bits for a lattice of {nl}^3 points ({} expected)",
+                bits.len(),
+                lattice_words(spec, s)
+            ));
+        }
+        // The box of the inside points, in lattice units, from the rows that have any.
+        let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+        for (row, words) in bits.chunks_exact(w).enumerate() {
+            let Some(first) = words.iter().position(|&b| b != 0) else {
+                continue;
+            };
+            let last = words.iter().rposition(|&b| b != 0).unwrap_or(first);
+            let x0 = 32 * first + words[first].trailing_zeros() as usize;
+            let x1 = 32 * last + 31 - words[last].leading_zeros() as usize;
+            for (a, v) in [(0, x0), (0, x1), (1, row % nl), (2, row / nl)] {
+                lo[a] = lo[a].min(v);
+                hi[a] = hi[a].max(v);
+            }
+        }
+        if lo[0] > hi[0] {
+            return Ok(PiecesStats::default());
+        }
+        let d: [usize; 3] = std::array::from_fn(|a| hi[a] - lo[a] + 1);
+        let at = |x: usize, row: usize| {
+            let (j, k) = (lo[1] + row % d[1], lo[2] + row / d[1]);
+            [lo[0] + x, j, k]
+        };
+        let inside = |x: usize, row: usize| {
+            let [i, j, k] = at(x, row);
+            bits[i / 32 + w * (j + nl * k)] >> (i % 32) & 1 != 0
+        };
+        let grid_of = |x: usize, row: usize| spec.linear(at(x, row).map(|v| v * s));
+        Ok(self.find(d, gap, inside, grid_of))
+    }
+
+    /// The pass over a box of `d` lattice points whose inside points `inside(x, row)` tells
+    /// (row `j + d[1] k`); the dropped points' grid indices (`grid_of`) into `self.dropped`.
+    fn find(
+        &mut self,
+        d: [usize; 3],
+        gap: [usize; 3],
+        inside: impl Fn(usize, usize) -> bool,
+        grid_of: impl Fn(usize, usize) -> usize,
+    ) -> PiecesStats {
+        self.dropped.clear();
         // The runs, row by row; each joined to the runs it touches in the rows before it
         // that neighbour it: (j - 1, k), (j - 1, k - 1), (j, k - 1), (j + 1, k - 1).
         self.runs.clear();
@@ -135,15 +213,14 @@ impl Pieces {
         self.parent.clear();
         for row in 0..d[1] * d[2] {
             self.row_start.push(self.runs.len() as u32);
-            let g0 = grid_of(0, row);
             let mut x = 0;
             while x < d[0] {
-                if !is_inside(grid.values[g0 + x * s]) {
+                if !inside(x, row) {
                     x += 1;
                     continue;
                 }
                 let x0 = x;
-                while x + 1 < d[0] && is_inside(grid.values[g0 + (x + 1) * s]) {
+                while x + 1 < d[0] && inside(x + 1, row) {
                     x += 1;
                 }
                 let r = self.runs.len() as u32;
@@ -252,9 +329,7 @@ impl Pieces {
                 }
                 let [x0, x1] = self.runs[r];
                 for x in x0..=x1 {
-                    let g = grid_of(x as usize, row);
-                    grid.values[g] = 0.0;
-                    self.dropped.push(g as u32);
+                    self.dropped.push(grid_of(x as usize, row) as u32);
                 }
             }
         }
@@ -263,7 +338,8 @@ impl Pieces {
         stats
     }
 
-    /// Grid indices of the points the last [`Self::drop_apart`] set outside.
+    /// Grid indices of the points the last pass dropped ([`Self::drop_apart`] set them
+    /// outside; [`Self::drop_apart_bits`] only lists them).
     pub fn dropped(&self) -> &[u32] {
         &self.dropped
     }
@@ -425,6 +501,63 @@ mod tests {
         assert!(p.dropped().is_empty());
     }
 
+    /// The grid's lattice of stride `s` as `drop_apart_bits` reads it.
+    fn bits_of(g: &Grid, s: usize) -> Vec<u32> {
+        let spec = g.spec();
+        let nl = (spec.n() - 1) / s + 1;
+        let w = nl.div_ceil(32);
+        let mut bits = vec![0u32; lattice_words(spec, s)];
+        for k in 0..nl {
+            for j in 0..nl {
+                for i in 0..nl {
+                    if is_inside(g.values[spec.linear([i * s, j * s, k * s])]) {
+                        bits[i / 32 + w * (j + nl * k)] |= 1 << (i % 32);
+                    }
+                }
+            }
+        }
+        bits
+    }
+
+    /// The bits' pass on a lattice whose rows span several words (65 points: three words),
+    /// pieces across the words' edges: what the pass on the grid drops, at its grid indices;
+    /// bits of the wrong length are refused.
+    #[test]
+    fn the_pass_from_bits_is_the_pass_on_the_grid() {
+        let spec = GridSpec::from_resolution(129).unwrap();
+        let mut g = Grid::new(spec);
+        cube(&mut g, [40, 40, 40], [90, 100, 70]); // body, x across words 0-2 at stride 2
+        cube(&mut g, [100, 40, 40], [104, 42, 42]); // 5 lattice points apart along x
+        cube(&mut g, [0, 0, 0], [66, 2, 2]); // far, x from 0 to 33 at stride 2
+        cube(&mut g, [126, 126, 126], [128, 128, 128]); // the far corner
+        let bits = bits_of(&g, 2);
+        let b = IndexBox {
+            lo: [0; 3],
+            hi: [128; 3],
+        };
+        let mut want_p = Pieces::default();
+        let want = want_p.drop_apart(&mut g, 2, b, [6; 3]);
+        assert_eq!(want.dropped, 2, "{want:?}");
+        let mut p = Pieces::default();
+        assert_eq!(p.drop_apart_bits(spec, 2, &bits, [6; 3]), Ok(want));
+        let (mut a, mut b) = (p.dropped().to_vec(), want_p.dropped().to_vec());
+        a.sort_unstable();
+        b.sort_unstable();
+        assert!(a == b, "dropped points differ");
+        let e = p.drop_apart_bits(spec, 2, &bits[1..], [6; 3]).unwrap_err();
+        assert!(
+            e.contains("65^3") && e.contains(&bits.len().to_string()),
+            "{e}"
+        );
+        // No inside point: nothing.
+        let none = vec![0u32; bits.len()];
+        assert_eq!(
+            p.drop_apart_bits(spec, 2, &none, [6; 3]),
+            Ok(PiecesStats::default())
+        );
+        assert!(p.dropped().is_empty());
+    }
+
     /// On random speckled grids the run-based pass drops exactly what the definition does,
     /// computed the plain way: 26-connected components point by point
     /// (`metrics::components`), the body the largest first found, and a piece near when any
@@ -476,9 +609,20 @@ mod tests {
                 lo: [0; 3],
                 hi: [16; 3],
             };
+            let bits = bits_of(&g, 1);
             let st = p.drop_apart(&mut g, 1, all, gap);
             let mut got = p.dropped().to_vec();
             got.sort_unstable();
+            // The same from the grid's bits, nothing written.
+            let mut pb = Pieces::default();
+            assert_eq!(
+                pb.drop_apart_bits(spec, 1, &bits, gap),
+                Ok(st),
+                "case {case}"
+            );
+            let mut from_bits = pb.dropped().to_vec();
+            from_bits.sort_unstable();
+            assert!(from_bits == got, "case {case}: the bits' pass differs");
             assert_eq!(st.components, comps.len(), "case {case}");
             assert_eq!(got, want, "case {case}, gap {gap:?}");
             assert!(got.iter().all(|&q| g.values[q as usize] == 0.0));

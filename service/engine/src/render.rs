@@ -8,8 +8,9 @@
 //!    Optionally ([`RenderOptions::drop_apart`], [`crate::pieces`]) the level `L - 1`
 //!    pieces apart from the body are set outside here, and the level-`L` nodes beside them
 //!    are never evaluated (not by the dilation, the field's seeds or the conflict loop):
-//!    they cast no hit and cull nothing, so what they hid is rendered. CPU path only
-//!    (`render_gpu` keeps them).
+//!    they cast no hit and cull nothing, so what they hid is rendered. `render_gpu` does
+//!    the same on the adapter (`gpu/render/pieces.rs`: the level's inside bits read back,
+//!    the pieces found here, the dropped points sent up).
 //! 2. Upsample and binarize to level `L`; per pixel, the first inside node from the front
 //!    (largest `k`) is the *coarse hit*. Nodes behind it (`k < hit`) are **shadow nodes**
 //!    and are never evaluated.
@@ -306,13 +307,14 @@ impl Renderer {
             .ok_or(crate::grid::GridError::BadResolution(spec.n()))?;
         let coarse = check_coarse(fine, opts.coarse_level)?;
         let cols = gpu
-            .frame(gpu_field, spec, coarse)
+            .frame(gpu_field, spec, coarse, opts.drop_apart)
             .map_err(FieldError::Backend)?;
         let n = spec.n();
         let stats = RenderStats {
             coarse_evaluations: cols.coarse_evaluations,
             final_evaluations: cols.final_evaluations,
             culled: cols.culled,
+            dropped_apart: cols.dropped_apart,
             ..Default::default()
         };
         self.depth.clear();

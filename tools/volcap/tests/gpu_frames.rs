@@ -516,7 +516,8 @@ fn localization_on_the_adapter_finds_the_cpus_surface_on_real_photos() {
 /// The mesh-free renderer on the adapter (`Renderer::render_gpu`: localization, the culled
 /// final level and the display image there; the Fourier series and the person mask in the
 /// kernels) against the CPU renderer on the real photos' fields, from the input view and
-/// turned 90 degrees, at 129^3 and 257^3, shaded: the same hits on >= 99.9 % of columns and
+/// turned 90 degrees, at 129^3 and 257^3, shaded, the pieces apart from the body dropped at
+/// the product's gap (`render.drop_apart`): the same hits on >= 99.9 % of columns and
 /// images within 1/255 on >= 99.9 % of channels, at the grid's size and at display size
 /// (a point within rounding of 0.5 may land on the other side on an adapter that fuses
 /// multiply-adds; on lavapipe they are equal).
@@ -533,7 +534,7 @@ fn the_renderer_on_the_adapter_draws_the_cpus_frames_of_real_photos() {
     let opts = RenderOptions {
         background: [0.0, 0.0, 0.0, 1.0],
         shade: true,
-        drop_apart: None,
+        drop_apart: Some(volcap_engine::pieces::DEFAULT_GAP),
         ..Default::default()
     };
     let agree = |x: &[u8], y: &[u8]| {
@@ -568,7 +569,7 @@ fn the_renderer_on_the_adapter_draws_the_cpus_frames_of_real_photos() {
             let display = agree(&da, &db);
             println!(
                 "{photo} yaw {yaw} {res}^3: {} + {} / {} + {} evaluations, {} / {} hits, \
-                 hits equal on {:.4} % of columns, image within 1/255 on {:.4} %, \
+                 {} / {} points dropped apart, hits equal on {:.4} % of columns, image within 1/255 on {:.4} %, \
                  display (512) on {:.4} % of channels",
                 want.coarse_evaluations,
                 want.final_evaluations,
@@ -576,6 +577,8 @@ fn the_renderer_on_the_adapter_draws_the_cpus_frames_of_real_photos() {
                 got.final_evaluations,
                 want.hits,
                 got.hits,
+                want.dropped_apart,
+                got.dropped_apart,
                 same_hits * 100.0,
                 image * 100.0,
                 display * 100.0

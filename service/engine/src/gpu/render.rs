@@ -23,6 +23,8 @@ use crate::localize::HierarchicalMode;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
+mod pieces;
+
 const RENDER: &str = concat!(include_str!("localize.wgsl"), include_str!("render.wgsl"));
 const DISPLAY: &str = include_str!("display.wgsl");
 
@@ -41,6 +43,9 @@ pub struct Columns {
     pub final_evaluations: u64,
     /// Candidates never evaluated: behind a confirmed hit.
     pub culled: u64,
+    /// Level `L - 1` points of pieces apart from the body, set outside (`render.rs`'s
+    /// `RenderStats::dropped_apart`).
+    pub dropped_apart: u64,
 }
 
 struct RenderPipes {
@@ -56,6 +61,8 @@ struct RenderPipes {
     reset_release: wgpu::ComputePipeline,
     release: wgpu::ComputePipeline,
     surface: wgpu::ComputePipeline,
+    /// Pieces apart from the body (`render/pieces.rs`).
+    apart: pieces::ApartPipes,
     display_layout: wgpu::BindGroupLayout,
     display: wgpu::ComputePipeline,
 }
@@ -94,6 +101,7 @@ pub struct GpuRenderer {
     out: Columns,
     raw: Vec<u32>,
     upload: Vec<f32>,
+    apart: pieces::Apart,
 }
 
 impl RenderPipes {
@@ -130,6 +138,7 @@ impl RenderPipes {
             release: pipe(&render, &with_render, "release"),
             surface: pipe(&render, &with_render, "surface"),
             display: pipe(&display, &display_pl, "main"),
+            apart: pieces::ApartPipes::new(d, layout0, tiling),
             tiling,
             layout,
             display_layout,
@@ -154,6 +163,7 @@ impl GpuRenderer {
             out: Columns::default(),
             raw: Vec::new(),
             upload: Vec::new(),
+            apart: pieces::Apart::default(),
         })
     }
 
@@ -247,12 +257,15 @@ impl GpuRenderer {
     }
 
     /// Localize `field` up to level `L - 1` from `coarse` (the paper's method), then the final
-    /// level with culling; the columns come back.
+    /// level with culling; the columns come back. With `drop_apart` (a gap, a fraction of
+    /// the grid's side: `RenderOptions::drop_apart`), the level `L - 1` pieces apart from the
+    /// body are left out in between (`render/pieces.rs`).
     pub fn frame(
         &mut self,
         field: &GpuField<'_>,
         spec: GridSpec,
         coarse: u32,
+        drop_apart: Option<f32>,
     ) -> Result<&Columns, String> {
         let fine = spec
             .level()
@@ -267,7 +280,7 @@ impl GpuRenderer {
         }
         self.loc.prepare(field, spec, coarse, true)?;
         loop {
-            if self.attempt(spec, coarse, fine)? {
+            if self.attempt(spec, coarse, fine, drop_apart)? {
                 self.loc.done = true;
                 return Ok(&self.out);
             }
@@ -276,7 +289,13 @@ impl GpuRenderer {
     }
 
     /// One attempt into `self.out`; `false` when a list overflowed.
-    fn attempt(&mut self, spec: GridSpec, coarse: u32, fine: u32) -> Result<bool, String> {
+    fn attempt(
+        &mut self,
+        spec: GridSpec,
+        coarse: u32,
+        fine: u32,
+        drop_apart: Option<f32>,
+    ) -> Result<bool, String> {
         // The localizer's buffers first (the column bind groups hold its lists).
         self.column_bufs(spec)?;
         let cb = self.columns.as_ref().expect("made above");
@@ -286,6 +305,11 @@ impl GpuRenderer {
         if overflow {
             return Ok(false);
         }
+        // Pieces apart from the body left out (render.rs step 1b).
+        let dropped_apart = match drop_apart {
+            Some(frac) => self.apart.run(&mut rec, &rp.apart, spec, fine, frac)?,
+            None => 0,
+        };
         let big_l = spec.level();
         let plane = (spec.n() * spec.n()) as u32;
         let p = rec.p;
@@ -406,6 +430,7 @@ impl GpuRenderer {
         o.coarse_evaluations = stats.evaluations;
         o.final_evaluations = (counts[EVALS] as u64).saturating_sub(stats.evaluations);
         o.culled = counts[CULLED[x]] as u64;
+        o.dropped_apart = dropped_apart;
         Ok(true)
     }
 

@@ -12,6 +12,10 @@ use std::sync::atomic::Ordering;
 pub enum GpuField<'a> {
     /// One value per point of the run's grid (linear index order), evaluated by the host.
     Table(&'a [f32]),
+    /// A table with seeds, points known inside in render NDC (as a CPU field's
+    /// `OccupancyField::seeds`): the tests' way to reach the seeds' steps with a field the
+    /// host tabulated.
+    SeededTable(&'a [f32], Vec<glam::Vec3>),
     /// The Fourier head over the render view: `to_crop` maps render NDC to crop NDC, points
     /// outside the crop or where the `mask_size` x `mask_size` mask is below 0.5 are 0, the
     /// rest the series (`model/field.rs` `ModelField::occupancy`).
@@ -27,10 +31,11 @@ pub enum GpuField<'a> {
 }
 
 impl GpuField<'_> {
-    /// The field's seeds (none for a table).
+    /// The field's seeds (none for a plain table).
     pub fn seeds(&self) -> &[glam::Vec3] {
         match self {
             GpuField::Table(_) => &[],
+            GpuField::SeededTable(_, seeds) => seeds,
             GpuField::Fourier { seeds, .. } => seeds,
         }
     }
@@ -105,7 +110,7 @@ impl GpuLocalizer {
     ) -> Result<(), String> {
         self.pending_copy = None;
         let (data, mask, head, to_crop): (FieldData<'_>, &[f32], [u32; 6], Mat3) = match field {
-            GpuField::Table(t) => {
+            GpuField::Table(t) | GpuField::SeededTable(t, _) => {
                 if t.len() != spec.len() {
                     return Err(format!(
                         "the table holds {} values for a grid of {}",

@@ -125,6 +125,25 @@ impl<'a> Rec<'a> {
         Ok(out)
     }
 
+    /// [`Self::counts`], and the first `out.len()` bytes of `src` copied after what was
+    /// recorded (through `staging`) into `out`.
+    pub(in crate::gpu) fn counts_and_read(
+        &mut self,
+        src: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        out: &mut [u8],
+    ) -> Result<[u32; COUNTS], String> {
+        let enc = self
+            .enc
+            .get_or_insert_with(|| self.gpu.device.create_command_encoder(&Default::default()));
+        enc.copy_buffer_to_buffer(src, 0, staging, 0, out.len() as u64);
+        let counts = self.counts()?;
+        // Submitted and done: the mapping waits on an empty submission.
+        let enc = self.gpu.device.create_command_encoder(&Default::default());
+        self.gpu.submit_and_read_bytes(enc, staging, out)?;
+        Ok(counts)
+    }
+
     /// Levels `coarse..=last` (the coarsest evaluated whole): (stats, whether a list
     /// overflowed). With the conflict loop, a submission per round (per batch of rounds).
     pub(in crate::gpu) fn levels(
