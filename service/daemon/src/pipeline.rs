@@ -146,6 +146,10 @@ pub struct Shared {
     /// Occupancy-field evaluations of every frame rendered so far (localization, final
     /// level, normals), for the pipeline benchmark.
     pub evaluations: AtomicU64,
+    /// Rendered frames from which `render.drop_apart` left pieces apart from the body out,
+    /// and the level `L - 1` points it dropped in all (`RenderStats::dropped_apart`).
+    pub apart_frames: AtomicU64,
+    pub apart_points: AtomicU64,
     /// Model mode with `[temporal]` enabled: the field thread's filter is on...
     pub temporal: bool,
     /// ...and how often it started again (a new person, a people count change, a gap, a
@@ -210,6 +214,8 @@ impl Shared {
             close_range_model: cfg.field() == FieldMode::Model && cfg.model.close_range.is_some(),
             close_range: AtomicBool::new(false),
             evaluations: AtomicU64::new(0),
+            apart_frames: AtomicU64::new(0),
+            apart_points: AtomicU64::new(0),
             temporal: cfg.field() == FieldMode::Model && cfg.temporal.enabled,
             temporal_resets: AtomicU64::new(0),
         }
@@ -423,6 +429,11 @@ fn finish_render(
         Ok((st, times)) => {
             let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
             sh.evaluations.fetch_add(n, Ordering::Relaxed);
+            if st.dropped_apart > 0 {
+                sh.apart_frames.fetch_add(1, Ordering::Relaxed);
+                sh.apart_points
+                    .fetch_add(st.dropped_apart, Ordering::Relaxed);
+            }
             times
         }
         Err(e) => {

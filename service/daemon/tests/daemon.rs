@@ -41,6 +41,18 @@ fn the_main_job_shows_the_reconstruction() {
     assert_eq!(s["people"], 1, "{s}");
     assert_eq!(s["resolution"], 257, "{s}");
     assert!(s["temporal"]["resets"].as_u64() >= Some(1), "{s}");
+    // The pieces apart from the body left out at the board's gap, counted.
+    let apart = &s["drop_apart"];
+    assert_eq!(apart["gap"].as_f64(), Some(0.1), "{s}");
+    let (frames, points) = (apart["frames"].as_u64(), apart["points"].as_u64());
+    assert!(frames.is_some() && points >= frames, "{s}");
+    let (_, _, metrics) = request(&d.addr, "GET", "/metrics", "");
+    let metrics = String::from_utf8(metrics).unwrap();
+    assert!(
+        metrics.contains("volcap_render_apart_frames_total ")
+            && metrics.contains("volcap_render_apart_points_total "),
+        "{metrics}"
+    );
     let (_, _, viewer) = request(&d.addr, "GET", "/", "");
     assert!(
         String::from_utf8(viewer)

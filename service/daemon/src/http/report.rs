@@ -88,6 +88,13 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         "temporal": sh.temporal.then(|| serde_json::json!({
             "resets": sh.temporal_resets.load(Ordering::Relaxed),
         })),
+        "drop_apart": {
+            // As the file gives it (0.1, not f32's 0.10000000149).
+            "gap": live.drop_apart.to_string().parse::<f64>().unwrap_or(0.0),
+            "frames": sh.apart_frames.load(Ordering::Relaxed),
+            "points": sh.apart_points.load(Ordering::Relaxed),
+            "note": "render.drop_apart: inside pieces farther than this fraction of the grid's side from the body are left out of the render and /mesh.glb (0: kept); frames: rendered frames that left some out, points: the level L-1 grid points left out in all",
+        },
         "resolution": live.resolution,
         "display_size": live.out_size(),
         "paused": live.paused,
@@ -181,6 +188,12 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
         w.done.load(Ordering::Relaxed),
         w.cancelled.load(Ordering::Relaxed),
         w.failed.load(Ordering::Relaxed)
+    ));
+    s.push_str(&format!(
+        "# HELP volcap_render_apart_frames_total rendered frames that left pieces apart from the body out (render.drop_apart)\n# TYPE volcap_render_apart_frames_total counter\nvolcap_render_apart_frames_total {}\n\
+         # HELP volcap_render_apart_points_total level L-1 grid points of pieces apart from the body left out\n# TYPE volcap_render_apart_points_total counter\nvolcap_render_apart_points_total {}\n",
+        sh.apart_frames.load(Ordering::Relaxed),
+        sh.apart_points.load(Ordering::Relaxed)
     ));
     s.push_str(&app.rtsp.metrics());
     s.push_str(&sh.compute.metrics());
