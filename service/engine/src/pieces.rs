@@ -174,7 +174,11 @@ impl Pieces {
             };
             let last = words.iter().rposition(|&b| b != 0).unwrap_or(first);
             let x0 = 32 * first + words[first].trailing_zeros() as usize;
-            let x1 = 32 * last + 31 - words[last].leading_zeros() as usize;
+            // (Bits past the row's last point, which the GPU's `pack` leaves 0, are not read.)
+            let x1 = (32 * last + 31 - words[last].leading_zeros() as usize).min(nl - 1);
+            if x0 >= nl {
+                continue;
+            }
             for (a, v) in [(0, x0), (0, x1), (1, row % nl), (2, row / nl)] {
                 lo[a] = lo[a].min(v);
                 hi[a] = hi[a].max(v);
@@ -544,6 +548,14 @@ mod tests {
         a.sort_unstable();
         b.sort_unstable();
         assert!(a == b, "dropped points differ");
+        // Bits past a row's last point are not read.
+        let mut padded = bits.clone();
+        padded[2] |= 1 << 31;
+        padded[3 * 100 + 2] |= 1 << 5;
+        assert_eq!(p.drop_apart_bits(spec, 2, &padded, [6; 3]), Ok(want));
+        let mut c = p.dropped().to_vec();
+        c.sort_unstable();
+        assert!(c == b, "padding read");
         let e = p.drop_apart_bits(spec, 2, &bits[1..], [6; 3]).unwrap_err();
         assert!(
             e.contains("65^3") && e.contains(&bits.len().to_string()),
