@@ -54,3 +54,38 @@ def test_soup_of_real_checkpoints_loads_into_the_network(tmp_path):
     p1, p2 = dict(n1.named_parameters()), dict(n2.named_parameters())
     for name, p in net.named_parameters():
         assert torch.allclose(p, (p1[name] + p2[name]) / 2, atol=1e-6), name
+
+
+def test_bn_recomputed_on_a_datasets_items_is_the_soups_own(tmp_path):
+    """--bn-data: the statistics are the soup's on the drawn images (its first BatchNorm's
+    running mean equals the mean, in f64, of that layer's inputs over the images), whatever
+    the averaged statistics were, and a missing cache is named."""
+    from volcap_train.items import fourier_cache_path
+    from volcap_train.nets import make_fourier
+
+    seg = tmp_path / "seg.onnx"
+    g = torch.Generator().manual_seed(3)
+    items = {"rgb": torch.randint(0, 256, (20, 3, 64, 64), generator=g, dtype=torch.uint8), "mask": torch.randint(0, 256, (20, 1, 64, 64), generator=g, dtype=torch.uint8)}
+    torch.save(items, fourier_cache_path(tmp_path, "train", 15, seg, 2))
+    torch.manual_seed(0)
+    net = make_fourier("fourier-small")
+    weights = {n: v.float() for n, v in net.state_dict().items()}
+    bns = [n for n, m in net.named_modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    assert bns
+    weights[bns[0] + ".running_mean"] += 100.0  # averaged statistics far off
+    out, layers, seen = soup.with_bn_recomputed(weights, "fourier-small", soup.bn_batches(tmp_path, "fourier-small", seg, 2, 16, 1, batch=4))
+    assert layers == len(bns) and seen == 16
+    # reference: the first BatchNorm's inputs on the same 16 images, the soup's weights
+    net.load_state_dict(out)
+    net.eval()
+    first = dict(net.named_modules())[bns[0]]
+    got = []
+    h = first.register_forward_hook(lambda m, i, o: got.append(i[0].double()))
+    with torch.no_grad():
+        for b in soup.bn_batches(tmp_path, "fourier-small", seg, 2, 16, 1, batch=4):
+            net(b)
+    h.remove()
+    ref = torch.cat(got).mean((0, 2, 3))
+    assert torch.allclose(out[bns[0] + ".running_mean"].double(), ref, rtol=1e-4, atol=1e-5)
+    with pytest.raises(SystemExit, match="no cached training items"):
+        list(soup.bn_batches(tmp_path / "none", "fourier-small", seg, 2, 16, 1))

@@ -7,7 +7,13 @@ run time (one network, same MACs); whether it helps is measured like any run (po
 Each input is a run folder (its ckpt.pt) or a checkpoint file, full or light. Inputs whose
 weights differ in names or shapes are refused, naming the input and the tensor. BatchNorm
 running statistics are averaged like the weights (exact for the mean, an approximation for the
-variance, as in the paper's uniform soups)."""
+variance, as in the paper's uniform soups), or, with `--bn-data DS`, recomputed for the soup's
+own weights on `--bn-images` seeded training images of a dataset (its cached items, as the
+trainer reads them: `--seg` and `--segment-passes` name the cache), as the trainer does for its
+moving average (`--ema-bn-images`): runs from other training seeds lie further apart than an
+average's steps, and the mean of their statistics need not be their mean's.
+
+  python -m volcap_train.soup OUT.pt RUN... --variant fourier-small --bn-data DS16 --seg ../../models/seg.onnx --segment-passes 2"""
 from __future__ import annotations
 
 import argparse
@@ -16,7 +22,7 @@ from pathlib import Path
 import torch
 
 from . import light
-from .runs import init_weights
+from .runs import init_weights, recompute_bn
 
 
 def load_weights(path: Path) -> dict:
@@ -53,12 +59,58 @@ def average(sets: list[dict], weights: list[float], names: list[str]) -> dict:
     return out
 
 
+def bn_batches(data: Path, variant: str, seg: Path | None, passes: int, images: int, seed: int, batch: int = 8):
+    """The encoder inputs of `images` training images of dataset `data` drawn by `seed`, in
+    batches, read from its cached items (memory-mapped: only the drawn images are paged in)
+    as the trainer gives them to the net without augmentation."""
+    from .items import fourier_cache_path
+    from .nets import encoder_input, fourier_variant
+
+    k = fourier_variant(variant)[0]
+    cache = fourier_cache_path(data, "train", k, seg, passes)
+    if not cache.exists():
+        raise SystemExit(f"--bn-data {data}: no cached training items {cache.name} (k {k}, seg {seg}, passes {passes}); a training run on it builds them")
+    d = torch.load(cache, mmap=True, weights_only=False)
+    n = min(images, len(d["rgb"]))
+    if n < 1:
+        raise SystemExit(f"--bn-images {images}: needs at least one image")
+    idx = torch.randperm(len(d["rgb"]), generator=torch.Generator().manual_seed(seed))[:n].sort().values
+    for s in range(0, n, batch):
+        i = idx[s : s + batch]
+        yield encoder_input(d["rgb"][i].float() / 255.0, d["mask"][i].float() / 255.0)
+
+
+def with_bn_recomputed(weights: dict, variant: str, batches) -> tuple[dict, int, int]:
+    """`weights` with the BatchNorm running statistics recomputed for them over `batches`
+    (recompute_bn); returns them, how many BatchNorm layers there were and how many images
+    the statistics saw."""
+    from .nets import make_fourier
+
+    net = make_fourier(variant)
+    net.load_state_dict(weights)
+    seen = [0]
+
+    def counted():
+        for b in batches:
+            seen[0] += len(b)
+            yield b
+
+    with torch.no_grad():
+        layers = recompute_bn(net, counted())
+    return {n: v.detach().float().clone() for n, v in net.state_dict().items()}, layers, seen[0]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="volcap_train.soup")
     ap.add_argument("out", type=Path)
     ap.add_argument("inputs", type=Path, nargs="+")
     ap.add_argument("--variant", required=True, help="the runs' --variant (recorded in the light checkpoint)")
     ap.add_argument("--weights", default=None, help="comma-separated weight per input (default: uniform)")
+    ap.add_argument("--bn-data", type=Path, default=None, help="a dataset folder: recompute the soup's BatchNorm statistics on its training items instead of averaging them")
+    ap.add_argument("--bn-images", type=int, default=800, help="with --bn-data: how many training images")
+    ap.add_argument("--bn-seed", type=int, default=0, help="with --bn-data: the draw of the images")
+    ap.add_argument("--seg", type=Path, default=None, help="with --bn-data: the segmentation model the items' masks came from (as the runs' --seg)")
+    ap.add_argument("--segment-passes", type=int, default=1, help="with --bn-data: as the runs' --segment-passes")
     a = ap.parse_args(argv)
     try:
         weights = [float(w) for w in a.weights.split(",")] if a.weights else [1.0] * len(a.inputs)
@@ -66,8 +118,12 @@ def main(argv=None):
         raise SystemExit(f"soup: --weights {a.weights!r}: not comma-separated numbers")
     names = [str(p) for p in a.inputs]
     soup = average([load_weights(p) for p in a.inputs], weights, names)
+    bn = "BatchNorm statistics averaged"
+    if a.bn_data is not None:
+        soup, layers, seen = with_bn_recomputed(soup, a.variant, bn_batches(a.bn_data, a.variant, a.seg, a.segment_passes, a.bn_images, a.bn_seed))
+        bn = f"BatchNorm statistics of {layers} layers recomputed on {seen} images of {a.bn_data}"
     light.save(a.out, soup, -1, a.variant)
-    print(f"{a.out}: {a.variant}, mean of {len(a.inputs)} inputs, weights {weights}")
+    print(f"{a.out}: {a.variant}, mean of {len(a.inputs)} inputs, weights {weights}; {bn}")
 
 
 if __name__ == "__main__":
