@@ -1,5 +1,6 @@
 """volcap_train.widen: a widened Fourier head computes what the narrow one did (eval and
 train mode, batch-norm statistics that are not the defaults), then trains like any net."""
+import pytest
 import torch
 
 from volcap_train.nets import FourierNet
@@ -18,9 +19,10 @@ def narrow_net():
     return net
 
 
-def test_widened_net_computes_the_narrow_ones_function():
+@pytest.mark.parametrize("c", [12, 16])  # fourier-medium, fourier-wide
+def test_widened_net_computes_the_narrow_ones_function(c):
     a = narrow_net()
-    b = widen(a, FourierNet(15, 12), 8, 12)
+    b = widen(a, FourierNet(15, c), 8, c)
     assert sum(p.numel() for p in b.parameters()) > 2 * sum(p.numel() for p in a.parameters())
     x = torch.randn(2, 4, 256, 256)
     for mode in ("eval", "train"):

@@ -334,6 +334,8 @@ FOURIER_VARIANTS = {
     "fourier-small": (15, 8),
     # fourier-small widened (volcap_train.widen) and trained on: more capacity, same K
     "fourier-medium": (15, 12),
+    # ... and wider still (hands.md section 26, run (28): a candidate for the GPU boards, ~4x the encoder MACs)
+    "fourier-wide": (15, 16),
     "fourier-tiny": (15, 6),
     # name: (K, c, depth as a phase shift)
     "fourier-shift": (15, 12, True),
