@@ -66,3 +66,12 @@ def test_a_report_of_several_models_needs_one_named(tmp_path):
         ce.load_rows(r, "m3")
     with pytest.raises(SystemExit, match="no eval.json"):
         ce.load_rows(tmp_path / "missing", None)
+
+
+def test_a_value_eval_could_not_measure_drops_that_image_from_that_metric_only(tmp_path):
+    # `volcap eval` writes NaN as null (a part with no true sample on one image)
+    a = report(tmp_path, "a", [("s1", 0, 0.0, "m", 2.0, 1.0, 0.7, None), ("s2", 0, 0.0, "m", 3.0, 2.0, 0.6, 12.0)])
+    b = report(tmp_path, "b", [("s1", 0, 0.0, "m", 2.5, 1.5, 0.6, 11.0), ("s2", 0, 0.0, "m", 2.0, 2.5, 0.65, 10.0)])
+    res = {r["metric"]: r for r in ce.compare(ce.paired([ce.load_rows(a, None)], [ce.load_rows(b, None)]))}
+    assert res["hands cm"]["images"] == 1 and math.isclose(res["hands cm"]["diff"], 2.0)
+    assert res["Chamfer cm"]["images"] == 2

@@ -48,6 +48,12 @@ def load_rows(path: Path, model: str | None) -> dict:
         r = dict(r)
         parts = r.get("part_cm") or []
         r["hands_cm"] = parts[3] if len(parts) > 3 else float("nan")
+        for key, _, _ in METRICS:
+            # `volcap eval` writes a value it could not measure (NaN: e.g. an image whose
+            # true surface has no sample on a part) as null: such an image drops out of that
+            # metric's pairs only.
+            if r.get(key) is None:
+                r[key] = float("nan")
         out[(r["subject"], r["pose"], r["yaw_deg"])] = r
     return out
 
