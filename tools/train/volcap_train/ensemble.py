@@ -17,8 +17,7 @@ import torch
 from torch import nn
 
 from .export import export
-from .nets import make_fourier
-from .soup import load_weights
+from .point_iou import load
 
 
 class Ensemble(nn.Module):
@@ -43,11 +42,7 @@ def main(argv=None):
         raise SystemExit("ensemble: needs at least two inputs")
     if not a.like.exists():
         raise SystemExit(f"--like {a.like}: no such file")
-    nets = []
-    for p in a.inputs:
-        n = make_fourier(a.variant)
-        n.load_state_dict(load_weights(p))
-        nets.append(n.eval())
+    nets = [load(p, a.variant) for p in a.inputs]
     meta = {p.key.removeprefix("volcap."): p.value for p in onnx.load(str(a.like)).metadata_props}
     size = int(meta.get("input_size", 256))
     meta["run"] = f"ensemble of {len(nets)}: " + ", ".join(str(p) for p in a.inputs)

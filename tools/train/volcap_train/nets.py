@@ -334,7 +334,7 @@ FOURIER_VARIANTS = {
     "fourier-small": (15, 8),
     # fourier-small widened (volcap_train.widen) and trained on: more capacity, same K
     "fourier-medium": (15, 12),
-    # ... and wider still (hands.md section 26, run (28): a candidate for the GPU boards, ~4x the encoder MACs)
+    # ... and wider still (hands.md section 26, run (28): a candidate for the GPU boards, 3.5x fourier-small's MACs)
     "fourier-wide": (15, 16),
     "fourier-tiny": (15, 6),
     # name: (K, c, depth as a phase shift)
