@@ -4,7 +4,9 @@
 #
 #   here:   tools/gpu_bench.sh prepare
 #           builds the release `volcap` with the GPU backend, packs it stripped into .gpubench/
-#           (xz: the working tree that travels is limited to 64 MiB, the tracked tree was ~51 MB; it is ~73 MiB on 2026-11-29 (72.4 before that day), over the limit: see the closing note of that day)
+#           (xz, ~12 MiB: the working tree that travels is limited to 64 MiB with what a call
+#           carries; the tracked tree is 45.6 MiB since 2026-11-29's slimming (73.3 before), and
+#           tools/train/tests/test_tree_size.py keeps it under 48)
 #           and downloads the Vulkan loader into .gl/ (both git-ignored)
 #   there:  device run, carry [".gpubench", ".gl"], command: tools/gpu_bench.sh run
 #           (--quick: a tiny version, as CI-free checking here on lavapipe does; --short: the

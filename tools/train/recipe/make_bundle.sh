@@ -7,7 +7,8 @@
 #
 #   tools/train/recipe/make_bundle.sh .recipe --lean     (a lent machine, through the device
 #   tool: the checkout travels, so the bundle holds only the binary (xz, ~12 MB) and run.sh,
-#   and takes the rest from the checkout around it: the checkout (~51 MB) and a full bundle
+#   and takes the rest from the checkout around it: the checkout (45.6 MiB since
+#   2026-11-29's slimming; tests/test_tree_size.py keeps it under 48) and a full bundle
 #   (52 MiB) together are over the tool's 64 MiB; the lean one uses the binary's embedded
 #   assets). There: carry [".recipe"], command `.recipe/run.sh /tmp/res --minutes-data 3
 #   --minutes-train 5`, the result copied into $OUT.

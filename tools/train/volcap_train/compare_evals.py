@@ -3,7 +3,8 @@ images, image by image, with standard errors.
 
   python -m volcap_train.compare_evals --a A1 [A2 ...] --b B1 [B2 ...] [--model-a M] [--model-b M]
 
-Each Ai / Bi is a `volcap eval --out` folder (its eval.json) or the file itself; Ai and Bi must
+Each Ai / Bi is a `volcap eval --out` folder (its eval.json, or eval.json.xz as `slim_docs
+--pack-json` leaves the committed ones) or the file itself; Ai and Bi must
 be runs on the same images (same --subjects, --poses, --views and --seed), so their images pair
 by (subject, pose, yaw); the pairs of all the reports pool. Per metric it prints both means,
 the mean of the per-image differences A - B with its standard error, and how many images A
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import lzma
 import math
 from pathlib import Path
 
@@ -30,10 +32,13 @@ METRICS = [
 def load_rows(path: Path, model: str | None) -> dict:
     """The ok images of one report as {(subject, pose, yaw): row}; `model` picks one of several
     models in the report (needed when it holds more than one)."""
-    f = path / "eval.json" if path.is_dir() else path
+    f = path
+    if path.is_dir():
+        f = next((path / n for n in ("eval.json", "eval.json.xz") if (path / n).exists()), path / "eval.json")
     if not f.exists():
         raise SystemExit(f"{path}: no eval.json (a `volcap eval --out` folder or the file)")
-    rows = json.loads(f.read_text())["images"]
+    data = lzma.decompress(f.read_bytes()) if f.suffix == ".xz" else f.read_bytes()
+    rows = json.loads(data)["images"]
     models = sorted({r["model"] for r in rows})
     if model is None:
         if len(models) != 1:
