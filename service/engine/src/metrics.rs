@@ -145,10 +145,16 @@ pub fn chamfer(a: &[DVec3], b: &[DVec3]) -> f64 {
 }
 
 /// Closest point to `p` on triangle `abc` and its barycentric coordinates (Ericson,
-/// Real-Time Collision Detection 5.1.5). Degenerate triangles fall back to the nearest vertex.
+/// Real-Time Collision Detection 5.1.5). A degenerate triangle (two vertices at one point, as
+/// marching cubes makes where the field equals the level at a grid vertex, or no area) is
+/// the segments between its vertices: the closest point of those, never a 0/0 (which made
+/// `volcap eval`'s per-part distance NaN).
 pub fn closest_point_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, [f64; 3]) {
     let ab = b - a;
     let ac = c - a;
+    if a == b || b == c || a == c || ab.cross(ac).length_squared() < f64::MIN_POSITIVE {
+        return closest_point_degenerate(p, a, b, c);
+    }
     let ap = p - a;
     let d1 = ab.dot(ap);
     let d2 = ac.dot(ap);
@@ -184,20 +190,39 @@ pub fn closest_point_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3,
     }
     let denom = va + vb + vc;
     if denom.abs() < f64::MIN_POSITIVE {
-        let da = (p - a).length_squared();
-        let db = (p - b).length_squared();
-        let dc = (p - c).length_squared();
-        return if da <= db && da <= dc {
-            (a, [1.0, 0.0, 0.0])
-        } else if db <= dc {
-            (b, [0.0, 1.0, 0.0])
-        } else {
-            (c, [0.0, 0.0, 1.0])
-        };
+        return closest_point_degenerate(p, a, b, c);
     }
     let v = vb / denom;
     let w = vc / denom;
     (a + ab * v + ac * w, [1.0 - v - w, v, w])
+}
+
+/// [`closest_point_triangle`] of a triangle without area: the nearest point of its three
+/// edges (a zero-length edge is its one point).
+fn closest_point_degenerate(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, [f64; 3]) {
+    // t along the segment from u to v, clamped; 0 for a segment of no length.
+    let along = |u: DVec3, v: DVec3| {
+        let e = v - u;
+        let l = e.length_squared();
+        if l < f64::MIN_POSITIVE {
+            0.0
+        } else {
+            ((p - u).dot(e) / l).clamp(0.0, 1.0)
+        }
+    };
+    let (t_ab, t_bc, t_ca) = (along(a, b), along(b, c), along(c, a));
+    let cands = [
+        (a + (b - a) * t_ab, [1.0 - t_ab, t_ab, 0.0]),
+        (b + (c - b) * t_bc, [0.0, 1.0 - t_bc, t_bc]),
+        (c + (a - c) * t_ca, [t_ca, 0.0, 1.0 - t_ca]),
+    ];
+    let mut best = cands[0];
+    for cand in &cands[1..] {
+        if (p - cand.0).length_squared() < (p - best.0).length_squared() {
+            best = *cand;
+        }
+    }
+    best
 }
 
 /// Distance from `p` to triangle `abc`.
@@ -345,6 +370,57 @@ mod tests {
         assert!((point_triangle_distance(DVec3::new(2.0, 0.0, 0.0), a, b, c) - 1.0).abs() < 1e-12);
         // Degenerate triangle never gives NaN.
         assert!(point_triangle_distance(DVec3::ONE, a, a, a).is_finite());
+    }
+
+    /// Triangles without area (two vertices at one point, as marching cubes makes where the
+    /// field equals the level at a grid vertex; three in a line): the closest point is finite,
+    /// its barycentric coordinates rebuild it, and its distance is the f64 minimum over a
+    /// dense sampling of the triangle (the first case made 0/0 = NaN before).
+    #[test]
+    fn degenerate_triangles_give_the_nearest_point_of_their_edges() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
+        };
+        let (o, y, x2) = (DVec3::ZERO, DVec3::Y, DVec3::X * 2.0);
+        let cases = [
+            (o, o, y),
+            (o, y, o),
+            (y, o, o),
+            (o, DVec3::X, x2),
+            (x2, o, DVec3::X),
+            (o, o, o),
+        ];
+        // The one that was NaN: a == b, the query beyond a along ac's side.
+        let (q, _) = closest_point_triangle(DVec3::new(1.0, 0.5, 0.0), o, o, y);
+        assert!((q - DVec3::new(0.0, 0.5, 0.0)).length() < 1e-12, "{q}");
+        for (a, b, c) in cases {
+            for _ in 0..100 {
+                let p = DVec3::new(rnd(), rnd(), rnd());
+                let (q, w) = closest_point_triangle(p, a, b, c);
+                assert!(
+                    q.is_finite() && w.iter().all(|v| v.is_finite()),
+                    "{p} {a} {b} {c}"
+                );
+                assert!((a * w[0] + b * w[1] + c * w[2] - q).length() < 1e-9);
+                let n = 200;
+                let mut best = f64::INFINITY;
+                for i in 0..=n {
+                    for j in 0..=(n - i) {
+                        let (s, t) = (i as f64 / n as f64, j as f64 / n as f64);
+                        best = best.min((a + (b - a) * s + (c - a) * t - p).length());
+                    }
+                }
+                let d = (p - q).length();
+                assert!(
+                    d <= best + 1e-12 && d >= best - 2.0 * 2.0 / n as f64,
+                    "{d} {best}"
+                );
+            }
+        }
     }
 
     #[test]
