@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from volcap_train import compare_evals as ce
@@ -68,3 +69,11 @@ def test_packed_reports_are_read_by_compare_evals_and_links_follow(tmp_path):
     assert ce.load_rows(run, None) == plain
     assert ce.load_rows(run / "eval.json.xz", None) == plain
     assert md.read_text() == "see [the report](sec/run/eval.json.xz) and [a missing one](sec/other/eval.json)\n"
+
+
+def test_a_file_that_is_no_png_is_named_in_the_error(tmp_path):
+    p = tmp_path / "broken.png"
+    p.write_bytes(b"not a png at all")
+    with pytest.raises(SystemExit, match="broken.png: not a PNG"):
+        slim_docs.main([str(tmp_path)])
+    assert p.read_bytes() == b"not a png at all"

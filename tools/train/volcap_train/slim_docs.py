@@ -48,7 +48,10 @@ def palette_png(data: bytes) -> bytes:
 def slim_png(path: Path, min_gain: float, dry: bool) -> tuple[int, int]:
     """(bytes before, bytes after) of one PNG, rewritten when it pays."""
     data = path.read_bytes()
-    small = palette_png(data)
+    try:
+        small = palette_png(data)
+    except (OSError, ValueError) as e:  # PIL's UnidentifiedImageError is an OSError
+        raise SystemExit(f"{path}: not a PNG that can be read ({e})") from e
     if len(small) > len(data) * (1.0 - min_gain):
         return len(data), len(data)
     if not dry:
