@@ -152,7 +152,8 @@ pub fn chamfer(a: &[DVec3], b: &[DVec3]) -> f64 {
 pub fn closest_point_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, [f64; 3]) {
     let ab = b - a;
     let ac = c - a;
-    if a == b || b == c || a == c || ab.cross(ac).length_squared() < f64::MIN_POSITIVE {
+    // Two vertices at one point make an edge vector exactly zero, so the cross product too.
+    if ab.cross(ac).length_squared() < f64::MIN_POSITIVE {
         return closest_point_degenerate(p, a, b, c);
     }
     let ap = p - a;

@@ -54,9 +54,10 @@ def load_rows(path: Path, model: str | None) -> dict:
         parts = r.get("part_cm") or []
         r["hands_cm"] = parts[3] if len(parts) > 3 else float("nan")
         for key, _, _ in METRICS:
-            # `volcap eval` writes a value it could not measure (NaN: e.g. an image whose
-            # true surface has no sample on a part) as null: such an image drops out of that
-            # metric's pairs only.
+            # `volcap eval` writes a value it could not measure (NaN: a part the frame does
+            # not show, so no true sample of it) as null: such an image drops out of that
+            # metric's pairs only. (Reports made before 2026-11-29 also hold nulls from a
+            # metric bug, degenerate mesh triangles: docs/eval/hands.md section 27.)
             if r.get(key) is None:
                 r[key] = float("nan")
         out[(r["subject"], r["pose"], r["yaw_deg"])] = r
