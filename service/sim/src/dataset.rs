@@ -33,7 +33,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use safetensors::Dtype;
 use safetensors::tensor::TensorView;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use std::sync::Arc;
 use volcap_engine::mesh::Mesh;
@@ -183,6 +183,31 @@ pub enum DatasetError {
     Sim(#[from] SimError),
     #[error("{path}: {msg}")]
     Write { path: String, msg: String },
+}
+
+/// The wardrobe that [`random_subject`] draws from: the names of the pack's outfits, shoes,
+/// hair and skins. Recorded in the dataset's manifest: the embedded runtime pack holds 3 of
+/// the 9 outfits (2 of 4 shoes, 3 of 8 hair, 4 skins) that `volcap eval --data
+/// ../shared/data/makehuman` dresses its held-out subjects in, and a pack's `source` names the
+/// folder it was cut from, not what it kept (hands.md section 28: ten training runs drew from
+/// the runtime pack unnoticed).
+pub fn wardrobe(assets: &HumanAssets) -> BTreeMap<&'static str, Vec<String>> {
+    let mut w = BTreeMap::new();
+    for (key, kind) in [
+        ("outfits", GarmentKind::Outfit),
+        ("shoes", GarmentKind::Shoes),
+        ("hair", GarmentKind::Hair),
+    ] {
+        let names = assets
+            .garments
+            .iter()
+            .filter(|(_, g)| g.kind == kind)
+            .map(|(n, _)| n.clone())
+            .collect();
+        w.insert(key, names);
+    }
+    w.insert("skins", assets.skins.keys().cloned().collect());
+    w
 }
 
 /// A subject identity drawn from the seed, as a scene `[[subject]]` table.
@@ -349,6 +374,7 @@ pub fn generate(
         "points": cfg.points, "surface_points": cfg.surface_points, "sigma_m": cfg.sigma_m, "voxel_m": cfg.voxel_m,
         "lighting": cfg.lighting.name(), "pose_seed": cfg.pose_seed,
         "assets": assets.source,
+        "wardrobe": wardrobe(&assets),
         "split": ids.iter().zip(&val).map(|(id, v)| (id.clone(), if *v { "val" } else { "train" })).collect::<HashMap<_, _>>(),
         "subject_tables": ids.iter().zip(&tables).map(|(id, t)| (id.clone(), t.clone())).collect::<HashMap<_, _>>(),
     });

@@ -276,6 +276,54 @@ fn a_pose_seed_keeps_the_people_and_split_and_draws_new_poses() {
     std::fs::remove_dir_all(&base).ok();
 }
 
+/// The manifest records the wardrobe the identities were dressed from (the embedded pack's
+/// three outfits here), and every subject wears only items of it.
+#[test]
+fn the_manifest_names_the_wardrobe_and_every_subject_is_dressed_from_it() {
+    let cfg = tiny(12, 1, 1, 5);
+    let (base, a, _) = pair("wardrobe", &cfg, &cfg);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("dataset.json")).unwrap()).unwrap();
+    let assets = HumanAssets::embedded().unwrap();
+    let listed = |k: &str| -> BTreeSet<String> {
+        m["wardrobe"][k]
+            .as_array()
+            .unwrap_or_else(|| panic!("wardrobe.{k}: {m}"))
+            .iter()
+            .map(|v| v.as_str().unwrap().to_string())
+            .collect()
+    };
+    let outfits = listed("outfits");
+    let shoes = listed("shoes");
+    assert_eq!(outfits.len(), 3, "{outfits:?}");
+    assert_eq!(
+        listed("skins"),
+        assets.skins.keys().cloned().collect::<BTreeSet<_>>()
+    );
+    for k in ["outfits", "shoes", "hair"] {
+        for n in listed(k) {
+            assert!(assets.garments.contains_key(&n), "{k}: {n}");
+        }
+    }
+    let mut worn = BTreeSet::new();
+    for t in m["subject_tables"].as_object().unwrap().values() {
+        for line in t.as_str().unwrap().lines() {
+            let Some((key, v)) = line.split_once(" = ") else {
+                continue;
+            };
+            let v = v.trim_matches('"').to_string();
+            match key {
+                "outfit" => assert!(outfits.contains(&v), "{v}"),
+                "shoes" => assert!(shoes.contains(&v), "{v}"),
+                _ => continue,
+            }
+            worn.insert(v);
+        }
+    }
+    assert!(worn.len() >= 3, "12 people in at least 3 items: {worn:?}");
+    std::fs::remove_dir_all(&base).ok();
+}
+
 #[test]
 fn lighting_names_round_trip_and_others_are_refused_by_name() {
     use volcap_sim::dataset::DatasetLighting;

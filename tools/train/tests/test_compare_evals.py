@@ -8,17 +8,19 @@ import pytest
 from volcap_train import compare_evals as ce
 
 
-def report(tmp_path, name, rows):
+def report(tmp_path, name, rows, facing=None):
     d = tmp_path / name
     d.mkdir()
     images = []
-    for (subject, pose, yaw, model, c, p, iou, hands) in rows:
+    for i, (subject, pose, yaw, model, c, p, iou, hands) in enumerate(rows):
         images.append(
             {
                 "subject": subject, "pose": pose, "yaw_deg": yaw, "model": model, "status": "ok",
                 "chamfer_cm": c, "p2s_cm": p, "iou": iou, "part_cm": [1, 1, 1, hands, 1, 1],
             }
         )
+        if facing is not None:
+            images[-1]["facing_error"] = facing[i]
     (d / "eval.json").write_text(json.dumps({"images": images, "models": []}))
     return d
 
@@ -75,3 +77,17 @@ def test_a_value_eval_could_not_measure_drops_that_image_from_that_metric_only(t
     res = {r["metric"]: r for r in ce.compare(ce.paired([ce.load_rows(a, None)], [ce.load_rows(b, None)]))}
     assert res["hands cm"]["images"] == 1 and math.isclose(res["hands cm"]["diff"], 2.0)
     assert res["Chamfer cm"]["images"] == 2
+
+
+def test_facing_errors_compare_as_a_share_and_older_reports_leave_them_out(tmp_path):
+    rows = [("s1", 0, 0.0, "m", 2.0, 1.0, 0.7, 10.0), ("s2", 0, 0.0, "m", 3.0, 2.0, 0.6, 12.0),
+            ("s3", 0, 0.0, "m", 3.0, 2.0, 0.6, 12.0)]
+    a = report(tmp_path, "a", rows, facing=[False, False, True])
+    b = report(tmp_path, "b", rows, facing=[True, True, False])
+    old = report(tmp_path, "old", rows)
+    res = {r["metric"]: r for r in ce.compare(ce.paired([ce.load_rows(a, None)], [ce.load_rows(b, None)]))}
+    f = res["facing errors (share)"]
+    assert f["images"] == 3 and math.isclose(f["a"], 1 / 3) and math.isclose(f["b"], 2 / 3)
+    assert f["a_wins"] == 2  # fewer is better: right where B is reversed
+    res = {r["metric"] for r in ce.compare(ce.paired([ce.load_rows(a, None)], [ce.load_rows(old, None)]))}
+    assert "facing errors (share)" not in res and "Chamfer cm" in res

@@ -26,6 +26,10 @@ METRICS = [
     ("p2s_cm", "P2S cm", False),
     ("iou", "IoU", True),
     ("hands_cm", "hands cm", False),
+    # 1 on a facing error (`volcap eval`'s `facing_error`: the reconstruction nearer the truth
+    # turned around in depth), else 0: its mean is the share of such images. Reports made
+    # before 2026-11-29 have no such field: the metric is left out for them.
+    ("facing", "facing errors (share)", False),
 ]
 
 
@@ -53,6 +57,7 @@ def load_rows(path: Path, model: str | None) -> dict:
         r = dict(r)
         parts = r.get("part_cm") or []
         r["hands_cm"] = parts[3] if len(parts) > 3 else float("nan")
+        r["facing"] = float(r["facing_error"]) if "facing_error" in r else None
         for key, _, _ in METRICS:
             # `volcap eval` writes a value it could not measure (NaN: a part the frame does
             # not show, so no true sample of it) as null: such an image drops out of that

@@ -209,6 +209,12 @@ pub struct ImageRow {
     /// all samples, so the six add up to the image's P2S. Where spurious surface is (a
     /// blurred fringe, a misplaced hand) rather than what is missing.
     pub part_p2s_cm: [f64; 6],
+    /// [`distances::Distances::reversed_chamfer_cm`]: the reconstruction turned around in depth.
+    pub reversed_chamfer_cm: f64,
+    /// A facing error: the reconstruction turned around in depth is nearer the truth than
+    /// as it is (`reversed_chamfer_cm < chamfer_cm`): the network put the person's front
+    /// where the back is (hands.md section 18's rule, here on the whole pipeline's surface).
+    pub facing_error: bool,
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
@@ -275,6 +281,8 @@ fn run_case(
         mesh_ms: 0.0,
         part_cm: [f64::NAN; 6],
         part_p2s_cm: [f64::NAN; 6],
+        reversed_chamfer_cm: f64::NAN,
+        facing_error: false,
     };
     let s = c.size;
     let truth_mask: Vec<f32> = c.mask.iter().map(|&m| m as f32 / 255.0).collect();
@@ -358,11 +366,13 @@ fn run_case(
     let mesh = marching_cubes(grid);
     row.mesh_ms = t.elapsed().as_secs_f64() * 1e3 + pieces_ms;
     match surface_distances(mesh, crop, to_cam, &c.oracle, &c.gt_mesh, Some(&c.parts)) {
-        Some((ch, p2s, parts, part_p2s)) => {
-            row.chamfer_cm = ch;
-            row.p2s_cm = p2s;
-            row.part_cm = parts;
-            row.part_p2s_cm = part_p2s;
+        Some(d) => {
+            row.chamfer_cm = d.chamfer_cm;
+            row.p2s_cm = d.p2s_cm;
+            row.part_cm = d.part_cm;
+            row.part_p2s_cm = d.part_p2s_cm;
+            row.reversed_chamfer_cm = d.reversed_chamfer_cm;
+            row.facing_error = d.reversed_chamfer_cm < d.chamfer_cm;
         }
         None => row.status = "empty surface".into(),
     }
@@ -608,25 +618,15 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             images.push(row);
             pb.inc(1);
         }
-        let rows: Vec<&ImageRow> = images[start..].iter().collect();
-        let ok: Vec<&&ImageRow> = rows.iter().filter(|r| r.status == "ok").collect();
-        // A failed image is among the worst: infinite distance.
-        let dist = |r: &ImageRow, f: fn(&ImageRow) -> f64| {
-            if r.status == "ok" {
-                f(r)
-            } else {
-                f64::INFINITY
-            }
-        };
         let (g, mp, p) = report::card(&a.models_dir, name);
-        let m = ModelRow {
-            model: label.clone(),
-            depth_frame: frame.name().to_string(),
-            iso_level: match &models.shape {
+        let m = ModelRow::summarize(
+            &label,
+            frame.name(),
+            match &models.shape {
                 ShapeModel::Fourier(f) if truth_k.is_none() => Some(f.iso_level),
                 _ => None,
             },
-            family: if let Some((basis, k)) = truth_k {
+            if let Some((basis, k)) = truth_k {
                 format!(
                     "{} series, {} terms (ground truth)",
                     basis.name(),
@@ -635,37 +635,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
             } else {
                 models.shape.family().to_string()
             },
-            images: rows.len(),
-            segment_passes: seg_passes,
-            failed: rows.len() - ok.len(),
-            chamfer_cm: mean(ok.iter().map(|r| r.chamfer_cm)),
-            p2s_cm: mean(ok.iter().map(|r| r.p2s_cm)),
-            worst10_chamfer_cm: worst10(&rows, |r| dist(r, |r| r.chamfer_cm)),
-            worst10_p2s_cm: worst10(&rows, |r| dist(r, |r| r.p2s_cm)),
-            iou: mean(rows.iter().map(|r| r.iou)),
-            mask_iou: mean(rows.iter().map(|r| r.mask_iou)),
-            evaluations: mean(ok.iter().map(|r| r.evaluations as f64)),
-            segment_ms: mean(rows.iter().map(|r| r.segment_ms)),
-            encode_ms: mean(ok.iter().map(|r| r.encode_ms)),
-            localize_ms: mean(ok.iter().map(|r| r.localize_ms)),
-            frame_ms: mean(
-                ok.iter()
-                    .map(|r| r.segment_ms + r.encode_ms + r.localize_ms),
-            ),
-            gmacs_frame: g,
-            macs_point: mp,
-            params: p,
-            part_cm: std::array::from_fn(|i| {
-                mean(ok.iter().map(|r| r.part_cm[i]).filter(|v| v.is_finite()))
-            }),
-            part_p2s_cm: std::array::from_fn(|i| {
-                mean(
-                    ok.iter()
-                        .map(|r| r.part_p2s_cm[i])
-                        .filter(|v| v.is_finite()),
-                )
-            }),
-        };
+            seg_passes,
+            (g, mp, p),
+            &images[start..],
+        );
         if a.json {
             println!("{}", serde_json::to_string(&m)?);
         }

@@ -379,10 +379,33 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
         lighting: a.lighting,
         ..Default::default()
     };
+    let assets = a.assets.load()?;
+    // What the identities are dressed from (also in dataset.json's `wardrobe`): the embedded
+    // runtime pack is a third of the outfits the held-out evaluation uses.
+    let w = volcap_sim::dataset::wardrobe(&assets);
+    let count = |k: &str| w.get(k).map_or(0, Vec::len);
+    eprintln!(
+        "wardrobe: {} outfits, {} shoes, {} hair, {} skins ({}){}",
+        count("outfits"),
+        count("shoes"),
+        count("hair"),
+        count("skins"),
+        if a.assets.assets.is_some() {
+            "--assets"
+        } else {
+            "the embedded runtime pack"
+        },
+        if a.assets.assets.is_none() {
+            "; for training, pass --assets ../shared/data/makehuman: `volcap eval --data` dresses \
+             its held-out subjects from the whole wardrobe"
+        } else {
+            ""
+        }
+    );
     let total = (a.subjects * a.poses * a.views) as u64;
     let pb = bar(total);
     let t = Instant::now();
-    let n = volcap_sim::dataset::generate(a.assets.load()?, &cfg, &a.out, |d| pb.set_position(d))?;
+    let n = volcap_sim::dataset::generate(assets, &cfg, &a.out, |d| pb.set_position(d))?;
     pb.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     println!(

@@ -78,6 +78,11 @@ fn both_framings_score_the_truth_as_near_exact() {
                 );
                 assert!(ch < 2.0 && p2s < 1.5, "{framing}: {r}");
                 assert!(iou > 0.85, "{framing}: {r}");
+                // The truth faces the right way: turned around in depth (front and back
+                // swapped, the silhouette kept) it is clearly farther from itself.
+                let reversed = r["reversed_chamfer_cm"].as_f64().unwrap();
+                assert_eq!(r["facing_error"], false, "{framing}: {r}");
+                assert!(reversed > ch + 1.0, "{framing}: {r}");
                 let parts = r["part_cm"].as_array().unwrap();
                 assert_eq!(parts.len(), 6);
                 // head, torso, arms, hands, legs: shown in both framings, near the truth
@@ -107,6 +112,11 @@ fn both_framings_score_the_truth_as_near_exact() {
                 );
             }
             assert_eq!(m[2]["failed"], 0, "{framing}");
+            assert_eq!(m[2]["facing_errors"], 0, "{framing}");
+            // Every image faces right, so the means over those are the means.
+            let right = m[2]["facing_right"].as_array().unwrap();
+            assert_eq!(right[0].as_f64(), m[2]["chamfer_cm"].as_f64(), "{framing}");
+            assert_eq!(right[1].as_f64(), m[2]["p2s_cm"].as_f64(), "{framing}");
         }
         assert!(rows[2]["model"].as_str().unwrap().starts_with("truth-k15"));
         assert!(

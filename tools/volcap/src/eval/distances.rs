@@ -2,14 +2,33 @@
 //! ground-truth mesh where the frame shows them, and both split by body part.
 
 use super::framing::{ToCamera, in_frame};
+use glam::DVec3;
 use volcap_engine::mesh::Mesh;
 use volcap_engine::metrics::{TriangleIndex, chamfer, sample_surface};
+
+/// A reconstruction's distances to the truth (cm), [`surface_distances`]'s answer.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Distances {
+    pub chamfer_cm: f64,
+    pub p2s_cm: f64,
+    /// Per body part ([`super::ImageRow::part_cm`]); NaN without part labels.
+    pub part_cm: [f64; 6],
+    /// Per body part, the share of the P2S ([`super::ImageRow::part_p2s_cm`]).
+    pub part_p2s_cm: [f64; 6],
+    /// The Chamfer distance of the reconstruction turned around in depth (its samples
+    /// reflected through the plane across the view axis at their mean depth): the same
+    /// silhouette with front and back swapped, i.e. for a near-symmetric body the person
+    /// facing the other way. Lower than `chamfer_cm` on a *facing error*
+    /// ([`super::ImageRow::facing_error`]).
+    pub reversed_chamfer_cm: f64,
+}
 
 /// Chamfer and point-to-surface distance (cm) of a mesh in the model's crop NDC against
 /// the ground-truth world mesh, both where the frame shows them (10,000 samples each), and
 /// with `parts`, per body part the mean distance from the true surface's samples of that
 /// part to the mesh (cm, NaN for a part not shown) and the part's share of the P2S
-/// ([`super::ImageRow::part_p2s_cm`]); `None` for an empty surface.
+/// ([`super::ImageRow::part_p2s_cm`]); the Chamfer distance of the reconstruction turned
+/// around in depth ([`Distances::reversed_chamfer_cm`]); `None` for an empty surface.
 pub(super) fn surface_distances(
     mut mesh: Mesh,
     crop: volcap_engine::model::preprocess::Crop,
@@ -17,7 +36,7 @@ pub(super) fn surface_distances(
     oracle: &volcap_sim::oracle::SceneField,
     gt_mesh: &Mesh,
     parts: Option<&volcap_sim::parts::PartLabeler>,
-) -> Option<(f64, f64, [f64; 6], [f64; 6])> {
+) -> Option<Distances> {
     if mesh.triangles.is_empty() {
         return None;
     }
@@ -87,10 +106,109 @@ pub(super) fn surface_distances(
             f64::NAN
         }
     });
-    Some((
-        chamfer(&pred, &gt) * 100.0,
-        p2s_sum / n_pred * 100.0,
+    let reversed = reversed_in_depth(&pred, &cam);
+    Some(Distances {
+        chamfer_cm: chamfer(&pred, &gt) * 100.0,
+        p2s_cm: p2s_sum / n_pred * 100.0,
         part_cm,
         part_p2s_cm,
-    ))
+        reversed_chamfer_cm: chamfer(&reversed, &gt) * 100.0,
+    })
+}
+
+/// `points` reflected through the plane across the camera's view axis at their mean depth
+/// (the NDC z axis, linear in depth for the dataset's weak-perspective camera; the central
+/// ray's direction for a pinhole one): front and back swapped, the silhouette kept.
+fn reversed_in_depth(points: &[DVec3], cam: &volcap_sim::camera::Projector) -> Vec<DVec3> {
+    let forward = (cam.ndc_to_world(glam::Vec3::Z) - cam.ndc_to_world(glam::Vec3::ZERO))
+        .as_dvec3()
+        .normalize_or_zero();
+    let n = points.len().max(1) as f64;
+    let mean = points.iter().fold(DVec3::ZERO, |s, p| s + *p) / n;
+    let mean_depth = mean.dot(forward);
+    points
+        .iter()
+        .map(|p| *p - 2.0 * (p.dot(forward) - mean_depth) * forward)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volcap_sim::camera::{Camera, Projection};
+
+    /// A camera looking along an oblique horizontal direction (not an axis), weak perspective.
+    fn camera() -> volcap_sim::camera::Projector {
+        Camera {
+            width: 256,
+            height: 256,
+            eye: glam::Vec3::new(2.0, 1.0, 3.0),
+            target: glam::Vec3::new(0.1, 1.0, 0.2),
+            projection: Projection::WeakPerspective { height_m: 2.3 },
+            near: 0.5,
+            far: 8.0,
+        }
+        .projector()
+    }
+
+    /// A person-like point set with a front: a slab with a nose on one side only.
+    fn asymmetric(cam: &volcap_sim::camera::Projector) -> Vec<DVec3> {
+        let mut p = vec![];
+        for i in 0..20 {
+            for j in 0..20 {
+                let (x, y) = (-0.3 + 0.03 * i as f32, -0.5 + 0.05 * j as f32);
+                for z in [0.0f32, 0.04] {
+                    p.push(cam.ndc_to_world(glam::Vec3::new(x, y, 0.3 + z)).as_dvec3());
+                }
+            }
+        }
+        for k in 0..100 {
+            let z = 0.04 + 0.001 * k as f32;
+            p.push(
+                cam.ndc_to_world(glam::Vec3::new(0.0, 0.2, 0.3 + z))
+                    .as_dvec3(),
+            );
+        }
+        p
+    }
+
+    #[test]
+    fn reversing_in_depth_keeps_the_silhouette_and_the_mean_depth_and_undoes_itself() {
+        let cam = camera();
+        let p = asymmetric(&cam);
+        let r = reversed_in_depth(&p, &cam);
+        let mean_z = |v: &[DVec3]| {
+            v.iter()
+                .map(|q| cam.world_to_ndc(q.as_vec3()).z as f64)
+                .sum::<f64>()
+                / v.len() as f64
+        };
+        assert!((mean_z(&p) - mean_z(&r)).abs() < 1e-5);
+        let mut moved = 0;
+        for (a, b) in p.iter().zip(&r) {
+            let (na, nb) = (cam.world_to_ndc(a.as_vec3()), cam.world_to_ndc(b.as_vec3()));
+            assert!(
+                (na.x - nb.x).abs() < 1e-4 && (na.y - nb.y).abs() < 1e-4,
+                "{na} {nb}"
+            );
+            moved += ((na.z - nb.z).abs() > 1e-3) as usize;
+        }
+        assert!(moved > p.len() / 2, "front and back swapped: {moved}");
+        let back = reversed_in_depth(&r, &cam);
+        for (a, b) in p.iter().zip(&back) {
+            assert!((*a - *b).length() < 1e-5, "{a} {b}");
+        }
+    }
+
+    #[test]
+    fn a_reconstruction_facing_the_other_way_is_nearer_the_truth_reversed() {
+        let cam = camera();
+        let truth = asymmetric(&cam);
+        let turned = reversed_in_depth(&truth, &cam);
+        // Turned around: far as it is, at zero reversed.
+        assert!(chamfer(&turned, &truth) > 1e-3);
+        assert!(chamfer(&reversed_in_depth(&turned, &cam), &truth) < 1e-6);
+        // Facing right: the reversal only moves it away.
+        assert!(chamfer(&reversed_in_depth(&truth, &cam), &truth) > chamfer(&truth, &truth));
+    }
 }

@@ -1,7 +1,7 @@
 //! The evaluation's report: the Markdown table (models side by side, per-image rows) and the
 //! Chamfer-vs-time plot.
 
-use super::{EvalArgs, Framing, ImageRow};
+use super::{EvalArgs, Framing, ImageRow, mean, worst10};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -40,6 +40,75 @@ pub struct ModelRow {
     pub part_p2s_cm: [f64; 6],
     /// How many times each frame was segmented (`Models::segment_passes`).
     pub segment_passes: u8,
+    /// Images whose reconstruction faces the wrong way ([`ImageRow::facing_error`]).
+    pub facing_errors: usize,
+    /// Chamfer, P2S and IoU over the reconstructed images that face the right way: what the
+    /// facing errors cost the means above.
+    pub facing_right: [f64; 3],
+}
+
+impl ModelRow {
+    /// One model's summary over its image rows (`card`: GMACs a frame, MACs a point and
+    /// parameters from models.json). A failed image counts in the worst 10 as infinitely
+    /// far; distances average over the reconstructed ones.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn summarize(
+        label: &str,
+        depth_frame: &str,
+        iso_level: Option<f32>,
+        family: String,
+        segment_passes: u8,
+        card: (Option<f64>, Option<f64>, Option<u64>),
+        rows: &[ImageRow],
+    ) -> Self {
+        let ok: Vec<&ImageRow> = rows.iter().filter(|r| r.status == "ok").collect();
+        let dist = |r: &ImageRow, f: fn(&ImageRow) -> f64| {
+            if r.status == "ok" {
+                f(r)
+            } else {
+                f64::INFINITY
+            }
+        };
+        let all: Vec<&ImageRow> = rows.iter().collect();
+        let right: Vec<&&ImageRow> = ok.iter().filter(|r| !r.facing_error).collect();
+        let part = |f: fn(&ImageRow) -> [f64; 6]| -> [f64; 6] {
+            std::array::from_fn(|i| mean(ok.iter().map(|r| f(r)[i]).filter(|v| v.is_finite())))
+        };
+        Self {
+            model: label.to_string(),
+            family,
+            depth_frame: depth_frame.to_string(),
+            iso_level,
+            images: rows.len(),
+            failed: rows.len() - ok.len(),
+            chamfer_cm: mean(ok.iter().map(|r| r.chamfer_cm)),
+            p2s_cm: mean(ok.iter().map(|r| r.p2s_cm)),
+            worst10_chamfer_cm: worst10(&all, |r| dist(r, |r| r.chamfer_cm)),
+            worst10_p2s_cm: worst10(&all, |r| dist(r, |r| r.p2s_cm)),
+            iou: mean(rows.iter().map(|r| r.iou)),
+            mask_iou: mean(rows.iter().map(|r| r.mask_iou)),
+            evaluations: mean(ok.iter().map(|r| r.evaluations as f64)),
+            segment_ms: mean(rows.iter().map(|r| r.segment_ms)),
+            encode_ms: mean(ok.iter().map(|r| r.encode_ms)),
+            localize_ms: mean(ok.iter().map(|r| r.localize_ms)),
+            frame_ms: mean(
+                ok.iter()
+                    .map(|r| r.segment_ms + r.encode_ms + r.localize_ms),
+            ),
+            gmacs_frame: card.0,
+            macs_point: card.1,
+            params: card.2,
+            part_cm: part(|r| r.part_cm),
+            part_p2s_cm: part(|r| r.part_p2s_cm),
+            segment_passes,
+            facing_errors: ok.iter().filter(|r| r.facing_error).count(),
+            facing_right: [
+                mean(right.iter().map(|r| r.chamfer_cm)),
+                mean(right.iter().map(|r| r.p2s_cm)),
+                mean(right.iter().map(|r| r.iou)),
+            ],
+        }
+    }
 }
 
 /// The options that change what was measured, as they were given (so that the report's
@@ -224,6 +293,28 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             m.p2s_cm
         );
     }
+    let _ = writeln!(
+        s,
+        "\n**Facing errors**: images whose reconstruction is nearer the truth turned around in depth \
+         (its surface reflected through the plane across the view axis at its mean depth: the same \
+         silhouette, front and back swapped) than as it is; and the means over the images that face the \
+         right way, what the facing errors cost.\n\n\
+         | model | facing errors | Chamfer cm (facing right) | P2S cm (facing right) | IoU (facing right) |\n|---|---|---|---|---|"
+    );
+    for m in summary {
+        let ok = m.images - m.failed;
+        let _ = writeln!(
+            s,
+            "| {} | {}/{} ({:.1} %) | {:.2} | {:.2} | {:.3} |",
+            m.model,
+            m.facing_errors,
+            ok,
+            100.0 * m.facing_errors as f64 / ok.max(1) as f64,
+            m.facing_right[0],
+            m.facing_right[1],
+            m.facing_right[2]
+        );
+    }
     let _ = writeln!(s);
     let turntables: Vec<&ModelRow> = summary
         .iter()
@@ -249,12 +340,12 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
     );
     let _ = writeln!(
         s,
-        "| model | subject | pose | yaw | status | Chamfer cm | P2S cm | IoU | mask IoU | evals | localize ms |\n|---|---|---|---|---|---|---|---|---|---|---|"
+        "| model | subject | pose | yaw | status | Chamfer cm | P2S cm | IoU | mask IoU | facing | evals | localize ms |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in images {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {:.0} | {} | {:.2} | {:.2} | {:.3} | {:.3} | {} | {:.0} |",
+            "| {} | {} | {} | {:.0} | {} | {:.2} | {:.2} | {:.3} | {:.3} | {} | {} | {:.0} |",
             r.model,
             r.subject,
             r.pose,
@@ -264,6 +355,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             r.p2s_cm,
             r.iou,
             r.mask_iou,
+            if r.facing_error { "reversed" } else { "" },
             r.evaluations,
             r.localize_ms
         );

@@ -487,11 +487,11 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 )?;
                 iou.push(iou_bits(&grid.binarized(), &truth.binarized()));
                 let mesh = volcap_engine::mesh::marching_cubes(&grid);
-                if let Some((c, p, _, _)) =
+                if let Some(d) =
                     surface_distances(mesh, crop, fr.to_cam, &fr.oracle, &fr.gt_mesh, None)
                 {
-                    chamfer.push(c);
-                    p2s.push(p);
+                    chamfer.push(d.chamfer_cm);
+                    p2s.push(d.p2s_cm);
                 }
                 let v = views(&grid, spec, crop, fr);
                 per.push(Some((v, views(&truth, spec, crop, fr), crop.s)));
