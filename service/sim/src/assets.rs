@@ -148,6 +148,19 @@ impl Selection {
         }
     }
 
+    /// The runtime pack's bodies (its macro targets) in the whole wardrobe of the folder
+    /// (every outfit, shoe, hair, hat and skin; textures at `texture_px`): a training set's
+    /// clothes where the whole pack (about 38 MB) does not fit, as beside the checkout on a
+    /// lent GPU machine (tools/train/recipe/make_bundle.sh --lean). The held-out evaluation
+    /// dresses its subjects from the whole wardrobe (docs/eval/hands.md section 28).
+    pub fn wardrobe(dir: &Path, texture_px: u32) -> Self {
+        Self {
+            targets: runtime_targets,
+            texture_px,
+            ..Self::everything(dir)
+        }
+    }
+
     /// Everything in the folder (training data generation).
     pub fn everything(dir: &Path) -> Self {
         let list = |sub: &str, f: &dyn Fn(&str) -> bool| -> Vec<String> {

@@ -9,8 +9,9 @@
 #   tool: the checkout travels, so the bundle holds only the binary (xz, ~12 MB) and run.sh,
 #   and takes the rest from the checkout around it: the checkout (45.6 MiB since
 #   2026-11-29's slimming; tests/test_tree_size.py keeps it under 48) and a full bundle
-#   (52 MiB) together are over the tool's 64 MiB; the lean one uses the binary's embedded
-#   assets). There: carry [".recipe"], command `.recipe/run.sh /tmp/res --minutes-data 3
+#   (52 MiB) together are over the tool's 64 MiB; the lean one packs the whole wardrobe on the
+#   runtime pack's bodies, `sim pack --wardrobe 256`, 3.6 MB as xz, when ../shared is here, else
+#   it uses the binary's embedded assets). There: carry [".recipe"], command `.recipe/run.sh /tmp/res --minutes-data 3
 #   --minutes-train 5`, the result copied into $OUT.
 #
 # OUT holds: the simulator's release binary (`volcap.gz`, stripped and packed), the human assets as one
@@ -41,6 +42,17 @@ if [ "$lean" = 1 ]; then
   strip "$out/volcap" 2>/dev/null || objcopy --strip-debug "$out/volcap" 2>/dev/null || true
   xz -9 -T0 -f "$out/volcap"
   cp "$here/run.sh" "$out/"
+  # The whole wardrobe on the runtime pack's bodies (3.6 MB as xz, 6.4 as the pack's gzip; the
+  # whole pack, 38 MB, does not fit beside the checkout): without it the sets would hold the
+  # runtime pack's 3 of the 9 outfits the held-out evaluation dresses its subjects in
+  # (docs/eval/hands.md section 28). run.sh turns it back into a gzip pack.
+  if [ -f "$repo/../shared/data/makehuman/3dobjs/base.obj" ]; then
+    "$binary" sim pack --wardrobe 256 --from "$repo/../shared/data/makehuman" --out "$out/wardrobe.pack.gz" > /dev/null
+    gzip -dc "$out/wardrobe.pack.gz" | xz -9e -T0 > "$out/assets.pack.xz"
+    rm "$out/wardrobe.pack.gz"
+  else
+    echo "make_bundle.sh: ../shared/data/makehuman not here: the lean bundle uses the binary's embedded runtime pack (3 of the 9 outfits)" >&2
+  fi
   git -C "$repo" rev-parse HEAD > "$out/COMMIT" 2>/dev/null || echo unknown > "$out/COMMIT"
   echo "lean bundle $out: $(( $(du -sb "$out" | cut -f1) / 1048576 )) MiB; the checkout and it: $(( ( $(git -C "$repo" ls-files -z | xargs -0 du -cb 2>/dev/null | tail -1 | cut -f1) + $(du -sb "$out" | cut -f1) ) / 1048576 )) MiB"
   exit 0

@@ -87,6 +87,11 @@ if [ -f "$b/volcap.xz" ]; then xz -dc "$b/volcap.xz" > "$res/volcap"; else gunzi
 chmod +x "$res/volcap"
 assets=()
 [ -f "$b/assets.pack.gz" ] && assets=(--assets "$b/assets.pack.gz")
+# A lean bundle's wardrobe travels as xz (make_bundle.sh --lean); the simulator reads gzip packs.
+if [ -f "$b/assets.pack.xz" ]; then
+  xz -dc "$b/assets.pack.xz" | gzip -1 > "$res/assets.pack.gz"
+  assets=(--assets "$res/assets.pack.gz")
+fi
 t0=$(date +%s)
 end=0
 [ "$minutes_data" != 0 ] && end=$(( t0 + $(awk -v m="$minutes_data" 'BEGIN { printf "%d", m * 60 }') ))

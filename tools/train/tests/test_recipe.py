@@ -81,7 +81,12 @@ def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
     bundle, res = REPO / f".recipe-test-{os.getpid()}", tmp_path / "result"
     try:
         subprocess.run([str(REPO / "tools/train/recipe/make_bundle.sh"), str(bundle), "--lean"], check=True)
-        assert sorted(p.name for p in bundle.iterdir()) == ["COMMIT", "run.sh", "volcap.xz"]
+        # The whole wardrobe travels as a pack where the MakeHuman data is here (not in CI).
+        wardrobe = (REPO / "../shared/data/makehuman/3dobjs/base.obj").exists()
+        expected = ["COMMIT", "run.sh", "volcap.xz"] + (["assets.pack.xz"] if wardrobe else [])
+        assert sorted(p.name for p in bundle.iterdir()) == sorted(expected)
+        if wardrobe:
+            assert (bundle / "assets.pack.xz").stat().st_size < 5 * 2**20
         assert (bundle / "volcap.xz").stat().st_size < 20 * 2**20
         env = {**os.environ, "PYTHON": sys.executable}
         subprocess.run(
@@ -102,6 +107,9 @@ def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
         assert len(split) == 2 and sorted(split.values()) == ["train", "val"], split
         for sid, part in split.items():
             assert len(list((ds / part / sid).glob("*.safetensors"))) == 2, (j, sid)  # 2 views
+        # Dressed from the whole wardrobe where it travelled, else the runtime pack's 3 outfits.
+        outfits = json.loads((ds / "dataset.json").read_text())["wardrobe"]["outfits"]
+        assert len(outfits) == (9 if wardrobe else 3), outfits
     assert "3 of 3 poses whole" in (res / "recipe.log").read_text()
     light = torch.load(res / "checkpoint.pt", weights_only=False)
     assert light["step"] == 1 and light["variant"] == "fourier-geom"

@@ -1,7 +1,8 @@
 """The tracked tree stays small enough to travel: the device tool sends the working tree with
 what a call carries, at most 64 MiB together, and the calls this project makes carry the packed
 `volcap` (~12 MiB: tools/gpu_bench.sh, tools/train/recipe/make_bundle.sh --lean) and the Vulkan
-loader (~1 MiB). Reports are kept small by `python -m volcap_train.slim_docs`."""
+loader (~1 MiB), the lean recipe also the whole wardrobe as xz (3.4 MiB; 15 MiB with the binary,
+so at this limit 63 MiB in all). Reports are kept small by `python -m volcap_train.slim_docs`."""
 import shutil
 import subprocess
 from collections import Counter

@@ -57,13 +57,15 @@ def load_rows(path: Path, model: str | None) -> dict:
         r = dict(r)
         parts = r.get("part_cm") or []
         r["hands_cm"] = parts[3] if len(parts) > 3 else float("nan")
-        r["facing"] = float(r["facing_error"]) if "facing_error" in r else None
+        if "facing_error" in r:
+            r["facing"] = float(r["facing_error"])
         for key, _, _ in METRICS:
             # `volcap eval` writes a value it could not measure (NaN: a part the frame does
             # not show, so no true sample of it) as null: such an image drops out of that
             # metric's pairs only. (Reports made before 2026-11-29 also hold nulls from a
             # metric bug, degenerate mesh triangles: docs/eval/hands.md section 27.)
-            if r.get(key) is None:
+            # (The facing column is absent from reports made before it: left out, not NaN.)
+            if key != "facing" and r.get(key) is None:
                 r[key] = float("nan")
         out[(r["subject"], r["pose"], r["yaw_deg"])] = r
     return out
@@ -87,7 +89,9 @@ def compare(pairs: list[tuple[dict, dict]]) -> list[dict]:
     wins, over the pairs where both values are finite."""
     out = []
     for key, label, higher in METRICS:
-        d = [(a[key], b[key]) for a, b in pairs if math.isfinite(a[key]) and math.isfinite(b[key])]
+        nan = float("nan")
+        d = [(a.get(key, nan), b.get(key, nan)) for a, b in pairs]
+        d = [(x, y) for x, y in d if math.isfinite(x) and math.isfinite(y)]
         if not d:
             continue
         n = len(d)

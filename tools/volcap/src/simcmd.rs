@@ -85,6 +85,11 @@ pub struct PackArgs {
     /// machine without `../shared` generates the same data. Default: the runtime pack.
     #[arg(long)]
     pub everything: bool,
+    /// The runtime pack's bodies in the whole wardrobe of the folder (every outfit, shoe,
+    /// hair and skin; textures at this many px): the lean training recipe's pack, small
+    /// enough to travel beside the checkout (`Selection::wardrobe`).
+    #[arg(long, value_name = "TEXTURE_PX", conflicts_with = "everything")]
+    pub wardrobe: Option<u32>,
 }
 
 #[derive(Args, Clone)]
@@ -150,10 +155,15 @@ fn pack(a: &PackArgs) -> anyhow::Result<()> {
         );
     }
     let t = Instant::now();
-    let sel = if a.everything {
-        Selection::everything(&a.from)
-    } else {
-        Selection::runtime()
+    let sel = match (a.everything, a.wardrobe) {
+        (true, _) => Selection::everything(&a.from),
+        (false, Some(px)) => {
+            if !(16..=4096).contains(&px) {
+                bail!("--wardrobe {px}: texture size must be 16 to 4096 px");
+            }
+            Selection::wardrobe(&a.from, px)
+        }
+        (false, None) => Selection::runtime(),
     };
     let assets = HumanAssets::from_makehuman(&a.from, &sel)?;
     let mut f =
