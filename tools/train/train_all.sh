@@ -28,6 +28,10 @@
 #   (another seed: none of DATA_SEG2's held-out identities); unset: run (16) is the last.
 #   DATA_SEG2_IDS2 (optional, with DATA_SEG2_IDS): two more such folders for run (18), the same
 #   command with --seed 29 --pose-seed 29 and --seed 31 --pose-seed 31; unset: run (17) is the last.
+#   DATA_SEG2_WARDROBE (optional, with DATA_SEG2_IDS2): three folders for run (32), the same
+#   command with --seed 47 --pose-seed 47 and 53 dressed from the whole wardrobe (`--assets
+#   ../shared/data/makehuman`), then 43 without (docs/eval/hands.md section 28); unset: run (18)
+#   is the last.
 set -euo pipefail
 cd "$(dirname "$0")"
 DATA=${DATA:?set DATA to a volcap sim dataset folder}
@@ -109,7 +113,14 @@ if [ -n "${DATA_SEG2:-}" ]; then
   fi
   if [ "$LAST" = 17 ] && [ -n "${DATA_SEG2_IDS2:-}" ]; then
     read -r -a IDS2 <<< "$DATA_SEG2_IDS2"
-    $T fourier --data "${SEG2N[0]}" --more-data "$DATA_SEG2_IDS" "${IDS2[@]}" --flip --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 5334 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-small-seg2-17/ckpt.pt"
+    OUT18="$RUNS/fourier-small-seg2"
+    [ -n "${DATA_SEG2_WARDROBE:-}" ] && OUT18="$RUNS/stages/fourier-small-seg2-18"
+    $T fourier --data "${SEG2N[0]}" --more-data "$DATA_SEG2_IDS" "${IDS2[@]}" --flip --out "$OUT18" --variant fourier-small --steps 5334 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-small-seg2-17/ckpt.pt"
+    # (32): the whole wardrobe (section 28), run (24)'s recipe and seed, 766 s.
+    if [ -n "${DATA_SEG2_WARDROBE:-}" ]; then
+      read -r -a WARD <<< "$DATA_SEG2_WARDROBE"
+      $T fourier --data "${SEG2N[0]}" --more-data "${WARD[@]}" --flip --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 5334 --seed 4 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$OUT18/ckpt.pt"
+    fi
   else
     mkdir -p "$RUNS/fourier-small-seg2"; cp "$RUNS/stages/fourier-small-seg2-$LAST/"{ckpt.pt,budget.json} "$RUNS/fourier-small-seg2/"
   fi
