@@ -51,7 +51,6 @@ impl ModelRow {
     /// One model's summary over its image rows (`card`: GMACs a frame, MACs a point and
     /// parameters from models.json). A failed image counts in the worst 10 as infinitely
     /// far; distances average over the reconstructed ones.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn summarize(
         label: &str,
         depth_frame: &str,
