@@ -236,6 +236,14 @@ fn material(mhmat: &Path, px: u32, alpha: bool) -> Result<MaterialDef, AssetErro
 }
 
 impl HumanAssets {
+    /// The names of the garments of one kind, in name order (what a subject is dressed from).
+    pub fn garment_names(&self, kind: GarmentKind) -> impl Iterator<Item = &String> {
+        self.garments
+            .iter()
+            .filter(move |(_, g)| g.kind == kind)
+            .map(|(n, _)| n)
+    }
+
     /// Load from the full MakeHuman folder (`../shared/data/makehuman`).
     pub fn from_makehuman(dir: &Path, sel: &Selection) -> Result<Self, AssetError> {
         let obj = mh::read_obj(&dir.join("3dobjs/base.obj"))?;

@@ -96,6 +96,11 @@ impl Camera {
 }
 
 impl Projector {
+    /// The unit view direction (from the eye towards the target).
+    pub fn forward(&self) -> Vec3 {
+        self.f
+    }
+
     pub fn to_screen(&self, p: Vec3) -> Screen {
         let d = p - self.cam.eye;
         let (xr, yu, depth) = (d.dot(self.r), d.dot(self.u), d.dot(self.f));

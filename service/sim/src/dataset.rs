@@ -198,13 +198,7 @@ pub fn wardrobe(assets: &HumanAssets) -> BTreeMap<&'static str, Vec<String>> {
         ("shoes", GarmentKind::Shoes),
         ("hair", GarmentKind::Hair),
     ] {
-        let names = assets
-            .garments
-            .iter()
-            .filter(|(_, g)| g.kind == kind)
-            .map(|(n, _)| n.clone())
-            .collect();
-        w.insert(key, names);
+        w.insert(key, assets.garment_names(kind).cloned().collect());
     }
     w.insert("skins", assets.skins.keys().cloned().collect());
     w
@@ -214,12 +208,7 @@ pub fn wardrobe(assets: &HumanAssets) -> BTreeMap<&'static str, Vec<String>> {
 fn random_subject(assets: &HumanAssets, r: &mut ChaCha8Rng, id: &str) -> String {
     let gender: f32 = r.random();
     let pick = |r: &mut ChaCha8Rng, kind: GarmentKind, prefer: &str| -> Option<String> {
-        let all: Vec<&String> = assets
-            .garments
-            .iter()
-            .filter(|(_, g)| g.kind == kind)
-            .map(|(n, _)| n)
-            .collect();
+        let all: Vec<&String> = assets.garment_names(kind).collect();
         let pref: Vec<&String> = all
             .iter()
             .copied()

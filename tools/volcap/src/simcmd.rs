@@ -394,23 +394,19 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
     // runtime pack is a third of the outfits the held-out evaluation uses.
     let w = volcap_sim::dataset::wardrobe(&assets);
     let count = |k: &str| w.get(k).map_or(0, Vec::len);
+    let from = match a.assets.assets {
+        Some(_) => "--assets",
+        None => {
+            "the embedded runtime pack; for training, pass --assets ../shared/data/makehuman: \
+             `volcap eval --data` dresses its held-out subjects from the whole wardrobe"
+        }
+    };
     eprintln!(
-        "wardrobe: {} outfits, {} shoes, {} hair, {} skins ({}){}",
+        "wardrobe: {} outfits, {} shoes, {} hair, {} skins ({from})",
         count("outfits"),
         count("shoes"),
         count("hair"),
         count("skins"),
-        if a.assets.assets.is_some() {
-            "--assets"
-        } else {
-            "the embedded runtime pack"
-        },
-        if a.assets.assets.is_none() {
-            "; for training, pass --assets ../shared/data/makehuman: `volcap eval --data` dresses \
-             its held-out subjects from the whole wardrobe"
-        } else {
-            ""
-        }
     );
     let total = (a.subjects * a.poses * a.views) as u64;
     let pb = bar(total);

@@ -116,13 +116,11 @@ pub(super) fn surface_distances(
     })
 }
 
-/// `points` reflected through the plane across the camera's view axis at their mean depth
-/// (the NDC z axis, linear in depth for the dataset's weak-perspective camera; the central
-/// ray's direction for a pinhole one): front and back swapped, the silhouette kept.
+/// `points` reflected through the plane across the camera's view direction at their mean
+/// depth: front and back swapped, the silhouette kept (exactly for the dataset's
+/// weak-perspective camera; about the central ray for a pinhole one).
 fn reversed_in_depth(points: &[DVec3], cam: &volcap_sim::camera::Projector) -> Vec<DVec3> {
-    let forward = (cam.ndc_to_world(glam::Vec3::Z) - cam.ndc_to_world(glam::Vec3::ZERO))
-        .as_dvec3()
-        .normalize_or_zero();
+    let forward = cam.forward().as_dvec3();
     let n = points.len().max(1) as f64;
     let mean = points.iter().fold(DVec3::ZERO, |s, p| s + *p) / n;
     let mean_depth = mean.dot(forward);
