@@ -138,6 +138,7 @@ def main(argv=None):
     ap.add_argument("--only", nargs="*", default=None, help="run names to export (default: all present)")
     ap.add_argument("--iso-level", default="auto", help="Fourier runs: the series level read as the surface (`volcap.iso_level`): `auto` (calibrated by point IoU on the training split, fourier.best_level) or a number in (0, 1) chosen from a sweep on training subjects (`volcap eval --subjects train --iso-level ...`)")
     ap.add_argument("--int8-calib-images", type=int, default=INT8_CALIB_IMAGES, help="Fourier runs: training images the int8 activation ranges are calibrated on (default %(default)s); the card names the count. Where no scheme reads the golden query within the limit, another count can (run (17) of fourier-small-seg2: 256 -> 0.028, 320 -> 0.010)")
+    ap.add_argument("--light-half", action="store_true", help="Fourier runs: write the light checkpoint (checkpoints/shape-NAME.pt) in float16, half the bytes (`volcap_train.light --half`)")
     ap.add_argument("--overfit", default=None, help="export only this Fourier run as the overfit test model (f32 ONNX + overfit.json: scene, frame, yaws of its training images)")
     args = ap.parse_args(argv)
     if args.int8_calib_images < 1:
@@ -217,7 +218,7 @@ def main(argv=None):
             continue
         variant = budget.get("args", {}).get("variant", "compact")
         if variant in FOURIER_VARIANTS:
-            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, common, gen, va, args.data, args.iso_level, args.int8_calib_images)
+            cards[f"shape-{name}"] = export_fourier(run, name, variant, budget, out, x, pts, common, gen, va, args.data, args.iso_level, args.int8_calib_images, args.light_half)
             continue
         if variant not in SHAPE_VARIANTS:
             continue
@@ -448,7 +449,7 @@ def fourier_meta(variant: str, k: int, frame: str, iso: float, name: str, passes
     return meta
 
 
-def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, common, gen, va: Split, data: Path, level: str = "auto", calib_images: int = INT8_CALIB_IMAGES) -> dict:
+def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, x, pts, common, gen, va: Split, data: Path, level: str = "auto", calib_images: int = INT8_CALIB_IMAGES, light_half: bool = False) -> dict:
     net = load_fourier(run, variant)
     k = net.k
     base = f"shape-{name}"
@@ -502,7 +503,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     # A light checkpoint (weights and step, no optimizer state) for resuming training in a
     # later session: `train fourier --init models/checkpoints/shape-NAME.pt`.
     st = torch.load(run / "ckpt.pt", weights_only=False, map_location="cpu")
-    light.save(out / "checkpoints" / f"{base}.pt", net.state_dict(), st["step"], variant)
+    light.save(out / "checkpoints" / f"{base}.pt", net.state_dict(), st["step"], variant, half=light_half)
     macs = count_macs(net, x)
     history = (run / "history.md").read_text() if (run / "history.md").exists() else ""
     return {"history": history, "files": files, "variant": variant, "family": "fourier", "fourier_k": k, "iso_level": iso, "iso_rule": iso_rule, "iso_point_iou_train": iso_ious, "int8_calib": calib, "params": params(net), "gmacs_frame": macs / 1e9, "macs_point": 4 * (2 * k + 1) + 4 * k, "budget": budget}

@@ -68,7 +68,7 @@ def run_net(modules) -> dict | None:
 
 
 def init_weights(ckpt, path) -> dict:
-    """The net's weights (as f32) from a light checkpoint (models/checkpoints/*.pt:
+    """The net's weights (floating-point ones as f32, integer ones as they are) from a light checkpoint (models/checkpoints/*.pt:
     {"net": ...}) or from a run's full one ({"modules": {"net": ...}, "opt": ...}: the
     optimizer state is dropped; a run with `--ema` gives its moving average, the weights it
     ships); anything else is refused naming the file."""
@@ -77,7 +77,7 @@ def init_weights(ckpt, path) -> dict:
         weights = ckpt["net"] if "net" in ckpt else run_net(ckpt.get("modules"))
     if not isinstance(weights, dict):
         raise SystemExit(f"--init {path}: neither a light checkpoint (key `net`) nor a run checkpoint (key `modules.net`)")
-    return {n: v.float().cpu() for n, v in weights.items()}
+    return {n: (v.float() if v.is_floating_point() else v).cpu() for n, v in weights.items()}
 
 
 class Run:
