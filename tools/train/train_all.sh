@@ -32,8 +32,17 @@
 #   command with --seed 47 --pose-seed 47 and 53 dressed from the whole wardrobe (`--assets
 #   ../shared/data/makehuman`), then 43 without (docs/eval/hands.md section 28); unset: run (18)
 #   is the last.
+#   DATA_SEG2_WHOLE (optional, with DATA_SEG2_WARDROBE): two folders for run (35) and the
+#   fourier-medium runs (34) and (36): DATA_SEG2's first folder's command with `--assets
+#   ../shared/data/makehuman` (DS16 in the whole wardrobe: the same identities, split, poses and
+#   light rigs), then set 43 with it (docs/eval/hands.md sections 28-29); unset: run (32) is the
+#   last, and fourier-medium is the old widened stage 5.
 set -euo pipefail
 cd "$(dirname "$0")"
+if [ -n "${DATA_SEG2_WHOLE:-}" ] && { [ -z "${DATA_SEG2_WARDROBE:-}" ] || [ -z "${DATA_SEG2_IDS2:-}" ]; }; then
+  echo "train_all.sh: DATA_SEG2_WHOLE needs DATA_SEG2, DATA_SEG2_IDS, DATA_SEG2_IDS2 and DATA_SEG2_WARDROBE (runs (17)-(32) come first)" >&2
+  exit 2
+fi
 DATA=${DATA:?set DATA to a volcap sim dataset folder}
 DATA_POSES=${DATA_POSES:?set DATA_POSES to a volcap sim dataset folder of the same identities in more poses}
 DATA_POSES2=${DATA_POSES2:?set DATA_POSES2 to a volcap sim dataset folder of the same identities in twice DATA_POSES poses}
@@ -119,7 +128,15 @@ if [ -n "${DATA_SEG2:-}" ]; then
     # (32): the whole wardrobe (section 28), run (24)'s recipe and seed, 766 s.
     if [ -n "${DATA_SEG2_WARDROBE:-}" ]; then
       read -r -a WARD <<< "$DATA_SEG2_WARDROBE"
-      $T fourier --data "${SEG2N[0]}" --more-data "${WARD[@]}" --flip --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 5334 --seed 4 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$OUT18/ckpt.pt"
+      OUT32="$RUNS/fourier-small-seg2"
+      [ -n "${DATA_SEG2_WHOLE:-}" ] && OUT32="$RUNS/stages/fourier-small-seg2-32"
+      $T fourier --data "${SEG2N[0]}" --more-data "${WARD[@]}" --flip --out "$OUT32" --variant fourier-small --steps 5334 --seed 4 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$OUT18/ckpt.pt"
+      # (35): every set from the whole wardrobe (section 29), run (32) on for 5,334 steps, 684 s.
+      if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
+        read -r -a WHOLE <<< "$DATA_SEG2_WHOLE"
+        ALLW=("${WARD[0]}" "${WARD[1]}" "${WHOLE[1]}")
+        $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/fourier-small-seg2" --variant fourier-small --steps 5334 --seed 4 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$OUT32/ckpt.pt"
+      fi
     fi
   else
     mkdir -p "$RUNS/fourier-small-seg2"; cp "$RUNS/stages/fourier-small-seg2-$LAST/"{ckpt.pt,budget.json} "$RUNS/fourier-small-seg2/"
@@ -128,8 +145,17 @@ fi
 # fourier-medium: fourier-small widened from c = 8 to 12 without changing its function
 # (volcap_train.widen: the new channels start unread), then trained on as fourier-small's last
 # stage (more capacity without starting over).
-$PY -m volcap_train.widen --init "$RUNS/stages/fourier-small-5/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
-$T fourier --data "$DATA" --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-medium-init.pt"
+# With DATA_SEG2_WHOLE, the GPU boards' fourier-medium (sections 28-29): run (32) widened, run
+# (34) on DS16 and the three whole-wardrobe identity sets (1,033 s), run (36) on every set from
+# the whole wardrobe at twice the steps (2,297 s).
+if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
+  $PY -m volcap_train.widen --init "$OUT32/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
+  $T fourier --data "${SEG2N[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/stages/fourier-medium-34" --variant fourier-medium --steps 5334 --seed 14 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-init.pt"
+  $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10668 --seed 14 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-34/ckpt.pt"
+else
+  $PY -m volcap_train.widen --init "$RUNS/stages/fourier-small-5/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
+  $T fourier --data "$DATA" --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-medium-init.pt"
+fi
 # fourier-small-upper: stage (3) resumed with upper bodies (the person cut by the frame's lower
 # edge) added to the training images, for close-range framing.
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
@@ -138,7 +164,10 @@ $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 # fourier-small's surface level comes from a sweep on training subjects (its model card):
 #   volcap eval --subjects train --poses 1 --views 2 --res 129 --seed 7 --model fourier-small --iso-level 0.45,0.5,0.55,0.6
 $PY -m volcap_train.export --data "$DATA_POSES2" --runs "$RUNS" --out ../../models --only fourier-small --iso-level "${FOURIER_SMALL_ISO:-0.55}"
-if [ -n "${DATA_SEG2:-}" ]; then
+if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
+  $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 32
+  $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-medium --iso-level 0.55 --int8-calib-images 64 --light-half
+elif [ -n "${DATA_SEG2:-}" ]; then
   $PY -m volcap_train.export --data "${SEG2N[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 320
 fi
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5
