@@ -39,7 +39,7 @@
 #   last, and fourier-medium is the old widened stage 5.
 set -euo pipefail
 cd "$(dirname "$0")"
-if [ -n "${DATA_SEG2_WHOLE:-}" ] && { [ -z "${DATA_SEG2_WARDROBE:-}" ] || [ -z "${DATA_SEG2_IDS2:-}" ]; }; then
+if [ -n "${DATA_SEG2_WHOLE:-}" ] && { [ -z "${DATA_SEG2:-}" ] || [ -z "${DATA_SEG2_IDS:-}" ] || [ -z "${DATA_SEG2_IDS2:-}" ] || [ -z "${DATA_SEG2_WARDROBE:-}" ]; }; then
   echo "train_all.sh: DATA_SEG2_WHOLE needs DATA_SEG2, DATA_SEG2_IDS, DATA_SEG2_IDS2 and DATA_SEG2_WARDROBE (runs (17)-(32) come first)" >&2
   exit 2
 fi
