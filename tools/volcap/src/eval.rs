@@ -37,7 +37,7 @@ pub use framing::Framing;
 use framing::{OracleInCrop, ToCamera};
 use report::{plot, report};
 pub use turntable::TURNTABLE_YAWS;
-use turntable::turntable;
+use turntable::{colour_errors, turntable};
 
 #[derive(Args, Debug, Clone)]
 pub struct EvalArgs {
@@ -97,6 +97,11 @@ pub struct EvalArgs {
     /// Grid resolution of the turntable renders (pixels per tile).
     #[arg(long, default_value_t = 129)]
     pub turntable_res: usize,
+    /// Grid resolution (pixels a side) of the colour columns' renders: each image's field at
+    /// the input view, turned to the side and to the back, against the oracle's colours
+    /// (`0`: no colour columns).
+    #[arg(long, default_value_t = 129)]
+    pub colour_res: usize,
     /// Folder for eval.md, eval.json and eval.png.
     #[arg(long, default_value = "docs/eval")]
     pub out: PathBuf,
@@ -215,6 +220,13 @@ pub struct ImageRow {
     /// as it is (`reversed_chamfer_cm < chamfer_cm`): the network put the person's front
     /// where the back is (hands.md section 18's rule, here on the whole pipeline's surface).
     pub facing_error: bool,
+    /// Colour error of the views ([`turntable::colour_errors`]; NaN without `--colour-res`,
+    /// for the ground-truth rows and failed images): the mean absolute RGB difference (0-1)
+    /// from the oracle's colours at the input's exposure on the pixels both renders show
+    /// (`turntable::exposure_gain`), at the input view (yaw 0:
+    /// the input's pixels), the side (yaw 90), the back (yaw 180), and the back with the
+    /// input's colours (no colour networks).
+    pub colour_l1: [f64; 4],
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
@@ -262,6 +274,7 @@ fn run_case(
     truth_k: Option<(Basis, usize)>,
     to_cam: ToCamera,
     drop_apart: Option<[f32; 2]>,
+    colour_res: usize,
 ) -> anyhow::Result<ImageRow> {
     let mut row = ImageRow {
         model: label.into(),
@@ -283,6 +296,7 @@ fn run_case(
         part_p2s_cm: [f64::NAN; 6],
         reversed_chamfer_cm: f64::NAN,
         facing_error: false,
+        colour_l1: [f64::NAN; 4],
     };
     let s = c.size;
     let truth_mask: Vec<f32> = c.mask.iter().map(|&m| m as f32 / 255.0).collect();
@@ -375,6 +389,17 @@ fn run_case(
             row.facing_error = d.reversed_chamfer_cm < d.chamfer_cm;
         }
         None => row.status = "empty surface".into(),
+    }
+    if colour_res > 0 && truth_k.is_none() && row.status == "ok" {
+        row.colour_l1 = colour_errors(
+            models,
+            c,
+            (&img, &prob, crop),
+            colour_res,
+            to_cam,
+            drop_apart.map(|g| g[0]),
+        )
+        .context("the colour columns")?;
     }
     Ok(row)
 }
@@ -610,6 +635,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 truth_k,
                 ToCamera::new(frame, c, truth_k.is_some()),
                 a.drop_apart.0,
+                a.colour_res,
             )
             .with_context(|| format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw))?;
             if a.json {

@@ -99,6 +99,14 @@ impl ModelField {
         }
     }
 
+    /// The same field without its colour networks: every view takes the input pixel each
+    /// point projects to (the paper's rule for the input view, applied to turned views too:
+    /// the baseline `volcap eval`'s colour columns measure the networks against).
+    pub fn without_color_nets(mut self) -> Self {
+        self.color = None;
+        self
+    }
+
     /// Whether the colour encoder's features came with the field (a turned view; the
     /// camera's own view takes the input's colours without them).
     pub fn has_color_features(&self) -> bool {

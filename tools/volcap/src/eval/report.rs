@@ -45,6 +45,8 @@ pub struct ModelRow {
     /// Chamfer, P2S and IoU over the reconstructed images that face the right way: what the
     /// facing errors cost the means above.
     pub facing_right: [f64; 3],
+    /// [`ImageRow::colour_l1`] averaged over the images that have it (NaN: none).
+    pub colour_l1: [f64; 4],
 }
 
 impl ModelRow {
@@ -106,6 +108,9 @@ impl ModelRow {
                 mean(right.iter().map(|r| r.p2s_cm)),
                 mean(right.iter().map(|r| r.iou)),
             ],
+            colour_l1: std::array::from_fn(|i| {
+                mean(ok.iter().map(|r| r.colour_l1[i]).filter(|v| v.is_finite()))
+            }),
         }
     }
 }
@@ -152,6 +157,9 @@ fn knobs(a: &EvalArgs) -> String {
     if !a.segment_passes.is_empty() {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
         let _ = write!(k, " --segment-passes {}", passes.join(","));
+    }
+    if a.colour_res != 129 {
+        let _ = write!(k, " --colour-res {}", a.colour_res);
     }
     if let Some(l) = a.coarse_level {
         let _ = write!(k, " --coarse-level {l}");
@@ -313,6 +321,32 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             m.facing_right[1],
             m.facing_right[2]
         );
+    }
+    let coloured: Vec<&ModelRow> = summary
+        .iter()
+        .filter(|m| m.colour_l1.iter().any(|v| v.is_finite()))
+        .collect();
+    if !coloured.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n**Colour of the views**: each image's field at the input view (yaw 0), turned to the side \
+             (yaw 90) and to the back (yaw 180), rendered mesh-free and unshaded at {}^2, against the \
+             simulator's colours from the same views at the input's exposure (its albedo times the \
+             per-channel gain that best maps it onto the input view's pixels): the mean absolute RGB \
+             difference (0-1) on the pixels both show. The input view takes the input's pixels (its error is the floor that \
+             the input's lighting and the surface's misfit leave); the side and the back are the colour \
+             networks'; the last column is the back with the input's pixels too (every point the colour \
+             of the input pixel it projects to, no colour networks): what the networks must beat.\n\n\
+             | model | front (input's pixels) | side | back | back, input's pixels |\n|---|---|---|---|---|",
+            a.colour_res
+        );
+        for m in coloured {
+            let _ = writeln!(
+                s,
+                "| {} | {:.3} | {:.3} | {:.3} | {:.3} |",
+                m.model, m.colour_l1[0], m.colour_l1[1], m.colour_l1[2], m.colour_l1[3]
+            );
+        }
     }
     let _ = writeln!(s);
     let turntables: Vec<&ModelRow> = summary

@@ -1,5 +1,5 @@
 //! Turntable sheets: a model's field rendered mesh-free at four yaws above the oracle's from
-//! the same views.
+//! the same views; the colour error of the turned views against the oracle's.
 
 use super::Case;
 use super::framing::{ToCamera, occupancy_in_frame};
@@ -115,4 +115,119 @@ pub(super) fn turntable(
         .save(path)
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+/// Yaws of the colour columns: the input view (where every model takes the input's pixels:
+/// the floor that the input's lighting and the surfaces' misfit leave), the side and the
+/// back.
+pub const COLOUR_YAWS: [f32; 3] = [0.0, 90.0, 180.0];
+
+/// Per channel, the least-squares gain `g` with `g * truth ~ model` over the pixels both
+/// renders show (the input's exposure and light tint over the oracle's albedo, read at the
+/// input view), clamped to [0.05, 20]; 1 where no pixel is shared.
+fn exposure_gain(
+    model: &volcap_engine::render::Renderer,
+    truth: &volcap_engine::render::Renderer,
+) -> [f64; 3] {
+    let (mut mt, mut tt) = ([0.0f64; 3], [0.0f64; 3]);
+    for (i, (hm, ht)) in model.hits().iter().zip(truth.hits()).enumerate() {
+        if *hm >= 0 && *ht >= 0 {
+            for ch in 0..3 {
+                let (m, t) = (
+                    f64::from(model.rgba()[i * 4 + ch]),
+                    f64::from(truth.rgba()[i * 4 + ch]),
+                );
+                mt[ch] += m * t;
+                tt[ch] += t * t;
+            }
+        }
+    }
+    std::array::from_fn(|ch| {
+        if tt[ch] > 0.0 {
+            (mt[ch] / tt[ch]).clamp(0.05, 20.0)
+        } else {
+            1.0
+        }
+    })
+}
+
+/// Mean absolute RGB difference (0-1, the three channels averaged) between a model's
+/// unshaded render and the truth's at `gain` ([`exposure_gain`]; capped at white) over the
+/// pixels where both show a surface; NaN where none does.
+fn l1_where_both(
+    model: &volcap_engine::render::Renderer,
+    truth: &volcap_engine::render::Renderer,
+    gain: [f64; 3],
+) -> f64 {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for (i, (hm, ht)) in model.hits().iter().zip(truth.hits()).enumerate() {
+        if *hm >= 0 && *ht >= 0 {
+            for (ch, g) in gain.iter().enumerate() {
+                let t = (f64::from(truth.rgba()[i * 4 + ch]) * g).min(255.0);
+                sum += (f64::from(model.rgba()[i * 4 + ch]) - t).abs();
+            }
+            n += 3;
+        }
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        sum / (255.0 * n as f64)
+    }
+}
+
+/// The colour error of a model's views (`volcap eval`'s colour columns): the field encoded
+/// over yaw 0, 90 and 180 ([`COLOUR_YAWS`]) and rendered mesh-free, unshaded, at `res`,
+/// against the oracle's colours from the same views, on the pixels both show: `[front, side,
+/// back, back with the input's colours]`, the last the same back view with every point
+/// taking the input pixel it projects to (no colour networks: the baseline they must beat).
+/// The oracle's colours are albedo and the input is lit: the truth is compared at the
+/// input's exposure, its albedo times the per-channel gain that best maps it onto the input
+/// view's pixels ([`exposure_gain`]), the colour the back would have in the input's light on
+/// average (the front's error is then what the light's shading and the surfaces' misfit
+/// leave). Colour errors where the two surfaces differ (a missing hand) count as they look.
+/// The frame comes as `Models::prepare` gives it: the letterboxed image, the person's mask
+/// and its crop.
+pub(super) fn colour_errors(
+    models: &Models,
+    c: &Case,
+    (img, prob, crop): (&[f32], &[f32], volcap_engine::model::preprocess::Crop),
+    res: usize,
+    to_cam: ToCamera,
+    apart: Option<f32>,
+) -> anyhow::Result<[f64; 4]> {
+    use volcap_engine::render::{RenderOptions, Renderer};
+    let spec = GridSpec::from_resolution(res)?;
+    let opts = RenderOptions {
+        shade: false,
+        drop_apart: apart,
+        ..Default::default()
+    };
+    let (mut model, mut truth) = (Renderer::new(), Renderer::new());
+    let mut out = [f64::NAN; 4];
+    let mut gain = [1.0; 3];
+    for (i, yaw) in COLOUR_YAWS.iter().enumerate() {
+        let view = ModelView {
+            yaw_deg: *yaw,
+            ..Default::default()
+        };
+        let field = models.encode(img, prob, crop, view)?;
+        let oracle = OracleInView {
+            oracle: &c.oracle,
+            field: &field,
+            to_cam,
+        };
+        truth.render(&oracle, &oracle, spec, &opts)?;
+        model.render(&field, &field, spec, &opts)?;
+        if i == 0 {
+            gain = exposure_gain(&model, &truth);
+        }
+        out[i] = l1_where_both(&model, &truth, gain);
+        if i + 1 == COLOUR_YAWS.len() {
+            let plain = field.without_color_nets();
+            model.render(&plain, &plain, spec, &opts)?;
+            out[3] = l1_where_both(&model, &truth, gain);
+        }
+    }
+    Ok(out)
 }
