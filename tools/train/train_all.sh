@@ -36,7 +36,9 @@
 #   fourier-medium runs (34) and (36): DATA_SEG2's first folder's command with `--assets
 #   ../shared/data/makehuman` (DS16 in the whole wardrobe: the same identities, split, poses and
 #   light rigs), then set 43 with it (docs/eval/hands.md sections 28-29); unset: run (32) is the
-#   last, and fourier-medium is the old widened stage 5.
+#   last, and fourier-medium is the old widened stage 5. The colour networks train on its first
+#   folder (DS16W; on DATA without it): made by the simulator of 2026-11-29 or later, whose
+#   coloured samples are the surface the views show (section 30; train refuses older folders).
 set -euo pipefail
 cd "$(dirname "$0")"
 if [ -n "${DATA_SEG2_WHOLE:-}" ] && { [ -z "${DATA_SEG2:-}" ] || [ -z "${DATA_SEG2_IDS:-}" ] || [ -z "${DATA_SEG2_IDS2:-}" ] || [ -z "${DATA_SEG2_WARDROBE:-}" ]; }; then
@@ -58,7 +60,6 @@ $T shape --data "$DATA" --out "$RUNS/compact-$ABL" --variant compact --steps "$A
 [ -e "$RUNS/compact/ckpt.pt" ] || { mkdir -p "$RUNS/compact"; cp "$RUNS/compact-$ABL/ckpt.pt" "$RUNS/compact/"; }
 $T shape --data "$DATA" --out "$RUNS/compact" --variant compact --steps "$FULL"
 $T seg --data "$DATA" --out "$RUNS/seg" --steps "${SEG_STEPS:-600}"
-$T color --data "$DATA" --out "$RUNS/color" --steps "${COLOR_STEPS:-400}"
 # The larger model, same budget as the compact default.
 $T shape --data "$DATA" --out "$RUNS/large" --variant large --steps "$FULL"
 # Ablations on the compact size, same budget as compact-$ABL.
@@ -147,15 +148,20 @@ fi
 # stage (more capacity without starting over).
 # With DATA_SEG2_WHOLE, the GPU boards' fourier-medium (sections 28-29): run (32) widened, run
 # (34) on DS16 and the three whole-wardrobe identity sets (1,033 s), run (36) on every set from
-# the whole wardrobe at twice the steps (2,297 s).
+# the whole wardrobe at twice the steps (2,297 s), run (38) on as many more (2,385 s; section 30).
 if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
   $PY -m volcap_train.widen --init "$OUT32/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
   $T fourier --data "${SEG2N[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/stages/fourier-medium-34" --variant fourier-medium --steps 5334 --seed 14 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-init.pt"
-  $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10668 --seed 14 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-34/ckpt.pt"
+  $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/stages/fourier-medium-36" --variant fourier-medium --steps 10668 --seed 14 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-34/ckpt.pt"
+  $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10668 --seed 15 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-36/ckpt.pt"
 else
   $PY -m volcap_train.widen --init "$RUNS/stages/fourier-small-5/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
   $T fourier --data "$DATA" --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-medium-init.pt"
 fi
+# The colour networks (section 30): 3,000 steps on the surface the views show, targets at the
+# input's exposure; on DS16W when it is given (the committed run), else on DATA (either made by
+# a simulator that samples the seen surface: `"surface": "seen"` in its dataset.json).
+$T color --data "${WHOLE[0]:-$DATA}" --out "$RUNS/color" --steps "${COLOR_STEPS:-3000}"
 # fourier-small-upper: stage (3) resumed with upper bodies (the person cut by the frame's lower
 # edge) added to the training images, for close-range framing.
 $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"

@@ -4,8 +4,9 @@
 //! Layout: `OUT/{train,val}/<subject>/<pose>_<view>.safetensors`, plus `OUT/dataset.json`
 //! (the configuration, the subjects and their split). Each shard holds tensors
 //! `image` u8 [H, W, 3], `mask` u8 [H, W], `points` f32 [N, 3] (render-view NDC, the
-//! engine's convention), `occ` f32 [N] (1 inside, 0 outside), `surface` f32 [M, 3] (NDC),
-//! `surface_rgb` f32 [M, 3], the per-pixel inside intervals along each pixel's ray
+//! engine's convention), `occ` f32 [N] (1 inside, 0 outside), `surface` f32 [M, 3] (NDC: the
+//! surface the view shows from the camera and from straight behind it, [`seen_surface`]),
+//! `surface_rgb` f32 [M, 3] (its colours), the per-pixel inside intervals along each pixel's ray
 //! (`ray_offsets` u32 [H * W + 1] into `ray_z` f32 [R, 2], render-view NDC z, see
 //! [`crate::rays`]: the dense supervision of the Fourier head), and one metadata key `volcap` holding JSON (`camera`, `subject`,
 //! `subject_table`, `style`, `time_s`, `yaw_deg`, `split`, and the `scene` text and `frame`
@@ -359,6 +360,9 @@ pub fn generate(
     std::fs::create_dir_all(out).map_err(|e| werr(out, &e))?;
     let manifest = serde_json::json!({
         "format": "volcap-sim-dataset/1",
+        // `surface`/`surface_rgb` hold the surface the views show ([`seen_surface`]); datasets
+        // without the key sampled the whole clothed surface, the body under the clothes too.
+        "surface": "seen",
         "seed": cfg.seed, "subjects": cfg.subjects, "poses": cfg.poses, "views": cfg.views, "size": cfg.size,
         "points": cfg.points, "surface_points": cfg.surface_points, "sigma_m": cfg.sigma_m, "voxel_m": cfg.voxel_m,
         "lighting": cfg.lighting.name(), "pose_seed": cfg.pose_seed,
@@ -435,14 +439,9 @@ pub fn generate(
                     }
                 }
             }
-            let surface: Vec<Vec3> = sample_surface(&surf, cfg.surface_points, r.random())
-                .iter()
-                .map(|p| p.as_vec3())
-                .collect();
-            let surface_rgb: Vec<f32> = surface
-                .iter()
-                .flat_map(|p| field.colors.color(*p))
-                .collect();
+            // The seed of the views' coloured surface samples (one draw, as ever: the poses,
+            // views and light rigs of a seed stay what they were).
+            let surface_seed: u64 = r.random();
             let labels: Vec<f32> = std::iter::repeat_n(1.0f32, ins.len())
                 .chain(std::iter::repeat_n(0.0, outs.len()))
                 .collect();
@@ -461,11 +460,17 @@ pub fn generate(
                 };
                 let pts = f32_bytes(&to_ndc(&world_pts));
                 let occ = f32_bytes(&labels);
-                let sp = f32_bytes(&to_ndc(&surface));
-                let sc = f32_bytes(&surface_rgb);
                 let mask = f.person_mask();
                 let (h, w) = (f.height, f.width);
                 let rays = ray_intervals(&field.oracle, &f.camera, DEFAULT_STEP_M);
+                let surface =
+                    seen_surface(&rays, &view, cfg.surface_points, surface_seed ^ vi as u64);
+                let surface_rgb: Vec<f32> = surface
+                    .iter()
+                    .flat_map(|p| field.colors.color(*p))
+                    .collect();
+                let sp = f32_bytes(&to_ndc(&surface));
+                let sc = f32_bytes(&surface_rgb);
                 let roff: Vec<u8> = rays.offsets.iter().flat_map(|x| x.to_le_bytes()).collect();
                 let rz = f32_bytes(rays.z.as_flattened());
                 // One metadata key holding sorted JSON: byte-identical files for a seed.
@@ -512,6 +517,45 @@ pub fn generate(
         }
     }
     Ok(done)
+}
+
+/// `count` points (world metres) of the surface a view's rays meet first and last, half
+/// each, on pixels drawn uniformly among those whose ray holds anything: the surface seen
+/// from the camera and from straight behind it, what the turned views show and what the
+/// colour networks learn (`surface` / `surface_rgb`). Not samples of the whole clothed
+/// surface: that holds the body under the clothes, whose nearest-triangle colour is skin
+/// that no view shows (the colour networks trained on it painted turned views skin-grey,
+/// docs/eval/hands.md section 30). Empty when no ray holds anything.
+pub fn seen_surface(
+    rays: &crate::rays::RayIntervals,
+    view: &crate::camera::Projector,
+    count: usize,
+    seed: u64,
+) -> Vec<Vec3> {
+    let (w, h) = (rays.width, rays.height);
+    let hit: Vec<usize> = (0..w * h)
+        .filter(|p| rays.offsets[*p + 1] > rays.offsets[*p])
+        .collect();
+    if hit.is_empty() {
+        return Vec::new();
+    }
+    let mut r = ChaCha8Rng::seed_from_u64(seed);
+    (0..count)
+        .map(|k| {
+            let p = hit[r.random_range(0..hit.len())];
+            let (i, j) = (p % w, p / w);
+            let iv = rays.pixel(i, j);
+            // Nearest the camera: the largest z; farthest: the smallest (`RayIntervals`).
+            let z = if k % 2 == 0 {
+                iv.iter().map(|v| v[1]).fold(f32::MIN, f32::max)
+            } else {
+                iv.iter().map(|v| v[0]).fold(f32::MAX, f32::min)
+            };
+            let x = -1.0 + 2.0 * i as f32 / (w.max(2) - 1) as f32;
+            let y = -1.0 + 2.0 * j as f32 / (h.max(2) - 1) as f32;
+            view.ndc_to_world(Vec3::new(x, y, z))
+        })
+        .collect()
 }
 
 fn gauss(r: &mut ChaCha8Rng) -> f64 {

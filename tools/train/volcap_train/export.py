@@ -46,6 +46,13 @@ class Sig(nn.Module):
         return torch.sigmoid(self.m(*a))
 
 
+
+# The colour networks' loss (`train.train_color`), as the card states it.
+COLOR_LOSS = (
+    "L1 of RGB on the surface the views show (`volcap sim dataset`'s seen surface: where pixel rays first meet "
+    "and last leave the person), targets at the input's exposure (`train.exposure_targets`)"
+)
+
 def count_macs(module: nn.Module, *inputs) -> int:
     """Multiply-accumulates of Conv2d and Linear layers for one forward pass."""
     total = [0]
@@ -215,6 +222,8 @@ def main(argv=None):
             iy, ix, fv = golden_sample(feat[0], 256, gen)
             save_file({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "rgb_out": col.numpy()}, str(out / "golden" / "color.safetensors"))
             cards["color"] = {"files": ["color.encoder.onnx", "color.mlp.onnx"], "params": params(enc) + params(mlp), "gmacs_frame": count_macs(enc, x) / 1e9, "macs_point": count_macs(mlp, fb[:1], rb[:1], zb[:1]), "budget": budget}
+            if (run / "history.md").exists():
+                cards["color"]["history"] = (run / "history.md").read_text()
             continue
         variant = budget.get("args", {}).get("variant", "compact")
         if variant in FOURIER_VARIANTS:
@@ -550,17 +559,17 @@ def write_card(out: Path, name: str, c: dict, data: Path):
         "|---|---|",
         f"| task | {a.get('task', name)} |",
         f"| variant | {c.get('variant', '-')} |",
-        f"| family | {c.get('family', 'mlp')}{' (K = ' + str(c['fourier_k']) + ', coefficient maps 128x128, zeta = 2 * crop-NDC z)' if c.get('fourier_k') else ''} |",
+        f"| family | {'colour encoder + point MLP' if a.get('task') == 'color' else c.get('family', 'mlp')}{' (K = ' + str(c['fourier_k']) + ', coefficient maps 128x128, zeta = 2 * crop-NDC z)' if c.get('fourier_k') else ''} |",
         *([f"| depth frame | {frame} |"] if c.get("fourier_k") else []),
         *([f"| masks | {masks_row(b)} |"] if c.get("fourier_k") else []),
         *([f"| surface level | {c['iso_level']:.2f} of the series (`volcap.iso_level`; the engine reads it as 0.5), {c.get('iso_rule', 'chosen on the training split by mean point IoU')}: "
            + ", ".join(f"{t:.2f}: {v:.3f}" for t, v in c['iso_point_iou_train'].items()) + " |"] if c.get("iso_level") is not None else []),
         *([f"| int8 calibration | {c['int8_calib']} |"] if c.get("int8_calib") else []),
-        f"| loss | {'dense: Parseval L2 of each pixel ray (every crop pixel), + ' + a.get('point_weight', '0.1') + ' x BCE of tau (occ - 0.5) on labelled points' if c.get('fourier_k') else 'BCE on labelled points'} |",
+        f"| loss | {'dense: Parseval L2 of each pixel ray (every crop pixel), + ' + a.get('point_weight', '0.1') + ' x BCE of tau (occ - 0.5) on labelled points' if c.get('fourier_k') else COLOR_LOSS if a.get('task') == 'color' else 'BCE on labelled points'} |",
         f"| parameters | {c['params']:,} |",
         f"| GMACs per frame (encoder) | {c['gmacs_frame']:.3f} |",
         f"| MACs per point (MLP) | {c.get('macs_point', '-')} |",
-        f"| OHEM | {a.get('ohem', '-')} |",
+        *([f"| OHEM | {a.get('ohem', '-')} |"] if a.get("task") != "color" else []),
         f"| steps x batch x points | {b.get('steps', '?')} x {a.get('batch', '?')} x {a.get('points', '-')} |",
         f"| wall time | {b.get('wall_s', '?')} s |",
         f"| hardware | {json.dumps(b.get('hardware', {}))} |",

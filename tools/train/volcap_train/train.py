@@ -11,6 +11,7 @@ upper-body variant) are `items.py`; this module holds each network's step.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
 from pathlib import Path
@@ -183,11 +184,44 @@ def train_shape(args):
     return loop(run, {"enc": enc, "mlp": mlp}, opt, args.steps, step_fn, eval_fn, {"gen": gen, "ohem": ohem})
 
 
+def exposure_targets(x: torch.Tensor, surf: torch.Tensor, albedo: torch.Tensor, batch: int = 64) -> torch.Tensor:
+    """Colour targets at the input's exposure: per image and channel, the least-squares gain
+    that maps the albedo of the surface samples nearest the camera (the even ones of a
+    `"surface": "seen"` dataset: where each sampled pixel's ray first meets the person) onto
+    the input pixels there, times every sample's albedo, in [0, 1]. Encoder inputs x [B, 4,
+    S, S], crop-NDC samples [B, M, 3], albedo [B, M, 3]. The back then has the brightness and
+    tint the input shows the front in (what `volcap eval`'s colour columns compare against)."""
+    out = []
+    for s in range(0, len(x), batch):
+        sl = slice(s, s + batch)
+        front = surf[sl, 0::2]
+        pix = sample_features(x[sl, :3] * 0.5 + 0.5, front[..., :2])
+        a = albedo[sl, 0::2]
+        gain = ((pix * a).sum(1) / (a * a).sum(1).clamp_min(1e-6)).clamp(0.05, 20.0)
+        out.append((albedo[sl] * gain[:, None, :]).clamp(0.0, 1.0))
+    return torch.cat(out)
+
+
+def seen_surface_dataset(root: Path) -> None:
+    """Refuse a dataset whose coloured surface samples hold the body under the clothes (made
+    before `volcap sim dataset` sampled the surface the views show: no `"surface": "seen"` in
+    its dataset.json): a colour network learns skin no view shows from it."""
+    manifest = Path(root) / "dataset.json"
+    seen = manifest.exists() and json.loads(manifest.read_text()).get("surface") == "seen"
+    if not seen:
+        raise SystemExit(
+            f'{manifest}: no "surface": "seen": its colour samples cover the whole clothed surface, the body under '
+            "the clothes too; make the dataset again with this volcap (`volcap sim dataset`) to train colour"
+        )
+
+
 def train_color(args):
     torch.manual_seed(args.seed)
     gen = torch.Generator().manual_seed(args.seed)
+    seen_surface_dataset(args.data)
     xtr, _, _, str_, ctr, _ = cropped_cached(args.data, "train")
     xva, _, _, sva, cva, _ = cropped_cached(args.data, "val")
+    ctr, cva = exposure_targets(xtr, str_, ctr), exposure_targets(xva, sva, cva)
     enc, mlp = ColorEncoder(), ColorMlp()
     opt = torch.optim.Adam(list(enc.parameters()) + list(mlp.parameters()), lr=args.lr)
     run = Run(args.out, args)
