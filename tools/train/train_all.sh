@@ -148,12 +148,14 @@ fi
 # stage (more capacity without starting over).
 # With DATA_SEG2_WHOLE, the GPU boards' fourier-medium (sections 28-29): run (32) widened, run
 # (34) on DS16 and the three whole-wardrobe identity sets (1,033 s), run (36) on every set from
-# the whole wardrobe at twice the steps (2,297 s), run (38) on as many more (2,385 s; section 30).
+# the whole wardrobe at twice the steps (2,297 s), runs (38) and (39) on as many more each
+# (2,385 s and 3,679 s; section 30).
 if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
   $PY -m volcap_train.widen --init "$OUT32/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
   $T fourier --data "${SEG2N[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/stages/fourier-medium-34" --variant fourier-medium --steps 5334 --seed 14 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-init.pt"
   $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/stages/fourier-medium-36" --variant fourier-medium --steps 10668 --seed 14 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-34/ckpt.pt"
-  $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10668 --seed 15 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-36/ckpt.pt"
+  $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/stages/fourier-medium-38" --variant fourier-medium --steps 10668 --seed 15 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-36/ckpt.pt"
+  $T fourier --data "${WHOLE[0]}" --more-data "${ALLW[@]}" --flip --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10668 --seed 16 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --init "$RUNS/stages/fourier-medium-38/ckpt.pt"
 else
   $PY -m volcap_train.widen --init "$RUNS/stages/fourier-small-5/ckpt.pt" --from fourier-small --to fourier-medium --out "$RUNS/stages/fourier-medium-init.pt"
   $T fourier --data "$DATA" --out "$RUNS/fourier-medium" --variant fourier-medium --steps 10000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --init "$RUNS/stages/fourier-medium-init.pt"
@@ -172,7 +174,7 @@ $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 $PY -m volcap_train.export --data "$DATA_POSES2" --runs "$RUNS" --out ../../models --only fourier-small --iso-level "${FOURIER_SMALL_ISO:-0.55}"
 if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
   $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 32
-  $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-medium --iso-level 0.55 --int8-calib-images 64 --light-half
+  $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-medium --iso-level 0.55 --int8-calib-images 128 --light-half
 elif [ -n "${DATA_SEG2:-}" ]; then
   $PY -m volcap_train.export --data "${SEG2N[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 320
 fi
