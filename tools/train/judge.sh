@@ -12,7 +12,7 @@
 # going is read at its latest checkpoint). OUT: a new folder for the export (OUT/export), a
 # copy of models/ with it (OUT/models), the reports (OUT/eval-{base,run}-SEED) and judge.txt.
 # Environment: DATA, a dataset for export's int8 calibration (required; the run's own);
-# ASSETS (../shared/data/makehuman), VOLCAP (target/release/volcap), SEEDS ("100 200 300"),
+# ASSETS (../shared/data/makehuman), VOLCAP (target/release/volcap; one that knows --colour-res), SEEDS ("100 200 300"),
 # NAME (the model's name, fourier-small-seg2), BASE_DIR (a folder of earlier reports of the
 # default named eval-base-SEED, reused instead of run again).
 set -euo pipefail
@@ -58,8 +58,9 @@ for s in $SEEDS; do
       models="$ROOT/models"
       [ "$side" = run ] && models="$OUT/models"
       echo "judge: $side, seed $s" >&2
+      # The shape judged (the colour networks are shared: no colour columns).
       "$VOLCAP" eval --data "$ASSETS" --subjects val --poses 2 --views 3 --res 257 \
-        --seed "$s" --coarse-level 4 --model "$NAME" --models-dir "$models" --out "$dir" \
+        --seed "$s" --coarse-level 4 --model "$NAME" --models-dir "$models" --out "$dir" --colour-res 0 \
         > "$dir.log" 2>&1 || { echo "judge: volcap eval failed (see $dir.log)" >&2; exit 1; }
     fi
     if [ "$side" = base ]; then B+=("$dir"); else A+=("$dir"); fi
