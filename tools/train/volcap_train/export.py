@@ -46,12 +46,12 @@ class Sig(nn.Module):
         return torch.sigmoid(self.m(*a))
 
 
-
 # The colour networks' loss (`train.train_color`), as the card states it.
 COLOR_LOSS = (
     "L1 of RGB on the surface the views show (`volcap sim dataset`'s seen surface: where pixel rays first meet "
     "and last leave the person), targets at the input's exposure (`train.exposure_targets`)"
 )
+
 
 def count_macs(module: nn.Module, *inputs) -> int:
     """Multiply-accumulates of Conv2d and Linear layers for one forward pass."""

@@ -220,12 +220,12 @@ pub struct ImageRow {
     /// as it is (`reversed_chamfer_cm < chamfer_cm`): the network put the person's front
     /// where the back is (hands.md section 18's rule, here on the whole pipeline's surface).
     pub facing_error: bool,
-    /// Colour error of the views ([`turntable::colour_errors`]; NaN without `--colour-res`,
+    /// Colour error of the views ([`turntable::colour_errors`]; NaN with `--colour-res 0`,
     /// for the ground-truth rows and failed images): the mean absolute RGB difference (0-1)
     /// from the oracle's colours at the input's exposure on the pixels both renders show
-    /// (`turntable::exposure_gain`), at the input view (yaw 0:
-    /// the input's pixels), the side (yaw 90), the back (yaw 180), and the back with the
-    /// input's colours (no colour networks).
+    /// (`turntable::exposure_gain`), at the input view (yaw 0: the input's pixels), the side
+    /// (yaw 90), the back (yaw 180), and the back with the input's colours (no colour
+    /// networks).
     pub colour_l1: [f64; 4],
 }
 
@@ -469,6 +469,14 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         0..=32,
     )?;
     level_in_pixels("--thin-level", "RADIUS", a.thin_level.as_deref(), 1..=16)?;
+    if a.colour_res != 0 {
+        GridSpec::from_resolution(a.colour_res).with_context(|| {
+            format!(
+                "--colour-res {}: 0 (no colour columns) or a grid resolution",
+                a.colour_res
+            )
+        })?;
+    }
     if !a.segment_passes.is_empty() {
         crate::backend::check_segment_passes(&a.segment_passes)?;
     }

@@ -153,6 +153,7 @@ fn bad_decode_knobs_are_refused_by_name() {
         ("--thin-level", "0,2"),
         ("--segment-passes", "3"),
         ("--segment-passes", "1,0"),
+        ("--colour-res", "20"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
             .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
@@ -298,4 +299,55 @@ fn each_model_is_segmented_as_it_was_trained_unless_told() {
         .concat(),
     );
     assert_eq!(row(&rows, "fourier-small-seg2-f32-seg1"), 1);
+}
+
+/// The colour columns: a trained model's images get four colour errors (the input view, the
+/// side, the back, the back in the input's own pixels), each a mean absolute RGB difference
+/// in [0, 1]; the ground-truth rows (no colour networks) and `--colour-res 0` get none.
+#[test]
+fn colour_columns_are_bounded_and_only_where_measured() {
+    let colour = |r: &serde_json::Value| -> Vec<Option<f64>> {
+        r["colour_l1"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64())
+            .collect()
+    };
+    let rows = run_eval(
+        "colour",
+        &[
+            &TINY[..],
+            &[
+                "--model",
+                "fourier-small-seg2,truth-k15",
+                "--colour-res",
+                "65",
+            ],
+        ]
+        .concat(),
+    );
+    // Per model: one image, then its summary.
+    assert_eq!(rows.len(), 4, "{rows:?}");
+    for r in [&rows[0], &rows[1]] {
+        let c = colour(r);
+        assert_eq!(c.len(), 4, "{r}");
+        assert!(
+            c.iter()
+                .all(|v| v.is_some_and(|v| (0.0..=1.0).contains(&v))),
+            "{r}"
+        );
+    }
+    for r in [&rows[2], &rows[3]] {
+        assert!(colour(r).iter().all(Option::is_none), "{r}");
+    }
+    let off = run_eval(
+        "colour-off",
+        &[
+            &TINY[..],
+            &["--model", "fourier-small-seg2", "--colour-res", "0"],
+        ]
+        .concat(),
+    );
+    assert!(colour(&off[0]).iter().all(Option::is_none), "{:?}", off[0]);
 }
