@@ -159,12 +159,24 @@ pub struct EvalArgs {
     /// left out.
     #[arg(long, value_enum, default_value_t = Framing::Whole)]
     pub framing: Framing,
+    /// The true surface Chamfer, P2S and the per-part distances are measured against:
+    /// `clothed` (the body and its garments' meshes whole, the body under the clothes
+    /// included, as every report before 2026-11-29 was) or `seen` (only what a view can show:
+    /// `distances::seen_surface`).
+    #[arg(long, value_enum, default_value_t = TruthSurface::Clothed)]
+    pub truth_surface: TruthSurface,
     /// `XY,Z`: drop inside pieces farther than XY across and Z in depth (fractions of the
     /// grid's side) from the largest before IoU and mesh, as the product does (`pieces`; the
     /// render and the meshes at `pieces::DEFAULT_GAP` on every axis, the default here; its
     /// time in the mesh column); `off` keeps every piece.
     #[arg(long, default_value = "0.1,0.1", value_parser = parse_apart)]
     pub drop_apart: Apart,
+}
+
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TruthSurface {
+    Clothed,
+    Seen,
 }
 
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -275,6 +287,7 @@ fn run_case(
     to_cam: ToCamera,
     drop_apart: Option<[f32; 2]>,
     colour_res: usize,
+    truth_surface: TruthSurface,
 ) -> anyhow::Result<ImageRow> {
     let mut row = ImageRow {
         model: label.into(),
@@ -379,7 +392,15 @@ fn run_case(
     let t = Instant::now();
     let mesh = marching_cubes(grid);
     row.mesh_ms = t.elapsed().as_secs_f64() * 1e3 + pieces_ms;
-    match surface_distances(mesh, crop, to_cam, &c.oracle, &c.gt_mesh, Some(&c.parts)) {
+    let seen;
+    let gt_mesh = match truth_surface {
+        TruthSurface::Clothed => &c.gt_mesh,
+        TruthSurface::Seen => {
+            seen = distances::seen_surface(&c.gt_mesh, &c.oracle.oracle);
+            &seen
+        }
+    };
+    match surface_distances(mesh, crop, to_cam, &c.oracle, gt_mesh, Some(&c.parts)) {
         Some(d) => {
             row.chamfer_cm = d.chamfer_cm;
             row.p2s_cm = d.p2s_cm;
@@ -644,6 +665,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 ToCamera::new(frame, c, truth_k.is_some()),
                 a.drop_apart.0,
                 a.colour_res,
+                a.truth_surface,
             )
             .with_context(|| format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw))?;
             if a.json {

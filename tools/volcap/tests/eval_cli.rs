@@ -351,3 +351,30 @@ fn colour_columns_are_bounded_and_only_where_measured() {
     );
     assert!(colour(&off[0]).iter().all(Option::is_none), "{:?}", off[0]);
 }
+
+/// `--truth-surface seen` measures against what a view can show: the ground-truth series
+/// (which holds only the person's outer surface) is nearer that than the clothed mesh with
+/// the body under the clothes (were nothing left out, the two would be equal).
+#[test]
+fn the_seen_truth_leaves_out_the_body_under_the_clothes() {
+    let chamfer = |name: &str, surface: &str| -> f64 {
+        let rows = run_eval(
+            name,
+            &[
+                &TINY[..4],
+                &[
+                    "--res",
+                    "65",
+                    "--model",
+                    "truth-k15",
+                    "--truth-surface",
+                    surface,
+                ],
+            ]
+            .concat(),
+        );
+        rows[0]["chamfer_cm"].as_f64().unwrap()
+    };
+    let (clothed, seen) = (chamfer("clothed", "clothed"), chamfer("seen", "seen"));
+    assert!(seen < clothed, "seen {seen} clothed {clothed}");
+}

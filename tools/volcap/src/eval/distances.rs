@@ -116,6 +116,53 @@ pub(super) fn surface_distances(
     })
 }
 
+/// How far beyond a true surface point [`seen_surface`] looks for the outside (metres).
+pub(super) const SEEN_REACH_M: f32 = 0.01;
+
+/// The part of the clothed ground-truth mesh a view can show: the triangles whose centroid
+/// has the outside within [`SEEN_REACH_M`] along one of 14 directions (the axes and the
+/// diagonals), read from the occupancy oracle. What it leaves out is the body under the
+/// clothes (a garment shell closes the oracle's volume over it), which no camera sees and
+/// `dataset::clothed_surface` holds; a body under cloth closer than the reach stays
+/// (`volcap eval --truth-surface seen`).
+pub(super) fn seen_surface(gt: &Mesh, oracle: &volcap_sim::oracle::Oracle) -> Mesh {
+    let d = 1.0 / 3f32.sqrt();
+    let dirs: [glam::Vec3; 14] = [
+        glam::Vec3::X,
+        glam::Vec3::NEG_X,
+        glam::Vec3::Y,
+        glam::Vec3::NEG_Y,
+        glam::Vec3::Z,
+        glam::Vec3::NEG_Z,
+        glam::Vec3::new(d, d, d),
+        glam::Vec3::new(d, d, -d),
+        glam::Vec3::new(d, -d, d),
+        glam::Vec3::new(d, -d, -d),
+        glam::Vec3::new(-d, d, d),
+        glam::Vec3::new(-d, d, -d),
+        glam::Vec3::new(-d, -d, d),
+        glam::Vec3::new(-d, -d, -d),
+    ];
+    let triangles = gt
+        .triangles
+        .iter()
+        .filter(|t| {
+            let c = t
+                .iter()
+                .fold(glam::Vec3::ZERO, |s, i| s + gt.vertices[*i as usize])
+                / 3.0;
+            dirs.iter()
+                .any(|d| oracle.occupancy(c + *d * SEEN_REACH_M) <= 0.5)
+        })
+        .copied()
+        .collect();
+    Mesh {
+        vertices: gt.vertices.clone(),
+        triangles,
+        colors: None,
+    }
+}
+
 /// `points` reflected through the plane across the camera's view direction at their mean
 /// depth: front and back swapped, the silhouette kept (exactly for the dataset's
 /// weak-perspective camera; about the central ray for a pinhole one).

@@ -158,6 +158,9 @@ fn knobs(a: &EvalArgs) -> String {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
         let _ = write!(k, " --segment-passes {}", passes.join(","));
     }
+    if a.truth_surface == super::TruthSurface::Seen {
+        k.push_str(" --truth-surface seen");
+    }
     if a.colour_res != 129 {
         let _ = write!(k, " --colour-res {}", a.colour_res);
     }
@@ -177,7 +180,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         "# Evaluation: full pipeline on held-out simulator subjects\n\n\
          `volcap eval --subjects {} --poses {} --views {} --res {} --model {} --seed {}{}` (manifest `{}`, assets {}).\n\
          Pipeline: segmentation -> crop -> shape encoder -> hierarchical localization at {}^3{} -> marching cubes.\n\
-         Chamfer / P2S in cm against the ground-truth clothed mesh (10k surface samples each); IoU against the\n\
+         Chamfer / P2S in cm against the ground-truth clothed mesh{} (10k surface samples each); IoU against the\n\
          simulator's occupancy oracle on the same grid; mask IoU of the segmentation; worst-10 = mean of the 10\n\
          worst images (a failed image counts as infinitely far). Times are per frame on this machine.\n\n\
          Depth frame: `camera` compares depth as the camera saw it; `body` first moves the truth so that\n\
@@ -200,6 +203,11 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             " -> pieces apart from the body dropped"
         } else {
             ""
+        },
+        if a.truth_surface == super::TruthSurface::Seen {
+            ", only what a view can show (`--truth-surface seen`: the body under the clothes left out)"
+        } else {
+            " (the body under the clothes included)"
         },
     );
     if a.framing == Framing::Upper {
