@@ -173,7 +173,7 @@ $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 #   volcap eval --subjects train --poses 1 --views 2 --res 129 --seed 7 --model fourier-small --iso-level 0.45,0.5,0.55,0.6
 $PY -m volcap_train.export --data "$DATA_POSES2" --runs "$RUNS" --out ../../models --only fourier-small --iso-level "${FOURIER_SMALL_ISO:-0.55}"
 if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
-  $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 32
+  $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 32 --light-half
   $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-medium --iso-level 0.55 --int8-calib-images 128 --light-half
 elif [ -n "${DATA_SEG2:-}" ]; then
   $PY -m volcap_train.export --data "${SEG2N[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 320

@@ -19,7 +19,8 @@ pub(super) struct Case {
     pub(super) rgb: Vec<u8>,
     pub(super) mask: Vec<u8>,
     pub(super) size: usize,
-    /// Ground truth: world mesh (clothed), occupancy oracle, the frame's camera.
+    /// Ground truth: world mesh (clothed, or with `--truth-surface seen` only what a view can
+    /// show), occupancy oracle, the frame's camera.
     pub(super) gt_mesh: Mesh,
     pub(super) oracle: volcap_sim::oracle::SceneField,
     /// Inside intervals along every pixel ray (the Fourier ground truth).
@@ -109,6 +110,12 @@ pub(super) fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
                     volcap_sim::parts::PartLabeler::new(body.verts, body.tris, &vertex_parts)
                 };
                 let oracle = sim.oracle(volcap_sim::oracle::DEFAULT_VOXEL_M);
+                let gt_mesh = match a.truth_surface {
+                    super::TruthSurface::Clothed => gt_mesh,
+                    super::TruthSurface::Seen => {
+                        super::distances::seen_surface(gt_mesh, &oracle.oracle)
+                    }
+                };
                 let rays = volcap_sim::rays::ray_intervals(
                     &oracle.oracle,
                     &f.camera,

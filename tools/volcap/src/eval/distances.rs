@@ -125,7 +125,7 @@ pub(super) const SEEN_REACH_M: f32 = 0.01;
 /// clothes (a garment shell closes the oracle's volume over it), which no camera sees and
 /// `dataset::clothed_surface` holds; a body under cloth closer than the reach stays
 /// (`volcap eval --truth-surface seen`).
-pub(super) fn seen_surface(gt: &Mesh, oracle: &volcap_sim::oracle::Oracle) -> Mesh {
+pub(super) fn seen_surface(mut gt: Mesh, oracle: &volcap_sim::oracle::Oracle) -> Mesh {
     let d = 1.0 / 3f32.sqrt();
     let dirs: [glam::Vec3; 14] = [
         glam::Vec3::X,
@@ -143,24 +143,16 @@ pub(super) fn seen_surface(gt: &Mesh, oracle: &volcap_sim::oracle::Oracle) -> Me
         glam::Vec3::new(-d, -d, d),
         glam::Vec3::new(-d, -d, -d),
     ];
-    let triangles = gt
-        .triangles
-        .iter()
-        .filter(|t| {
-            let c = t
-                .iter()
-                .fold(glam::Vec3::ZERO, |s, i| s + gt.vertices[*i as usize])
-                / 3.0;
-            dirs.iter()
-                .any(|d| oracle.occupancy(c + *d * SEEN_REACH_M) <= 0.5)
-        })
-        .copied()
-        .collect();
-    Mesh {
-        vertices: gt.vertices.clone(),
-        triangles,
-        colors: None,
-    }
+    let vertices = &gt.vertices;
+    gt.triangles.retain(|t| {
+        let c = t
+            .iter()
+            .fold(glam::Vec3::ZERO, |s, i| s + vertices[*i as usize])
+            / 3.0;
+        dirs.iter()
+            .any(|d| oracle.occupancy(c + *d * SEEN_REACH_M) <= 0.5)
+    });
+    gt
 }
 
 /// `points` reflected through the plane across the camera's view direction at their mean

@@ -8,7 +8,7 @@ use glam::Vec3;
 use std::path::Path;
 use volcap_engine::OccupancyField;
 use volcap_engine::grid::GridSpec;
-use volcap_engine::model::{ModelView, Models};
+use volcap_engine::model::{ModelField, ModelView, Models};
 
 /// The oracle (occupancy and colour) seen through a model field's render view: render NDC
 /// -> the field's crop NDC -> input NDC -> world. Renders the truth from the same views.
@@ -117,9 +117,9 @@ pub(super) fn turntable(
     Ok(())
 }
 
-/// Yaws of the colour columns: the input view (where every model takes the input's pixels:
-/// the floor that the input's lighting and the surfaces' misfit leave), the side and the
-/// back.
+/// Yaws of the colour columns: the input view first (where every model takes the input's
+/// pixels: the floor that the input's lighting and the surfaces' misfit leave), the side and
+/// the back.
 pub const COLOUR_YAWS: [f32; 3] = [0.0, 90.0, 180.0];
 
 /// Per channel, the least-squares gain `g` with `g * truth ~ model` over the pixels both
@@ -186,11 +186,13 @@ fn l1_where_both(
 /// view's pixels ([`exposure_gain`]), the colour the back would have in the input's light on
 /// average (the front's error is then what the light's shading and the surfaces' misfit
 /// leave). Colour errors where the two surfaces differ (a missing hand) count as they look.
-/// The frame comes as `Models::prepare` gives it: the letterboxed image, the person's mask
-/// and its crop.
+/// `front` is the frame's field over the input view (as `volcap eval` scored it); the turned
+/// ones are encoded from the frame as `Models::prepare` gives it: the letterboxed image, the
+/// person's mask and its crop.
 pub(super) fn colour_errors(
     models: &Models,
     c: &Case,
+    front: &ModelField,
     (img, prob, crop): (&[f32], &[f32], volcap_engine::model::preprocess::Crop),
     res: usize,
     to_cam: ToCamera,
@@ -204,24 +206,29 @@ pub(super) fn colour_errors(
         ..Default::default()
     };
     let (mut model, mut truth) = (Renderer::new(), Renderer::new());
+    // The field and the oracle seen through its view, both rendered.
+    let both =
+        |field: &ModelField, model: &mut Renderer, truth: &mut Renderer| -> anyhow::Result<()> {
+            let oracle = OracleInView {
+                oracle: &c.oracle,
+                field,
+                to_cam,
+            };
+            truth.render(&oracle, &oracle, spec, &opts)?;
+            model.render(field, field, spec, &opts)?;
+            Ok(())
+        };
     let mut out = [f64::NAN; 4];
-    let mut gain = [1.0; 3];
-    for (i, yaw) in COLOUR_YAWS.iter().enumerate() {
+    both(front, &mut model, &mut truth)?;
+    let gain = exposure_gain(&model, &truth);
+    out[0] = l1_where_both(&model, &truth, gain);
+    for (i, yaw) in COLOUR_YAWS.iter().enumerate().skip(1) {
         let view = ModelView {
             yaw_deg: *yaw,
             ..Default::default()
         };
         let field = models.encode(img, prob, crop, view)?;
-        let oracle = OracleInView {
-            oracle: &c.oracle,
-            field: &field,
-            to_cam,
-        };
-        truth.render(&oracle, &oracle, spec, &opts)?;
-        model.render(&field, &field, spec, &opts)?;
-        if i == 0 {
-            gain = exposure_gain(&model, &truth);
-        }
+        both(&field, &mut model, &mut truth)?;
         out[i] = l1_where_both(&model, &truth, gain);
         if i + 1 == COLOUR_YAWS.len() {
             let plain = field.without_color_nets();
