@@ -58,3 +58,36 @@ def test_cli_refuses_a_narrower_or_different_target(tmp_path):
             assert bad in str(e)
         else:
             raise AssertionError(bad)
+
+
+def test_an_hr_net_loaded_from_a_plain_checkpoint_computes_the_same_maps():
+    """fourier-medium-hr (hands.md section 32): the blocks at the maps' resolution start as the
+    identity, so `train fourier --init PLAIN.pt --variant fourier-medium-hr` starts as PLAIN."""
+    from volcap_train.nets import make_fourier
+
+    torch.manual_seed(0)
+    plain = FourierNet(15, 12)
+    with torch.no_grad():
+        for m in plain.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.5, 0.5)
+                m.running_var.uniform_(0.5, 2.0)
+                m.weight.uniform_(0.5, 1.5)
+                m.bias.uniform_(-0.2, 0.2)
+    hr = make_fourier("fourier-medium-hr")
+    assert hr.hr and sum(p.numel() for p in hr.parameters()) > sum(p.numel() for p in plain.parameters())
+    sd = hr.state_dict()
+    sd.update(plain.state_dict())
+    hr.load_state_dict(sd)
+    x = torch.randn(2, 4, 256, 256)
+    plain.eval(), hr.eval()
+    with torch.no_grad():
+        assert torch.allclose(hr(x), plain(x), atol=1e-5)
+    # ... and once trained a step, the blocks are no longer the identity
+    hr.train()
+    opt = torch.optim.SGD(hr.parameters(), lr=0.1)
+    hr(x).square().mean().backward()
+    opt.step()
+    hr.eval()
+    with torch.no_grad():
+        assert not torch.allclose(hr(x), plain(x), atol=1e-4)

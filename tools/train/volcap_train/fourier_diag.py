@@ -18,10 +18,12 @@ import json
 from pathlib import Path
 
 import torch
+import torch.nn.functional as F
 
 from . import fourier as FO
-from .nets import FourierNet, encoder_input, fourier_variant
+from .nets import FourierNet, encoder_input, fourier_variant, make_fourier
 from .items import fourier_cached
+from .ray_losses import thin_mask
 from .train import fourier_query
 
 
@@ -59,6 +61,45 @@ def diagnose(net: FourierNet, d: dict, k: int, images: int) -> dict:
     return out
 
 
+def thin_rays(net, d: dict, k: int, images: int, radius: int = 2) -> dict:
+    """The thin parts' rays (`ray_losses.thin_mask`: hands, wrists, ankles; hands.md section
+    31): how high the predicted series peaks against the truth series (the surface level is
+    0.55), how far its peak lies from the truth's in depth (zeta), and how much of them the
+    input's mask covers. A thin ray whose peak sits at the right depth but under the level is
+    a blur in depth, not a miss."""
+    n = len(d["rgb"])
+    idx = torch.arange(0, n, max(1, n // images))[:images]
+    z = torch.linspace(-1, 1, 512)
+    basis = FO.basis(z, k)
+    peak, tpeak, err, cover = [], [], [], []
+    with torch.no_grad():
+        for s in range(0, len(idx), 8):
+            i = idx[s : s + 8]
+            m = d["mask"][i].float() / 255
+            pred = net(encoder_input(d["rgb"][i].float() / 255, m))
+            tgt = d["coeff"][i].float()
+            thin = (thin_mask(tgt, radius)[:, 0] > 0.5) & (tgt[:, 0] > 0.01)
+            op = pred.permute(0, 2, 3, 1)[thin] @ basis.T
+            ot = tgt.permute(0, 2, 3, 1)[thin] @ basis.T
+            peak.append(op.max(1).values)
+            tpeak.append(ot.max(1).values)
+            err.append((z[op.argmax(1)] - z[ot.argmax(1)]).abs())
+            cover.append(F.interpolate(m, size=tgt.shape[-2:], mode="area")[:, 0][thin])
+    peak, tpeak, err, cover = (torch.cat(t) for t in (peak, tpeak, err, cover))
+    if len(peak) == 0:
+        return {"rays": 0}
+    return {
+        "rays": len(peak),
+        "peak_median": float(peak.median()),
+        "truth_peak_median": float(tpeak.median()),
+        "decoded_share": float((peak > 0.55).float().mean()),
+        "truth_decoded_share": float((tpeak > 0.55).float().mean()),
+        "peak_depth_error_median": float(err.median()),
+        "peak_depth_within_0.05": float((err < 0.05).float().mean()),
+        "mask_covers": float((cover > 0.5).float().mean()),
+    }
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="volcap_train.fourier_diag", description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, required=True)
@@ -66,18 +107,21 @@ def main(argv=None):
     ap.add_argument("--variant", default="fourier")
     ap.add_argument("--images", type=int, default=64)
     ap.add_argument("--split", default="val", choices=["train", "val"])
+    ap.add_argument("--seg", type=Path, default=None, help="the input masks from this segmentation model (as `train --seg`; default: the true masks)")
+    ap.add_argument("--segment-passes", type=int, default=1)
     ap.add_argument("--depth-frame", default="body", choices=["body", "camera"], help="truth with each image's mean depth at z = 0 (as `train --depth-frame body` trains) or as the camera saw it")
     a = ap.parse_args(argv)
     k, c, shift = fourier_variant(a.variant)
     st = torch.load(a.ckpt, weights_only=False)
     sd = st["net"] if "net" in st else st["modules"]["net"]
-    net = FourierNet(k, c, shift)
+    net = make_fourier(a.variant)
     net.load_state_dict({n: v.float() for n, v in sd.items()})
     net.eval()
-    d = fourier_cached(a.data, a.split, k)
+    d = fourier_cached(a.data, a.split, k, a.seg, a.segment_passes)
     if a.depth_frame == "body":
         FO.centre_depth(d["coeff"], d["points"], k)
     r = diagnose(net, d, k, a.images)
+    r["thin"] = thin_rays(net, d, k, a.images)
     r["step"] = st.get("step")
     print(json.dumps(r))
     print(f"c0 on the body: predicted {r['c0_pred']:.3f}, true {r['c0_true']:.3f}")
@@ -86,6 +130,11 @@ def main(argv=None):
     print(f"depth centre error {r['centre_err']:.3f} (zeta; the truth varies by {r['centre_true_std']:.3f})")
     print(f"points decoded inside: inside {r['pred_inside_hit']:.3f}, outside {r['pred_outside_hit']:.3f} "
           f"(ground-truth series: {r['truth_series_inside_hit']:.3f}, {r['truth_series_outside_hit']:.3f})")
+    t = r["thin"]
+    if t["rays"]:
+        print(f"thin rays ({t['rays']}): series peak median {t['peak_median']:.3f} (truth {t['truth_peak_median']:.3f}), "
+              f"decoded at 0.55 {t['decoded_share']:.3f} (truth {t['truth_decoded_share']:.3f}), peak depth off the truth's "
+              f"by {t['peak_depth_error_median']:.3f} (median; within 0.05: {t['peak_depth_within_0.05']:.3f}), mask covers {t['mask_covers']:.3f}")
 
 
 if __name__ == "__main__":

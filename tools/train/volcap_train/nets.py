@@ -206,11 +206,21 @@ class FourierNet(nn.Module):
     (fourier.py). Five scales down to 8x8 so that every pixel sees the whole person (depth
     needs global context), skips at every scale, a per-pixel MLP head (1x1 convs)."""
 
-    def __init__(self, k=15, c=12, shift=False, in_ch=4, out_ch=None):
+    def __init__(self, k=15, c=12, shift=False, in_ch=4, out_ch=None, hr=False):
         super().__init__()
         self.k = k
         self.shift = shift
+        self.hr = hr
         self.e0 = conv_bn(in_ch, c, 2)  # 128
+        if hr:
+            # `hr` (the -hr variants, hands.md section 32): a residual block on the encoder's
+            # and on the decoder's 128-px level, the maps' own resolution, where a hand is 2-5
+            # pixels wide and the plain net has one convolution of the input. Their last batch
+            # norms start at zero: the blocks start as the identity (the input is a ReLU's), so
+            # a plain checkpoint loads into an -hr net as the same function.
+            self.e0x, self.d0x = Block(c), Block(2 * c)
+            for b in (self.e0x, self.d0x):
+                nn.init.zeros_(b.bn.weight)
         self.e1 = nn.Sequential(conv_bn(c, 2 * c, 2), Block(2 * c))  # 64
         self.e2 = nn.Sequential(conv_bn(2 * c, 4 * c, 2), Block(4 * c))  # 32
         self.e3 = nn.Sequential(conv_bn(4 * c, 8 * c, 2), Block(8 * c), Block(8 * c))  # 16
@@ -235,6 +245,8 @@ class FourierNet(nn.Module):
         """The last decoder level [B, 2c, 128, 128], which the series head reads per pixel
         (and, in training, `surfaces.GeomHead`)."""
         e0 = self.e0(x)
+        if self.hr:
+            e0 = self.e0x(e0)
         e1 = self.e1(e0)
         e2 = self.e2(e1)
         e3 = self.e3(e2)
@@ -243,7 +255,8 @@ class FourierNet(nn.Module):
         d3 = self.d3(torch.cat([up(e4), e3], 1))
         d2 = self.d2(torch.cat([up(d3), e2], 1))
         d1 = self.d1(torch.cat([up(d2), e1], 1))
-        return self.d0(torch.cat([up(d1), e0], 1))
+        d0 = self.d0(torch.cat([up(d1), e0], 1))
+        return self.d0x(d0) if self.hr else d0
 
     def head(self, d0, with_centre: bool = False):
         out = self.out(d0)
@@ -310,7 +323,7 @@ def make_fourier(variant: str) -> nn.Module:
     k, c, shift = fourier_variant(variant)
     if variant in GEOM_VARIANTS:
         return FourierGeomNet(k, c, GEOM_VARIANTS[variant])
-    return FourierNet(k, c, shift)
+    return FourierNet(k, c, shift, hr=variant in HR_VARIANTS)
 
 
 def shift_series(rel: torch.Tensor, d: torch.Tensor, k: int) -> torch.Tensor:
@@ -337,6 +350,9 @@ FOURIER_VARIANTS = {
     # ... and wider still (hands.md section 26, run (28): a candidate for the GPU boards, 3.5x fourier-small's MACs)
     "fourier-wide": (15, 16),
     "fourier-tiny": (15, 6),
+    # fourier-medium with a residual block at the maps' resolution in the encoder and the
+    # decoder (HR_VARIANTS; hands.md section 32)
+    "fourier-medium-hr": (15, 12),
     # name: (K, c, depth as a phase shift)
     "fourier-shift": (15, 12, True),
     # FourierGeomNet: (K, series width c); its surface net's width in GEOM_VARIANTS
@@ -344,6 +360,8 @@ FOURIER_VARIANTS = {
 }
 # Surface net width of the FourierGeomNet variants.
 GEOM_VARIANTS = {"fourier-geom": 8}
+# Variants with the residual blocks at the maps' resolution (FourierNet's `hr`).
+HR_VARIANTS = {"fourier-medium-hr"}
 
 
 def fourier_variant(name: str):

@@ -25,7 +25,7 @@ from .data import Split, backgrounds, photometric, random_affine, sensor
 from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, FourierGeomNet, make_fourier, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
-from .ray_losses import ray_level_bce, thin_mask
+from .ray_losses import centre_aligned, ray_level_bce, thin_mask
 from .runs import Run, device, init_weights, loop, make_ema, recompute_bn
 from .surfaces import GeomHead, geometry_loss, surface_depths
 from .items import fourier_cached, fourier_union, fourier_upper_cached
@@ -387,10 +387,16 @@ def train_fourier(args):
             for n, v in sd.items():
                 if n in own and own[n].shape != v.shape and own[n].shape[1:] == v.shape[1:]:
                     # A shift variant from an unshifted checkpoint: the head gains the centre
-                    # channel (kept at its fresh init); the series channels start from the old ones.
-                    w = own[n].clone()
+                    # channel, zeroed (d = 0: the old series unrotated, so the net starts as the
+                    # checkpoint's function); the series channels start from the old ones.
+                    w = torch.zeros_like(own[n])
                     w[: v.shape[0]] = v
                     sd[n] = w
+            for n, v in own.items():
+                if n.split(".")[0] in ("e0x", "d0x") and n not in sd:
+                    # An -hr variant from a plain checkpoint: its blocks at the maps'
+                    # resolution keep their identity start (nets.FourierNet's `hr`).
+                    sd[n] = v
             net.load_state_dict(sd)
         print(f"initialized from {args.init} (trained {light.get('step', '?')} steps before; optimizer state restarts)")
     tau = 10.0
@@ -427,12 +433,20 @@ def train_fourier(args):
         and centre losses share them)."""
         return d["coeff"][idx.to(d["coeff"].device)].to(dev).float()
 
-    def losses(pred, target, d, idx, pidx, thin=0.0):
-        l2 = FO.parseval_l2(pred, target, dim=1)
+    def losses(pred, target, d, idx, pidx, thin=0.0, align=False):
         at = d["points"].device
         idx, pidx = idx.to(at), pidx.to(at)
         pts = torch.gather(d["points"][idx], 1, pidx.unsqueeze(-1).expand(-1, -1, 3)).to(dev)
         lab = torch.gather(d["occ"][idx], 1, pidx).to(dev)
+        centre_l1 = None
+        if align:
+            # --centre-align: each ray's profile judged at the depth the net put it (the
+            # target and the labelled points moved there), its depth by the centroid's L1.
+            only = thin_mask(target, args.align_radius)[:, 0] > 0.5 if args.align_radius > 0 else None
+            target, shift, centre_l1 = centre_aligned(pred, target, k, only=only)
+            pts = pts.clone()
+            pts[..., 2] = pts[..., 2] + sample_features(shift, pts[..., :2])[..., 0] / FO.ZETA_SCALE
+        l2 = FO.parseval_l2(pred, target, dim=1)
         occ = fourier_query(pred, pts, k)
         bce = F.binary_cross_entropy_with_logits(tau * (occ - 0.5), lab, reduction="none")
         if thin > 0:
@@ -445,6 +459,8 @@ def train_fourier(args):
             bce = bce * wp / wp.mean()
         else:
             dense = l2.mean()
+        if centre_l1 is not None:
+            dense = dense + args.align_weight * centre_l1
         return dense, bce, occ, lab
 
     # Host seconds inside the steps (budget.json time_s): the batch made (OHEM sampling,
@@ -475,7 +491,7 @@ def train_fourier(args):
         # the same as training on the mirrored person with mirrored targets.
         pred = mirror_some(pred, flips)
         d = mirror_some(d, flips) if d is not None else None
-        dense, bce, occ, lab = losses(pred, target, tr, items, pidx, args.thin_weight)
+        dense, bce, occ, lab = losses(pred, target, tr, items, pidx, args.thin_weight, args.centre_align)
         loss = dense + args.point_weight * bce.mean()
         if args.ray_bce_weight > 0:
             loss = loss + args.ray_bce_weight * ray_level_bce(pred, target, k, args.ray_samples, gen, tau)
@@ -556,6 +572,9 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--point-weight", type=float, default=0.1)
     ap.add_argument("--centre-weight", type=float, default=1.0, help="Fourier shift variants: weight of the L1 loss on the ray's depth centre")
+    ap.add_argument("--centre-align", action="store_true", help="fourier: judge each ray's profile at the depth the net put its mass (the target and labelled points moved to the predicted centroid) and the depth by the centroid's L1 (--align-weight): a thin part unsure in depth by its own thickness is then learnt sharp instead of as a low blur (hands.md section 31)")
+    ap.add_argument("--align-weight", type=float, default=0.2, help="fourier --centre-align: weight of the L1 on each ray's depth centroid (zeta), over the rays where both series hold mass")
+    ap.add_argument("--align-radius", type=int, default=0, help="fourier --centre-align: move only the thin parts' rays (those an opening of this many map pixels removes, as --thin-radius); 0: every ray")
     ap.add_argument("--moment-weight", type=float, default=0.0, help="Fourier: weight of the L1 loss on each ray's first depth moment (depth order)")
     ap.add_argument("--depth-frame", default="body", choices=["body", "camera"], help="Fourier: targets with each image's mean depth at z = 0 (body, fourier.centre_depth) or as the camera saw them (camera: runs before 2026-11-23 evening)")
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
