@@ -1,6 +1,7 @@
 """The Fourier head's per-ray losses beyond the Parseval L2 (`train fourier`): the thin parts'
-weighting mask (`--thin-weight`) and the surface-level BCE on every ray (`--ray-bce-weight`).
-Both were measured against the hands (docs/eval/hands.md, sections 3 and 4)."""
+weighting mask (`--thin-weight`), the surface-level BCE on every ray (`--ray-bce-weight`) and
+each ray's profile judged at the depth the net put it (`--centre-align`). Each was measured
+against the hands and none adopted (docs/eval/hands.md, sections 3, 4 and 31)."""
 
 from __future__ import annotations
 

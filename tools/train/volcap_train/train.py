@@ -572,7 +572,7 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--point-weight", type=float, default=0.1)
     ap.add_argument("--centre-weight", type=float, default=1.0, help="Fourier shift variants: weight of the L1 loss on the ray's depth centre")
-    ap.add_argument("--centre-align", action="store_true", help="fourier: judge each ray's profile at the depth the net put its mass (the target and labelled points moved to the predicted centroid) and the depth by the centroid's L1 (--align-weight): a thin part unsure in depth by its own thickness is then learnt sharp instead of as a low blur (hands.md section 31)")
+    ap.add_argument("--centre-align", action="store_true", help="fourier: judge each ray's profile at the depth the net put its mass (the target and labelled points moved to the predicted centroid) and the depth by the centroid's L1 (--align-weight): meant to let a thin part unsure in depth by its own thickness be learnt sharp instead of as a low blur; measured, it did not, and cost every ray's depth (hands.md section 31: not adopted)")
     ap.add_argument("--align-weight", type=float, default=0.2, help="fourier --centre-align: weight of the L1 on each ray's depth centroid (zeta), over the rays where both series hold mass")
     ap.add_argument("--align-radius", type=int, default=0, help="fourier --centre-align: move only the thin parts' rays (those an opening of this many map pixels removes, as --thin-radius); 0: every ray")
     ap.add_argument("--moment-weight", type=float, default=0.0, help="Fourier: weight of the L1 loss on each ray's first depth moment (depth order)")
