@@ -50,17 +50,13 @@ def sampled_centroid(coeff: torch.Tensor, k: int, min_mass: float = 0.01, sample
     form) reads a narrow pulse's centre through the truncated sawtooth, off by up to a
     hand's thickness, and by different amounts for a pulse and the same pulse moved."""
     ok = coeff[:, 0] > min_mass
-    out = torch.zeros_like(coeff[:, 0])
-    if ok.any():
-        rays = coeff.permute(0, 2, 3, 1)[ok]  # [N, 2K+1]
-        z = (torch.arange(samples, dtype=coeff.dtype, device=coeff.device) + 0.5) / samples * 2.0 - 1.0
-        w = (rays @ FO.basis(z, k).T - floor).clamp(min=0.0)  # [N, S]
-        mass = w.sum(1)
-        c = (w * z).sum(1) / mass.clamp(min=1e-6)
-        out = out.masked_scatter(ok, torch.where(mass > 1e-6, c, torch.zeros_like(c)))
-        ok = ok.clone()
-        ok[ok.clone()] = mass > 1e-6
-    return out, ok
+    rays = coeff.permute(0, 2, 3, 1)[ok]  # [N, 2K+1]
+    z = (torch.arange(samples, dtype=coeff.dtype, device=coeff.device) + 0.5) / samples * 2.0 - 1.0
+    w = (rays @ FO.basis(z, k).T - floor).clamp(min=0.0)  # [N, S]
+    mass = w.sum(1)
+    held = mass > 1e-6
+    c = torch.where(held, (w * z).sum(1) / mass.clamp(min=1e-6), torch.zeros_like(mass))
+    return torch.zeros_like(coeff[:, 0]).masked_scatter(ok, c), ok.masked_scatter(ok, held)
 
 
 def centre_aligned(pred: torch.Tensor, target: torch.Tensor, k: int, min_mass: float = 0.01, max_shift: float = 0.25, only: torch.Tensor | None = None):
