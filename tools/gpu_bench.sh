@@ -105,8 +105,10 @@ case "$mode" in
     # device of the same adapter (a few seconds a row).
     "$bin" bench queues --res "$qres" --seconds "$secs" --out "$out"
     # The same question in the pipeline: the render stage on the networks' device or on a
-    # second one (compute.render_device), the maps crossing the host for the second.
-    "$bin" bench pipeline --backend wgpu --model fourier-small --res "$qres" --threads "$threads" \
+    # second one (compute.render_device; `auto`, the default, is the second on a GPU), the
+    # maps crossing the host for the second; every model and resolution of the matrix (the
+    # third H200 run measured fourier-small at 257^3 only: 49.8 -> 78.6 fps).
+    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --render-device shared,own --out "$out/devices"
     echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
     "$bin" bench nets --runtime tract,wgpu --runs "$((runs * 4))" --profile --top 12 --out "$out"

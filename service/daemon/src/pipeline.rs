@@ -486,14 +486,25 @@ impl AdapterRenderer {
         if mode != FieldMode::Model {
             return None;
         }
-        let own_device = device == crate::config::RenderDevice::Own;
+        let mut own_device =
+            device.resolve(Some(&g.adapter.device_type)) == crate::config::RenderDevice::Own;
         let g = if own_device {
             match g.sibling() {
                 Ok(own) => {
                     tracing::info!(
-                        "the render stage on a device of its own (compute.render_device = \"own\")"
+                        "the render stage on a device of its own (compute.render_device = \"{}\")",
+                        device.name()
                     );
                     own
+                }
+                // `auto` asked for a second device only because it usually pays: without
+                // one the render stage shares the networks' (their maps stay on the adapter).
+                Err(e) if device == crate::config::RenderDevice::Auto => {
+                    tracing::warn!(
+                        "the render stage shares the networks' device (compute.render_device = \"auto\"): no second device: {e}"
+                    );
+                    own_device = false;
+                    g.clone()
                 }
                 Err(e) => {
                     tracing::warn!("the renderer stays on the CPU: no second device: {e}");
@@ -604,6 +615,22 @@ impl AdapterRenderer {
 
 pub use field_stage::FieldOutcome;
 
+/// The device the render stage asks for with `cfg` and these models: `compute.render_device`
+/// resolved on the networks' adapter ([`crate::config::RenderDevice::resolve`]; `shared`
+/// where the networks do not run on an adapter, where nothing renders on one).
+pub fn render_device(
+    cfg: &Config,
+    models: Option<&volcap_engine::model::Models>,
+) -> crate::config::RenderDevice {
+    #[cfg(feature = "wgpu")]
+    let device_type = models
+        .and_then(|m| m.runtime.gpu())
+        .map(|g| g.adapter.device_type.as_str());
+    #[cfg(not(feature = "wgpu"))]
+    let device_type = models.and(None::<&str>);
+    cfg.compute.render_device.resolve(device_type)
+}
+
 /// Start the pipeline threads.
 pub fn start(
     cfg: &Config,
@@ -627,6 +654,7 @@ pub fn start(
     // is segmented and N + 1 encoded while frame N is localized and rendered (latest wins
     // between).
     let fielded: Arc<Slot<(Frame, FieldOutcome)>> = Arc::default();
+    let render_on = render_device(cfg, models.as_deref());
     if let (FieldMode::Model, Some(models)) = (cfg.field(), models.clone()) {
         let segmented: Arc<Slot<(Frame, field_stage::Segmented)>> = Arc::default();
         threads.push(field_stage::spawn_segment(
@@ -648,7 +676,7 @@ pub fn start(
                 split_up_to: cfg.compute.segment_thread_up_to,
                 close_frames: cfg.model.close_range_frames,
                 temporal: cfg.temporal.settings(),
-                maps_to_host: cfg.compute.render_device == crate::config::RenderDevice::Own,
+                maps_to_host: render_on == crate::config::RenderDevice::Own,
             },
         ));
     }

@@ -139,14 +139,11 @@ pub struct PipelineArgs {
     /// localization levels' conflict rounds recorded per read-back at most.
     #[arg(long = "rounds-per-wait", value_delimiter = ',', default_value = "1")]
     pub rounds_per_wait: Vec<usize>,
-    /// `compute.render_device` values (comma-separated): shared (the networks' device, one
-    /// queue) and/or own (the render stage on a second device of the adapter, the maps
-    /// crossing the host; `bench queues` measures the mechanism).
-    #[arg(
-        long = "render-device",
-        value_delimiter = ',',
-        default_value = "shared"
-    )]
+    /// `compute.render_device` values (comma-separated): auto (the daemon's default: own on a
+    /// GPU, shared on lavapipe), shared (the networks' device, one queue) and/or own (the
+    /// render stage on a second device of the adapter, the maps crossing the host; `bench
+    /// queues` measures the mechanism). Each row names the device it used.
+    #[arg(long = "render-device", value_delimiter = ',', default_value = "auto")]
     pub render_devices: Vec<String>,
     /// `model.segment_passes` values (comma-separated, 1 or 2): 2 segments each frame's
     /// person crop again (one more segmentation a frame; its accuracy in `volcap eval

@@ -184,6 +184,7 @@ fn measure(
         Box::new(move || Ok(Box::new(ReplayCamera::new(stills, fps)) as Box<dyn Camera>));
     let runtime = models.runtime.label();
     let rt = models.runtime.clone();
+    let render_device = pipeline::render_device(cfg, Some(&models)).name();
     let threads = pipeline::start(cfg, factory, shared.clone(), Some(models));
     std::thread::sleep(Duration::from_secs_f64(warmup));
     let t0 = Instant::now();
@@ -247,7 +248,7 @@ fn measure(
         net_plans: work1[5] - work0[5],
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         rounds_per_wait: cfg.compute.rounds_per_wait,
-        render_device: cfg.compute.render_device.name(),
+        render_device,
         segment_passes: cfg.model.segment_passes.unwrap_or(1),
         drop_apart: cfg.render.drop_apart,
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,

@@ -40,9 +40,15 @@ pub enum ComputeFallback {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum RenderDevice {
+    /// `own` on a GPU, `shared` on the CPU's adapter (lavapipe), [`RenderDevice::resolve`].
+    /// Measured (docs/bench/pipeline-gpu.md, third H200 run): on an NVIDIA H200 `own` took the
+    /// pipeline from 49.8 to 78.6 fps at 257^3 (fourier-small, 16 cores, the render stage
+    /// 17.7 -> 10.6 ms a frame); on lavapipe it lost (0.6 -> 0.4 fps at 65^3: its second
+    /// device takes the same CPU cores from the networks).
+    #[default]
+    Auto,
     /// The networks' device: one queue for every stage; the frame's maps stay on the
     /// adapter from the shape network to the localizer.
-    #[default]
     Shared,
     /// A second device on the same adapter: the render stage's read-backs (some ten a frame)
     /// wait for its own work only, not for the networks the other stages submitted before
@@ -54,11 +60,13 @@ pub enum RenderDevice {
 }
 
 impl RenderDevice {
-    pub const ALL: [RenderDevice; 2] = [RenderDevice::Shared, RenderDevice::Own];
+    pub const ALL: [RenderDevice; 3] =
+        [RenderDevice::Auto, RenderDevice::Shared, RenderDevice::Own];
 
     /// The config value (`volcap bench pipeline --render-device` takes the same).
     pub fn name(&self) -> &'static str {
         match self {
+            RenderDevice::Auto => "auto",
             RenderDevice::Shared => "shared",
             RenderDevice::Own => "own",
         }
@@ -67,6 +75,18 @@ impl RenderDevice {
     /// The value named `name` (as [`Self::name`] writes it).
     pub fn by_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|d| d.name() == name)
+    }
+
+    /// The device used on an adapter of `device_type` (`AdapterSummary::device_type`:
+    /// "discrete", "integrated", "virtual", "other" or "cpu"; `None` where the networks do
+    /// not run on an adapter): `auto` is `own` on any adapter but the CPU's, `shared`
+    /// there; `shared` and `own` stay as they are.
+    pub fn resolve(self, device_type: Option<&str>) -> RenderDevice {
+        match (self, device_type) {
+            (RenderDevice::Auto, Some(t)) if t != "cpu" => RenderDevice::Own,
+            (RenderDevice::Auto, _) => RenderDevice::Shared,
+            (d, _) => d,
+        }
     }
 }
 
@@ -113,7 +133,8 @@ pub struct ComputeConfig {
     /// `volcap bench pipeline --rounds-per-wait` measures the trade on a board's GPU.
     #[serde(default = "d_rounds_per_wait")]
     pub rounds_per_wait: usize,
-    /// `backend = "wgpu"`: `shared` (default) or `own` ([`RenderDevice`]).
+    /// `backend = "wgpu"`: `auto` (default: `own` on a GPU, `shared` on lavapipe), `shared`
+    /// or `own` ([`RenderDevice`]).
     #[serde(default)]
     pub render_device: RenderDevice,
 }

@@ -72,7 +72,7 @@ fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
     )
     .unwrap();
     assert_eq!(c.compute.rounds_per_wait, 8);
-    assert_eq!(c.compute.render_device, crate::config::RenderDevice::Shared);
+    assert_eq!(c.compute.render_device, crate::config::RenderDevice::Auto);
     let c = Config::parse(
         &format!("{base}[compute]\nrender_device = \"own\"\n"),
         Path::new("b.toml"),
@@ -329,5 +329,24 @@ fn drop_apart_is_read_and_a_wrong_value_named() {
             e.contains("b.toml") && e.contains("drop_apart"),
             "{bad}: {e}"
         );
+    }
+}
+
+#[test]
+fn render_device_auto_is_own_on_a_gpu_and_shared_on_the_cpu() {
+    use crate::config::RenderDevice::{Auto, Own, Shared};
+    for t in ["discrete", "integrated", "virtual", "other"] {
+        assert_eq!(Auto.resolve(Some(t)), Own, "{t}");
+    }
+    // lavapipe, and no adapter at all (tract or ONNX Runtime run the networks).
+    assert_eq!(Auto.resolve(Some("cpu")), Shared);
+    assert_eq!(Auto.resolve(None), Shared);
+    // A value written in the config is kept whatever the adapter.
+    for t in [Some("discrete"), Some("cpu"), None] {
+        assert_eq!(Shared.resolve(t), Shared);
+        assert_eq!(Own.resolve(t), Own);
+    }
+    for d in crate::config::RenderDevice::ALL {
+        assert_eq!(crate::config::RenderDevice::by_name(d.name()), Some(d));
     }
 }

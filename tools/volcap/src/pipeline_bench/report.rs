@@ -152,7 +152,24 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
     let (left, right) = root.split_horizontally(550);
     let key = |r: &Row| {
         (
-            format!("{}{} {}", r.model, apart_note(r.drop_apart), r.runtime),
+            // The GPU backend's knobs, where a row sets them: without them in the key the
+            // rows of `--render-device shared,own` or `--rounds-per-wait 1,8` drew one line.
+            format!(
+                "{}{} {}{}{}",
+                r.model,
+                apart_note(r.drop_apart),
+                r.runtime,
+                if r.render_device == RenderDevice::Own.name() {
+                    " own device"
+                } else {
+                    ""
+                },
+                if r.rounds_per_wait > 1 && r.dispatches_per_frame > 0.0 {
+                    format!(" rounds<={}", r.rounds_per_wait)
+                } else {
+                    String::new()
+                }
+            ),
             r.coarse_level,
             r.threads,
             r.segment_thread_up_to,
