@@ -33,6 +33,10 @@ pub struct ComputeStatus {
     pub note: Option<String>,
     /// Whether the stages of [`ON_ADAPTER`] run there (model mode on the adapter).
     pub networks_on_adapter: bool,
+    /// Where the render stage draws the model's frames on the adapter, once it has opened
+    /// its renderer: "shared" (the networks' device) or "own" (a second device,
+    /// `compute.render_device`); unset where it renders on the CPU.
+    pub render_device: std::sync::OnceLock<&'static str>,
     counters: Option<Counters>,
 }
 
@@ -44,6 +48,7 @@ impl ComputeStatus {
             adapter_label: None,
             note,
             networks_on_adapter: false,
+            render_device: std::sync::OnceLock::new(),
             counters: None,
         }
     }
@@ -55,6 +60,7 @@ impl ComputeStatus {
             "note": self.note,
             "on_adapter": if self.networks_on_adapter { ON_ADAPTER } else { &[] },
             "on_cpu": if self.networks_on_adapter { ON_CPU } else { &["every stage"] },
+            "render_device": self.render_device.get(),
             "adapter_work": self.counters.as_ref().map(|c| c()),
         })
     }
@@ -150,6 +156,7 @@ fn open_gpu(adapter: &str) -> Result<(Runtime, ComputeStatus), String> {
         adapter_label: Some(gpu.adapter.label()),
         note: None,
         networks_on_adapter: false,
+        render_device: std::sync::OnceLock::new(),
         counters: Some(Box::new(move || {
             serde_json::to_value(g.counters()).unwrap_or_default()
         })),

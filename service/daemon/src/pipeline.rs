@@ -527,6 +527,11 @@ impl AdapterRenderer {
         }
     }
 
+    /// The device it draws on: "own" (a second device of the adapter) or "shared".
+    pub(crate) fn device_name(&self) -> &'static str {
+        if self.own_device { "own" } else { "shared" }
+    }
+
     pub(crate) fn render(
         &mut self,
         renderer: &mut Renderer,
@@ -600,6 +605,10 @@ impl AdapterRenderer {
         _device: crate::config::RenderDevice,
     ) -> Option<Self> {
         None
+    }
+
+    pub(crate) fn device_name(&self) -> &'static str {
+        match *self {}
     }
 
     pub(crate) fn render(

@@ -143,6 +143,15 @@ fn model_mode_runs_its_networks_on_the_adapter() {
         "{s}"
     );
     assert!(s["field"].as_str().unwrap().contains("wgpu"), "{s}");
+    // `compute.render_device = "auto"` (the default) keeps the render stage on the networks'
+    // device on the CPU's adapter (lavapipe; a second device there takes the same cores), on
+    // a second device on a GPU.
+    let expected = if c["adapter"]["device_type"] == "cpu" {
+        "shared"
+    } else {
+        "own"
+    };
+    assert_eq!(c["render_device"], expected, "{s}");
     // The same counters for Prometheus.
     let (st, _, body) = common::request(&d.addr, "GET", "/metrics", "");
     let m = String::from_utf8_lossy(&body);
@@ -192,5 +201,6 @@ fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
         down >= rendered * 31 * 128 * 128 * 4,
         "{down} bytes down for {rendered} frames: {s}"
     );
+    assert_eq!(s["compute"]["render_device"], "own", "{s}");
     assert_eq!(s["people"], 1, "{s}");
 }

@@ -29,6 +29,9 @@ pub(super) fn spawn(
                 rounds_per_wait,
                 render_device,
             );
+            if let Some(r) = &on_adapter {
+                let _ = sh.compute.render_device.set(r.device_name());
+            }
             let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
                 let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
                 sh.set_state(PipelineState::Degraded(why));
