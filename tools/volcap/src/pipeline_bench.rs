@@ -184,7 +184,9 @@ fn measure(
         Box::new(move || Ok(Box::new(ReplayCamera::new(stills, fps)) as Box<dyn Camera>));
     let runtime = models.runtime.label();
     let rt = models.runtime.clone();
-    let render_device = pipeline::render_device(cfg, Some(&models)).name();
+    // The device asked for; the one the render stage opened, once it has (`auto` without a
+    // second device shares the networks').
+    let asked = pipeline::render_device(cfg, Some(&models)).name();
     let threads = pipeline::start(cfg, factory, shared.clone(), Some(models));
     std::thread::sleep(Duration::from_secs_f64(warmup));
     let t0 = Instant::now();
@@ -212,6 +214,7 @@ fn measure(
         _ if published == 0 => Some("no frame published".into()),
         _ => None,
     };
+    let render_device = shared.compute.render_device.get().copied().unwrap_or(asked);
     shared.stop.store(true, Ordering::Relaxed);
     for t in threads {
         let _ = t.join();
