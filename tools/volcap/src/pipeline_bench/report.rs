@@ -190,7 +190,9 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
         ("p99 latency, ms", |r| r.latency_p99_ms),
     ];
     for (area, (what, f)) in [&left, &right].into_iter().zip(metric) {
-        let ymax = rows.iter().map(f).fold(1.0, f64::max) * 1.15;
+        // Headroom above the highest point for the legend box (a line of it per series, in
+        // the upper right): with eight series the box covered the lines it names.
+        let ymax = rows.iter().map(f).fold(1.0, f64::max) * (1.15 + 0.06 * keys.len() as f64);
         let mut chart = ChartBuilder::on(area)
             .caption(what, ("sans-serif", 20))
             .margin(12)
