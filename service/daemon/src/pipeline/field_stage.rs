@@ -260,8 +260,12 @@ pub(super) fn spawn(
                         Err(e)
                     }
                 };
+                // Not when `auto` left the render stage on the networks' device (no second
+                // one opened): it reads the maps there, and a read-back would cost 2 MB a frame
+                // for nothing.
+                let to_host = maps_to_host && sh.compute.render_device.get() != Some(&"shared");
                 let outcome = match outcome {
-                    Ok(field) if maps_to_host => match field.fourier_maps() {
+                    Ok(field) if to_host => match field.fourier_maps() {
                         Ok(_) => Ok(field),
                         Err(e) => Err(format!("the maps read back for the render device: {e}")),
                     },
