@@ -8,7 +8,7 @@ pub mod rtsp;
 mod temporal;
 pub use compute::{
     ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, RenderDevice,
-    THREADS,
+    RoundWaits, THREADS,
 };
 pub use live::{Live, LiveError};
 pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_PASSES, ThinParts};

@@ -523,8 +523,7 @@ pub fn start(
         cfg.render.oracle_voxel_m,
         cfg.field(),
         cfg.compute.threads,
-        cfg.compute.rounds_per_wait,
-        cfg.compute.render_device,
+        cfg.compute.clone(),
         models.clone(),
     ));
 

@@ -173,7 +173,9 @@ fn model_mode_runs_its_networks_on_the_adapter() {
 /// `compute.render_device = "own"`: the render stage on a second device of the adapter, the
 /// frame's maps read back by the field stage (some 2 MB a frame, where the shared device
 /// brings back a fraction of that: with `shared` this test fails) and written by the render
-/// stage; frames are published, rendered there, and counted with the networks' work.
+/// stage; frames are published, rendered there, and counted with the networks' work. With
+/// `compute.round_waits = "per-frame"` the levels' conflict rounds are predicted from the
+/// frame before (counted in `adapter_work.predicted`).
 #[cfg(feature = "wgpu")]
 #[test]
 fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
@@ -182,7 +184,10 @@ fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
         return;
     }
     let dir = tmp("gpu-own-render");
-    let d = start(&config(&dir, "backend = \"wgpu\"\nrender_device = \"own\""));
+    let d = start(&config(
+        &dir,
+        "backend = \"wgpu\"\nrender_device = \"own\"\nround_waits = \"per-frame\"",
+    ));
     let s = wait_for(
         &d.addr,
         "frames rendered on the second device",
@@ -203,4 +208,11 @@ fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
     );
     assert_eq!(s["compute"]["render_device"], "own", "{s}");
     assert_eq!(s["people"], 1, "{s}");
+    // The frames after the first of the grid are predicted (but for a frame whose
+    // prediction fell short twice, run again per round).
+    let predicted = w["predicted"].as_u64().unwrap();
+    assert!(
+        predicted >= 1 && 2 * predicted >= rendered,
+        "{predicted} of {rendered} predicted: {s}"
+    );
 }

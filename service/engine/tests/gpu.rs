@@ -272,10 +272,11 @@ fn analytic_tables(
 /// for the paper's method, its no-conflict variant and the tight one, from two coarse levels,
 /// with lists too small at first (grown, the frame run again), and with the grid's values
 /// tiled over several bindings (as where one binding cannot hold a grid: 513^3 on lavapipe)
-/// in tiles of 2^16 and 2^12 floats.
+/// in tiles of 2^16 and 2^12 floats; and with each level's rounds predicted from the frame
+/// before (one read-back a frame), frames whose prediction fell short run again.
 #[test]
 fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
-    use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
+    use volcap_engine::gpu::localize::{GpuField, GpuLocalizer, RoundWaits};
     use volcap_engine::grid::{Grid, GridSpec};
     use volcap_engine::localize::{HierarchicalMode, Localizer, Method};
     let Some(gpu) = gpu() else { return };
@@ -292,17 +293,26 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
         }
     };
     let mut tiles_seen = Vec::new();
-    for (res, cap, per_wait, tile) in [
-        (33, 1 << 18, 1, 0),
-        (129, 1 << 18, 8, 0),
-        (65, 64, 4, 0),
-        (65, 1 << 18, 1, 1 << 16),
-        (33, 1000, 2, 1 << 12),
+    // With the rounds predicted (one read-back a frame, the last rows), the frames go scene
+    // after scene under one method and coarse level, each predicted from the one before:
+    // some predictions fall short (the frame run again per round), some hold; both must
+    // give the CPU's frame, and both must happen.
+    let (per_round, per_frame) = (RoundWaits::PerRound, RoundWaits::PerFrame);
+    let before = gpu.counters();
+    for (res, cap, per_wait, tile, waits) in [
+        (33, 1 << 18, 1, 0, per_round),
+        (129, 1 << 18, 8, 0, per_round),
+        (65, 64, 4, 0, per_round),
+        (65, 1 << 18, 1, 1 << 16, per_round),
+        (33, 1000, 2, 1 << 12, per_round),
+        (65, 1 << 18, 1, 0, per_frame),
+        (33, 64, 1, 1 << 12, per_frame),
     ] {
         let gl = GpuLocalizer::new(gpu.clone())
             .unwrap()
             .with_list_capacity(cap)
-            .with_rounds_per_wait(per_wait);
+            .with_rounds_per_wait(per_wait)
+            .with_round_waits(waits);
         let mut gl = tiled(gl, tile);
         let spec = GridSpec::from_resolution(res).unwrap();
         let tiling = gl.tiling(spec);
@@ -314,53 +324,74 @@ fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_sc
             );
             tiles_seen.push(tiling.tiles);
         }
-        for (name, scene, table) in analytic_tables(spec) {
-            for (method, mode) in [
-                (Method::Hierarchical, HierarchicalMode::Paper),
-                (Method::HierarchicalNoConflict, HierarchicalMode::NoConflict),
-                (Method::HierarchicalTight, HierarchicalMode::Tight),
-            ] {
-                for coarse in [2, 3] {
-                    let mut cpu = Grid::new(spec);
-                    let want = cpu_loc.run(method, &scene, spec, coarse, &mut cpu).unwrap();
-                    let got = gl
-                        .run(&GpuField::Table(&table), spec, coarse, mode)
-                        .unwrap();
-                    let mut g = Grid::new(spec);
-                    gl.read_grid(&mut g).unwrap();
-                    let what = format!(
-                        "{name} {res}^3 {} from level {coarse}, {per_wait} rounds per wait, \
-                         {} tile(s)",
-                        method.name(),
-                        tiling.tiles
-                    );
-                    assert_eq!(got.evaluations, want.evaluations, "{what}: evaluations");
-                    assert_eq!(got.conflict_rounds, want.conflict_rounds, "{what}: rounds");
-                    assert_eq!(
-                        g.evaluated.count_ones(),
-                        cpu.evaluated.count_ones(),
-                        "{what}: evaluated points"
-                    );
-                    let set_differs =
-                        (0..spec.len()).find(|&q| g.evaluated.get(q) != cpu.evaluated.get(q));
-                    assert_eq!(set_differs, None, "{what}: evaluated sets differ");
-                    let value_differs =
-                        (0..spec.len()).find(|&q| g.values[q].to_bits() != cpu.values[q].to_bits());
-                    assert_eq!(
-                        value_differs.map(|q| (q, g.values[q], cpu.values[q])),
-                        None,
-                        "{what}: values differ"
-                    );
-                    checked += 1;
+        let tables = analytic_tables(spec);
+        let methods = [
+            (Method::Hierarchical, HierarchicalMode::Paper),
+            (Method::HierarchicalNoConflict, HierarchicalMode::NoConflict),
+            (Method::HierarchicalTight, HierarchicalMode::Tight),
+        ];
+        let mut frames = Vec::new();
+        if waits == per_round {
+            for t in &tables {
+                for &m in &methods {
+                    frames.extend([2, 3].map(|c| (t, m, c)));
                 }
             }
+        } else {
+            for &m in &methods {
+                for c in [2, 3] {
+                    frames.extend(tables.iter().map(|t| (t, m, c)));
+                    // The last scene again: its own rounds, a prediction that holds.
+                    frames.extend(tables.last().map(|t| (t, m, c)));
+                }
+            }
+        }
+        for ((name, scene, table), (method, mode), coarse) in frames {
+            let mut cpu = Grid::new(spec);
+            let want = cpu_loc.run(method, scene, spec, coarse, &mut cpu).unwrap();
+            let got = gl.run(&GpuField::Table(table), spec, coarse, mode).unwrap();
+            let mut g = Grid::new(spec);
+            gl.read_grid(&mut g).unwrap();
+            let what = format!(
+                "{name} {res}^3 {} from level {coarse}, {per_wait} rounds per wait, \
+                 {} tile(s), waits {}",
+                method.name(),
+                tiling.tiles,
+                waits.name()
+            );
+            assert_eq!(got.evaluations, want.evaluations, "{what}: evaluations");
+            assert_eq!(got.conflict_rounds, want.conflict_rounds, "{what}: rounds");
+            assert_eq!(
+                g.evaluated.count_ones(),
+                cpu.evaluated.count_ones(),
+                "{what}: evaluated points"
+            );
+            let set_differs = (0..spec.len()).find(|&q| g.evaluated.get(q) != cpu.evaluated.get(q));
+            assert_eq!(set_differs, None, "{what}: evaluated sets differ");
+            let value_differs =
+                (0..spec.len()).find(|&q| g.values[q].to_bits() != cpu.values[q].to_bits());
+            assert_eq!(
+                value_differs.map(|q| (q, g.values[q], cpu.values[q])),
+                None,
+                "{what}: values differ"
+            );
+            checked += 1;
         }
         if cap < 1000 {
             assert!(gl.list_capacity() > cap, "the small lists grew");
         }
     }
-    assert_eq!(tiles_seen, [5, 9]);
-    println!("{checked} runs equal to the CPU's");
+    assert_eq!(tiles_seen, [5, 9, 9]);
+    let after = gpu.counters();
+    let (predicted, reruns) = (
+        after.predicted - before.predicted,
+        after.reruns - before.reruns,
+    );
+    assert!(
+        reruns > 0 && predicted > 2 * reruns,
+        "predicted frames {predicted}, run again {reruns}"
+    );
+    println!("{checked} runs equal to the CPU's ({predicted} predicted, {reruns} run again)");
 }
 
 /// A grid whose values do not fit one storage binding is tiled: 513^3 (540 MB of values)
@@ -506,12 +537,13 @@ fn index_lists_stop_growing_at_one_binding_with_an_error_not_a_panic() {
 /// The mesh-free renderer with its grid on the adapter (`Renderer::render_gpu`: localization
 /// and the culled final level there) against the CPU renderer on every analytic scene, the
 /// field tabulated on the host: the same hits (coarse and final), depths, images, evaluation
-/// counts and culled nodes; lists too small at first (grown); and the display image drawn
+/// counts and culled nodes; lists too small at first (grown); the levels' rounds predicted
+/// from the frame before (frames run again where that fell short); and the display image drawn
 /// there within 1/255 of the CPU's on >= 99.9 % of channels, its depth within 1e-5 on >=
 /// 99.9 % of pixels.
 #[test]
 fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
-    use volcap_engine::gpu::localize::GpuField;
+    use volcap_engine::gpu::localize::{GpuField, RoundWaits};
     use volcap_engine::gpu::render::GpuRenderer;
     use volcap_engine::grid::GridSpec;
     use volcap_engine::render::{RenderOptions, Renderer};
@@ -523,89 +555,112 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
     let (mut depth_off, mut pixels) = (0usize, 0usize);
     // The last row tiles the grid's values over five bindings (as 513^3 on lavapipe): the
     // render's kernels and the display's read them through the tiles.
-    for (res, cap, tile) in [
-        (65, 1 << 18, 0),
-        (129, 1 << 18, 0),
-        (33, 16, 0),
-        (65, 1 << 18, 1 << 16),
+    // The last two rows predict the levels' conflict rounds from the frame before (one
+    // read-back for the levels): the frames go scene after scene, some predictions fall
+    // short (the frame run again), some hold; the same frames either way.
+    let (per_round, per_frame) = (RoundWaits::PerRound, RoundWaits::PerFrame);
+    let counted0 = gpu.counters();
+    for (res, cap, tile, waits) in [
+        (65, 1 << 18, 0, per_round),
+        (129, 1 << 18, 0, per_round),
+        (33, 16, 0, per_round),
+        (65, 1 << 18, 1 << 16, per_round),
+        (65, 1 << 18, 0, per_frame),
+        (33, 16, 0, per_frame),
     ] {
         // At 129^3 the levels' conflict rounds go to the adapter 4 at a time (the rounds after
         // the loop converged run over empty lists): the same frames.
         let mut gr = GpuRenderer::new(gpu.clone())
             .unwrap()
             .with_list_capacity(cap)
-            .with_rounds_per_wait(if res == 129 { 4 } else { 1 });
+            .with_rounds_per_wait(if res == 129 { 4 } else { 1 })
+            .with_round_waits(waits);
         if tile > 0 {
             gr = gr.with_tile_floats(tile);
         }
         let spec = GridSpec::from_resolution(res).unwrap();
-        for (name, scene, table) in analytic_tables(spec) {
-            // The second row with the pass over the pieces apart from the body on (it drops
-            // nothing here: two-bodies' second body is as large as the first; the next test
-            // drops pieces).
-            for (shade, coarse, apart) in [(false, 3, None), (true, 2, Some(0.1))] {
-                let opts = RenderOptions {
-                    coarse_level: coarse,
-                    background: [0.1, 0.2, 0.3, 1.0],
-                    shade,
-                    drop_apart: apart,
-                };
-                let what = format!(
-                    "{name} {res}^3 shade {shade} from level {coarse}, tiles of {tile}, \
-                     apart {apart:?}"
-                );
-                let want = cpu.render(&scene, &scene, spec, &opts).unwrap();
-                let got = on_gpu
-                    .render_gpu(
-                        &mut gr,
-                        &GpuField::Table(&table),
-                        &scene,
-                        &scene,
-                        spec,
-                        &opts,
-                    )
-                    .unwrap();
-                assert_eq!(got, want, "{what}: stats");
-                assert_eq!(
-                    on_gpu.coarse_hits(),
-                    cpu.coarse_hits(),
-                    "{what}: coarse hits"
-                );
-                assert_eq!(on_gpu.hits(), cpu.hits(), "{what}: hits");
-                let dz = on_gpu
-                    .depth()
-                    .iter()
-                    .zip(cpu.depth())
-                    .position(|(a, b)| a.to_bits() != b.to_bits());
-                assert_eq!(dz, None, "{what}: depths");
-                assert_eq!(on_gpu.rgba(), cpu.rgba(), "{what}: images");
-                let size = 2 * res + 7;
-                let a = cpu.render_display(size, opts.background).to_vec();
-                let b = on_gpu
-                    .render_display_gpu(&mut gr, size, opts.background)
-                    .unwrap()
-                    .to_vec();
-                assert_eq!(a.len(), b.len());
-                close += a
-                    .iter()
-                    .zip(&b)
-                    .filter(|(x, y)| x.abs_diff(**y) <= 1)
-                    .count();
-                channels += a.len();
-                // The blend of four columns is summed on the adapter, which may fuse its
-                // multiply-adds: where the blend lies within rounding of 0.5 (the noise
-                // scene's field hovers there) a ray can stop one node earlier or later.
-                let off = on_gpu
-                    .display_depth()
-                    .iter()
-                    .zip(cpu.display_depth())
-                    .filter(|(x, y)| (*x - *y).abs() > 1e-5)
-                    .count();
-                depth_off += off;
-                pixels += size * size;
+        let tables = analytic_tables(spec);
+        // The second option set with the pass over the pieces apart from the body on (it
+        // drops nothing here: two-bodies' second body is as large as the first; the next test
+        // drops pieces).
+        let option_sets = [(false, 3, None), (true, 2, Some(0.1))];
+        let mut frames = Vec::new();
+        if waits == per_round {
+            for t in &tables {
+                frames.extend(option_sets.map(|o| (t, o)));
+            }
+        } else {
+            for o in option_sets {
+                frames.extend(tables.iter().map(|t| (t, o)));
+                frames.extend(tables.last().map(|t| (t, o)));
             }
         }
+        for ((name, scene, table), (shade, coarse, apart)) in frames {
+            let opts = RenderOptions {
+                coarse_level: coarse,
+                background: [0.1, 0.2, 0.3, 1.0],
+                shade,
+                drop_apart: apart,
+            };
+            let what = format!(
+                "{name} {res}^3 shade {shade} from level {coarse}, tiles of {tile}, \
+                 apart {apart:?}, waits {}",
+                waits.name()
+            );
+            let want = cpu.render(scene, scene, spec, &opts).unwrap();
+            let got = on_gpu
+                .render_gpu(&mut gr, &GpuField::Table(table), scene, scene, spec, &opts)
+                .unwrap();
+            assert_eq!(got, want, "{what}: stats");
+            assert_eq!(
+                on_gpu.coarse_hits(),
+                cpu.coarse_hits(),
+                "{what}: coarse hits"
+            );
+            assert_eq!(on_gpu.hits(), cpu.hits(), "{what}: hits");
+            let dz = on_gpu
+                .depth()
+                .iter()
+                .zip(cpu.depth())
+                .position(|(a, b)| a.to_bits() != b.to_bits());
+            assert_eq!(dz, None, "{what}: depths");
+            assert_eq!(on_gpu.rgba(), cpu.rgba(), "{what}: images");
+            let size = 2 * res + 7;
+            let a = cpu.render_display(size, opts.background).to_vec();
+            let b = on_gpu
+                .render_display_gpu(&mut gr, size, opts.background)
+                .unwrap()
+                .to_vec();
+            assert_eq!(a.len(), b.len());
+            close += a
+                .iter()
+                .zip(&b)
+                .filter(|(x, y)| x.abs_diff(**y) <= 1)
+                .count();
+            channels += a.len();
+            // The blend of four columns is summed on the adapter, which may fuse its
+            // multiply-adds: where the blend lies within rounding of 0.5 (the noise
+            // scene's field hovers there) a ray can stop one node earlier or later.
+            let off = on_gpu
+                .display_depth()
+                .iter()
+                .zip(cpu.display_depth())
+                .filter(|(x, y)| (*x - *y).abs() > 1e-5)
+                .count();
+            depth_off += off;
+            pixels += size * size;
+        }
     }
+    let counted = gpu.counters();
+    let (predicted, reruns) = (
+        counted.predicted - counted0.predicted,
+        counted.reruns - counted0.reruns,
+    );
+    println!("{predicted} frames predicted, {reruns} run again");
+    assert!(
+        reruns > 0 && predicted > 2 * reruns,
+        "predicted frames {predicted}, run again {reruns}"
+    );
     // The adapter's clock on the localizations and renders and on the display images: it
     // ran where the adapter has timestamps (the timer's read-back in the counters' own),
     // and nothing is counted where it has none.

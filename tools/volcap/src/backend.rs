@@ -42,8 +42,9 @@ fn gpu(_adapter: &str) -> anyhow::Result<Runtime> {
 /// Host <-> adapter traffic, dispatches, the networks' nanoseconds on the adapter, the
 /// read-backs waited for, the networks planned, and the nanoseconds on the adapter of the
 /// frames' maps, of localization and rendering and of the display images, so far (zeros off
-/// the GPU; the nanoseconds 0 where the adapter has no timestamps).
-pub fn adapter_work(rt: &Runtime) -> [u64; 9] {
+/// the GPU; the nanoseconds 0 where the adapter has no timestamps), then the frames whose
+/// levels' conflict rounds were predicted and those of them run again.
+pub fn adapter_work(rt: &Runtime) -> [u64; 11] {
     #[cfg(feature = "wgpu")]
     if let Some(g) = rt.gpu() {
         let c = g.counters();
@@ -57,10 +58,12 @@ pub fn adapter_work(rt: &Runtime) -> [u64; 9] {
             c.maps_gpu_ns,
             c.localize_gpu_ns,
             c.display_gpu_ns,
+            c.predicted,
+            c.reruns,
         ];
     }
     let _ = rt;
-    [0; 9]
+    [0; 11]
 }
 
 /// Localization and the mesh-free render of a frame's model field: with `--backend wgpu` on

@@ -170,7 +170,7 @@ fn adapter_rows(
     a: &LocalizeArgs,
     rows: &mut Vec<Row>,
 ) -> anyhow::Result<()> {
-    use volcap_engine::gpu::localize::GpuLocalizer;
+    use volcap_engine::gpu::localize::{GpuLocalizer, RoundWaits};
     use volcap_engine::localize::HierarchicalMode;
     let BenchField::Model(model, Some(gpu)) = field else {
         return Ok(());
@@ -183,10 +183,19 @@ fn adapter_rows(
     if let Some(bad) = per_wait.iter().find(|n| !(1..=64).contains(*n)) {
         anyhow::bail!("--rounds-per-wait {bad}: must lie in 1..=64");
     }
-    for &per in per_wait {
+    let round_waits = a
+        .round_waits
+        .iter()
+        .map(|w| RoundWaits::parse(w.trim()).map_err(|e| anyhow::anyhow!("--round-waits: {e}")))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let plans = per_wait
+        .iter()
+        .flat_map(|p| round_waits.iter().map(move |w| (*p, *w)));
+    for (per, waits_kind) in plans {
         let mut gl = GpuLocalizer::new(gpu.clone())
             .map_err(anyhow::Error::msg)?
-            .with_rounds_per_wait(per);
+            .with_rounds_per_wait(per)
+            .with_round_waits(waits_kind);
         if let Err(e) = gl.check_size(spec) {
             // A grid over the adapter's buffer limit: the CPU rows stand, the adapter's are
             // left out and said why (the rest of the table still runs).
@@ -229,10 +238,14 @@ fn adapter_rows(
                 coarse_resolution: (1usize << coarse) + 1,
                 // The adapter's rows name the read-backs each run waited for (and the batch
                 // limit, where more than one is measured).
-                method: if per_wait.len() > 1 {
-                    format!("{}@adapter ({per} rounds/wait, {waits:.0} waits)", m.name())
-                } else {
-                    format!("{}@adapter ({waits:.0} waits)", m.name())
+                method: match (waits_kind, per_wait.len() > 1) {
+                    (RoundWaits::PerFrame, _) => {
+                        format!("{}@adapter (rounds predicted, {waits:.0} waits)", m.name())
+                    }
+                    (_, true) => {
+                        format!("{}@adapter ({per} rounds/wait, {waits:.0} waits)", m.name())
+                    }
+                    _ => format!("{}@adapter ({waits:.0} waits)", m.name()),
                 },
                 param: None,
                 evaluations: stats.evaluations,

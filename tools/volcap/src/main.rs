@@ -145,6 +145,16 @@ pub struct PipelineArgs {
     /// queues` measures the mechanism). Each row names the device it used.
     #[arg(long = "render-device", value_delimiter = ',', default_value = "auto")]
     pub render_devices: Vec<String>,
+    /// `compute.round_waits` values (comma-separated): per-round (the default: the render
+    /// stage reads the levels' conflict loop after each round) and/or per-frame (each
+    /// level's rounds predicted from the last frame, one read-back for the levels; a frame
+    /// the prediction fell short of runs again, counted in the row's note).
+    #[arg(
+        long = "round-waits",
+        value_delimiter = ',',
+        default_value = "per-round"
+    )]
+    pub round_waits: Vec<String>,
     /// `model.segment_passes` values (comma-separated, 1 or 2): 2 segments each frame's
     /// person crop again (one more segmentation a frame; its accuracy in `volcap eval
     /// --segment-passes 1,2`). Unset: each model as it was trained (its file's
@@ -238,6 +248,16 @@ pub struct LocalizeArgs {
     /// without the GPU backend does not have).
     #[arg(long, value_delimiter = ',', default_value = "1")]
     pub rounds_per_wait: Vec<usize>,
+    /// `--backend wgpu`, the `@adapter` rows: when the host reads the conflict loop
+    /// (comma-separated: a row set each): per-round (after each round or batch) and/or
+    /// per-frame (each level's rounds predicted from the run before: one read-back a run;
+    /// the runs of a row localize the same field, so the prediction holds after the first).
+    #[arg(
+        long = "round-waits",
+        value_delimiter = ',',
+        default_value = "per-round"
+    )]
+    pub round_waits: Vec<String>,
     /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
     #[arg(long, default_value = "auto")]
     pub adapter: String,

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use volcap_engine::model::{Models, Precision, Runtime, RuntimeChoice};
 use volcapd::capture::Camera;
 use volcapd::capture::replay::{ReplayCamera, Still};
-use volcapd::config::{Config, RenderDevice};
+use volcapd::config::{Config, RenderDevice, RoundWaits};
 use volcapd::pipeline::{self, PipelineState, Shared, stage};
 
 mod report;
@@ -75,6 +75,11 @@ pub struct Row {
     pub rounds_per_wait: usize,
     /// `compute.render_device` ("shared" or "own").
     pub render_device: &'static str,
+    /// `compute.round_waits` ("per-round" or "per-frame").
+    pub round_waits: &'static str,
+    /// Frames whose levels' rounds were predicted, and those of them run again, per frame.
+    pub predicted_per_frame: f64,
+    pub reruns_per_frame: f64,
     /// `model.segment_passes`.
     pub segment_passes: u8,
     /// `render.drop_apart` (0: pieces apart from the body kept).
@@ -134,7 +139,7 @@ type Setup = (
     usize,
     bool,
     f32,
-    (usize, RenderDevice, u8, f32),
+    (usize, RoundWaits, RenderDevice, u8, f32),
 );
 
 /// A loaded model set: name, precision, runtime index, segmentation passes.
@@ -151,14 +156,15 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         display,
         temporal,
         yaw,
-        (rounds, device, passes, apart),
+        (rounds, waits, device, passes, apart),
     ) = setup;
     let device = device.name();
+    let waits = waits.name();
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\ndrop_apart = {apart:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\n\
-         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nrender_device = {device:?}\n\
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\n\
          [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
         match prec {
@@ -252,6 +258,9 @@ fn measure(
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         rounds_per_wait: cfg.compute.rounds_per_wait,
         render_device,
+        round_waits: cfg.compute.round_waits.name(),
+        predicted_per_frame: (work1[9] - work0[9]) as f64 / published.max(1) as f64,
+        reruns_per_frame: (work1[10] - work0[10]) as f64 / published.max(1) as f64,
         segment_passes: cfg.model.segment_passes.unwrap_or(1),
         drop_apart: cfg.render.drop_apart,
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
@@ -285,6 +294,16 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
             RenderDevice::by_name(d.trim()).ok_or_else(|| {
                 let names: Vec<_> = RenderDevice::ALL.iter().map(|d| d.name()).collect();
                 anyhow!("--render-device {d:?}: one of {}", names.join(", "))
+            })
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let round_waits = a
+        .round_waits
+        .iter()
+        .map(|w| {
+            RoundWaits::by_name(w.trim()).ok_or_else(|| {
+                let names: Vec<_> = RoundWaits::ALL.iter().map(|w| w.name()).collect();
+                anyhow!("--round-waits {w:?}: one of {}", names.join(", "))
             })
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
@@ -340,7 +359,11 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     for &d in &a.display_sizes {
                         for &tf in &a.temporal {
                             for &yaw in &a.yaws {
-                                for &rounds in &a.rounds_per_wait {
+                                for (&rounds, &waits) in a
+                                    .rounds_per_wait
+                                    .iter()
+                                    .flat_map(|r| round_waits.iter().map(move |w| (r, w)))
+                                {
                                     for (&dev, &passes) in render_devices
                                         .iter()
                                         .flat_map(|d| passes_of_model.iter().map(move |p| (d, p)))
@@ -360,7 +383,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                                 d,
                                                 tf,
                                                 yaw,
-                                                (rounds, dev, passes, apart),
+                                                (rounds, waits, dev, passes, apart),
                                             ));
                                         }
                                     }
@@ -456,6 +479,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.yaw_deg == r.yaw_deg
                     && b.rounds_per_wait == r.rounds_per_wait
                     && b.render_device == r.render_device
+                    && b.round_waits == r.round_waits
                     && b.segment_passes == r.segment_passes
                     && b.drop_apart == r.drop_apart
             })

@@ -88,6 +88,22 @@ fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
         e.contains("line 5") && e.contains("render_device") && e.contains("own"),
         "{e}"
     );
+    assert_eq!(c.compute.round_waits, crate::config::RoundWaits::PerRound);
+    let c = Config::parse(
+        &format!("{base}[compute]\nround_waits = \"per-frame\"\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c.compute.round_waits, crate::config::RoundWaits::PerFrame);
+    let e = Config::parse(
+        &format!("{base}[compute]\nround_waits = \"sometimes\"\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("line 5") && e.contains("round_waits") && e.contains("per-frame"),
+        "{e}"
+    );
     let e = Config::parse(
         &format!("{base}[compute]\nsegment_thread_up_to = 100\n"),
         Path::new("b.toml"),

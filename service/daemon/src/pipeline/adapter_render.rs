@@ -22,9 +22,10 @@ impl AdapterRenderer {
     pub(crate) fn open(
         models: Option<&volcap_engine::model::Models>,
         mode: FieldMode,
-        rounds_per_wait: usize,
-        device: crate::config::RenderDevice,
+        compute: &crate::config::ComputeConfig,
     ) -> Option<Self> {
+        use volcap_engine::gpu::localize::RoundWaits;
+        let device = compute.render_device;
         let volcap_engine::model::Runtime::Wgpu(g) = &models?.runtime else {
             return None;
         };
@@ -61,7 +62,12 @@ impl AdapterRenderer {
         };
         match volcap_engine::gpu::render::GpuRenderer::new(g) {
             Ok(gpu) => Some(AdapterRenderer {
-                gpu: gpu.with_rounds_per_wait(rounds_per_wait),
+                gpu: gpu
+                    .with_rounds_per_wait(compute.rounds_per_wait)
+                    .with_round_waits(match compute.round_waits {
+                        crate::config::RoundWaits::PerRound => RoundWaits::PerRound,
+                        crate::config::RoundWaits::PerFrame => RoundWaits::PerFrame,
+                    }),
                 cpu_because: None,
                 own_device,
             }),
@@ -146,8 +152,7 @@ impl AdapterRenderer {
     pub(crate) fn open(
         _models: Option<&volcap_engine::model::Models>,
         _mode: FieldMode,
-        _rounds_per_wait: usize,
-        _device: crate::config::RenderDevice,
+        _compute: &crate::config::ComputeConfig,
     ) -> Option<Self> {
         None
     }

@@ -13,8 +13,7 @@ pub(super) fn spawn(
     voxel: f32,
     mode: FieldMode,
     eval_threads: usize,
-    rounds_per_wait: usize,
-    render_device: crate::config::RenderDevice,
+    compute: crate::config::ComputeConfig,
     models: Option<Arc<volcap_engine::model::Models>>,
 ) -> std::thread::JoinHandle<()> {
     std::thread::Builder::new()
@@ -23,12 +22,7 @@ pub(super) fn spawn(
             let mut renderer = Renderer::new();
             renderer.set_threads(eval_threads);
             // On the GPU backend the model's frames are localized and drawn on the adapter.
-            let mut on_adapter = super::AdapterRenderer::open(
-                models.as_deref(),
-                mode,
-                rounds_per_wait,
-                render_device,
-            );
+            let mut on_adapter = super::AdapterRenderer::open(models.as_deref(), mode, &compute);
             if let Some(r) = &on_adapter {
                 let _ = sh.compute.render_device.set(r.device_name());
             }

@@ -25,13 +25,17 @@ use super::kit::entry;
 use crate::grid::{Grid, GridSpec};
 use crate::localize::{HierarchicalMode, LocalizeStats, check_coarse};
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 
 mod field;
+mod plan;
 mod record;
 mod tiling;
 use field::FieldBufs;
 pub use field::{GpuField, MapsRef};
-pub(super) use record::{Dispatch, Rec};
+use plan::Predictor;
+pub use plan::{LEVEL_KEYS, MISS_SPARE_ROUNDS, RoundWaits, SPARE_ROUNDS};
+pub(super) use record::{Dispatch, Rec, Retry};
 pub use tiling::Tiling;
 
 const BOOK: &str = include_str!("localize.wgsl");
@@ -52,7 +56,13 @@ pub(super) const LOG: usize = 5;
 pub(super) const CULLED: [usize; 2] = [6, 7];
 /// Conflict rounds that evaluated something (`prep_round`).
 pub(super) const ROUNDS: usize = 8;
-pub(super) const COUNTS: usize = 9;
+/// Raised when a level's predicted rounds fell short (`plan.rs`).
+pub(super) const MISS: usize = 9;
+/// The evaluations before the render's final level.
+pub(super) const MARK: usize = 10;
+/// Conflict rounds per level ([`LEVEL_KEYS`] slots, `plan::level_key`).
+pub(super) const LEVEL_ROUNDS: usize = 11;
+pub(super) const COUNTS: usize = LEVEL_ROUNDS + LEVEL_KEYS;
 /// Parameter blocks per level: lists 0 and 1 read (the other written), the renderer's log
 /// read, its culled list 0 or 1 counted.
 const ORIENTATIONS: usize = 5;
@@ -68,6 +78,10 @@ pub(super) struct Pipes {
     pub(super) prep_src: wgpu::ComputePipeline,
     pub(super) prep_eval: wgpu::ComputePipeline,
     pub(super) prep_round: wgpu::ComputePipeline,
+    /// The miss flag after a level's predicted rounds, and the evaluations kept before the
+    /// render's final level.
+    pub(super) check_round: wgpu::ComputePipeline,
+    pub(super) mark_evals: wgpu::ComputePipeline,
     pub(super) seed: wgpu::ComputePipeline,
     /// The field's seeds at a level (`localize.wgsl` `seeds`).
     pub(super) seeds: wgpu::ComputePipeline,
@@ -124,6 +138,8 @@ pub struct GpuLocalizer {
     params_for: Option<(u64, bool)>,
     /// Conflict rounds per read-back at most ([`Self::with_rounds_per_wait`]).
     rounds_per_wait: usize,
+    /// The last frame's rounds per level, when they are predicted ([`Self::with_round_waits`]).
+    predictor: Predictor,
     /// Maps on the adapter to copy into the field's buffer, recorded ahead of the next
     /// localization's work ([`Self::recorder`]).
     pending_copy: Option<(wgpu::Buffer, u64)>,
@@ -182,6 +198,8 @@ impl Pipes {
             prep_src: pipe(&book, &with_args, "prep_src"),
             prep_eval: pipe(&book, &with_args, "prep_eval"),
             prep_round: pipe(&book, &with_args, "prep_round"),
+            check_round: pipe(&book, &plain, "check_round"),
+            mark_evals: pipe(&book, &plain, "mark_evals"),
             seed: pipe(&book, &plain, "seed"),
             seeds: pipe(&book, &with_seeds, "seeds"),
             upsample: pipe(&book, &plain, "upsample"),
@@ -222,6 +240,7 @@ impl GpuLocalizer {
             generation: 0,
             params_for: None,
             rounds_per_wait: DEFAULT_ROUNDS_PER_WAIT,
+            predictor: Predictor::default(),
             pending_copy: None,
             tile_floats: None,
             max_list: None,
@@ -234,6 +253,15 @@ impl GpuLocalizer {
     /// and the empty rounds dispatched do (`volcap bench localize --rounds-per-wait`).
     pub fn with_rounds_per_wait(mut self, n: usize) -> Self {
         self.rounds_per_wait = n.clamp(1, 64);
+        self
+    }
+
+    /// When the host reads the conflict loop's progress: after each round (batches of
+    /// [`Self::with_rounds_per_wait`]), or once a frame with each level's rounds predicted
+    /// from the last frame (a frame it falls short of is run again per round: `plan.rs`).
+    /// The values, evaluations and rounds do not depend on it.
+    pub fn with_round_waits(mut self, waits: RoundWaits) -> Self {
+        self.predictor = Predictor::new(waits);
         self
     }
 
@@ -366,14 +394,48 @@ impl GpuLocalizer {
     ) -> Result<LocalizeStats, String> {
         self.prepare(field, spec, coarse, false)?;
         loop {
-            let mut rec = self.recorder(spec, mode)?;
-            let (stats, overflow) = rec.levels(coarse, spec.level(), mode)?;
-            if !overflow {
-                self.done = true;
-                return Ok(stats);
+            let mut rec = self.recorder(spec, coarse, mode)?;
+            let retry = rec.levels(coarse, spec.level(), mode)?;
+            let counts = rec.counts()?;
+            drop(rec);
+            match retry.or(Retry::of(&counts)) {
+                None => {
+                    self.done = true;
+                    self.predictor.learn(spec, coarse, mode, &counts);
+                    return Ok(LocalizeStats {
+                        evaluations: counts[EVALS] as u64,
+                        conflict_rounds: counts[ROUNDS],
+                        empty: false,
+                    });
+                }
+                Some(r) => self.retry(r, spec)?,
             }
-            self.grow(spec)?;
         }
+    }
+
+    /// Before a frame is run again: lists four times larger after an overflow, a plan with
+    /// more rounds after a predicted round count fell short (then waits per round:
+    /// `plan.rs`).
+    pub(super) fn retry(&mut self, r: Retry, spec: GridSpec) -> Result<(), String> {
+        match r {
+            Retry::Overflow => self.grow(spec),
+            Retry::Missed(seen) => {
+                self.predictor.missed(&seen);
+                self.gpu.count().reruns.fetch_add(1, Ordering::Relaxed);
+                Ok(())
+            }
+        }
+    }
+
+    /// A completed frame's counters: its rounds per level are the next frame's plan.
+    pub(super) fn learn(
+        &mut self,
+        spec: GridSpec,
+        coarse: u32,
+        mode: HierarchicalMode,
+        counts: &[u32; COUNTS],
+    ) {
+        self.predictor.learn(spec, coarse, mode, counts);
     }
 
     pub(super) fn pipes(&self) -> &Pipes {
@@ -413,8 +475,13 @@ impl GpuLocalizer {
     pub(super) fn recorder(
         &mut self,
         spec: GridSpec,
+        coarse: u32,
         mode: HierarchicalMode,
     ) -> Result<Rec<'_>, String> {
+        let plan = self.predictor.plan(spec, coarse, mode);
+        if plan.is_some() {
+            self.gpu.count().predicted.fetch_add(1, Ordering::Relaxed);
+        }
         self.buffers(spec)?;
         let b = self.bufs.as_ref().expect("made by buffers");
         let f = self.field.as_ref().ok_or("no field uploaded")?;
@@ -476,6 +543,8 @@ impl GpuLocalizer {
             timed: false,
             dispatches: 0,
             rounds_per_wait: self.rounds_per_wait,
+            plan,
+            last: None,
         })
     }
 

@@ -7,7 +7,9 @@
 //   [n, s (the level's stride), nl (the level's points per axis), cap (list capacity),
 //    src (counts index of the list read), dst (counts index of the list written),
 //    closure (tight: the sign-change closure), tight (no dilation)]
-// counts: [cand, list A, list B, overflow, evaluations, -, -, -, conflict rounds]
+// counts: [cand, list A, list B, overflow, evaluations, -, -, -, conflict rounds, miss,
+//          evaluations before the final level, conflict rounds per level (16: by the level's
+//          stride exponent, 0 the finest)]
 // args: indirect dispatch arguments [x, y, z] of the next list-driven kernel.
 
 // The lists hold pairs (point, its value before evaluation as bits). Eight storage buffers
@@ -34,6 +36,9 @@ fn pp(i: u32) -> u32 {
 const OVERFLOW: u32 = 3u;
 const EVALS: u32 = 4u;
 const ROUNDS: u32 = 8u;
+const MISS: u32 = 9u;
+const MARK: u32 = 10u;
+const LEVEL_ROUNDS: u32 = 11u;
 
 fn index(wg: vec3<u32>, nwg: vec3<u32>, lid: vec3<u32>) -> u32 {
     return (wg.y * nwg.x + wg.x) * 64u + lid.x;
@@ -127,7 +132,24 @@ fn prep_round() {
     atomicAdd(&counts[EVALS], c);
     if c > 0u {
         atomicAdd(&counts[ROUNDS], 1u);
+        atomicAdd(&counts[LEVEL_ROUNDS + min(firstTrailingBit(pp(1u)), 15u)], 1u);
     }
+}
+
+// After the rounds the host predicted for a level (record.rs, one read-back a frame): the
+// list the last of them wrote (read here) is not empty, so the level's loop had more to
+// do: the miss flag is raised and the host runs the frame again, reading after each round.
+@compute @workgroup_size(1)
+fn check_round() {
+    if list_len(pp(4u)) > 0u {
+        atomicStore(&counts[MISS], 1u);
+    }
+}
+
+// The evaluations so far kept (the levels below the render's final one).
+@compute @workgroup_size(1)
+fn mark_evals() {
+    atomicStore(&counts[MARK], atomicLoad(&counts[EVALS]));
 }
 
 // Every point of the level (the coarsest): claimed and listed for evaluation.

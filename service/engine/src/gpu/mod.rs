@@ -19,6 +19,7 @@
 //! the adapter.
 
 pub mod fourier;
+pub(crate) mod kit;
 pub mod localize;
 pub mod maps;
 pub mod net;
@@ -128,6 +129,11 @@ pub struct Counters {
     pub localize_runs: AtomicU64,
     /// Frames rendered on the adapter (their final level and display image).
     pub render_runs: AtomicU64,
+    /// Frames (localizations and renders) recorded with each level's conflict rounds
+    /// predicted, one read-back for the levels (`compute.round_waits = "per-frame"`), and
+    /// those of them run again because a prediction fell short.
+    pub predicted: AtomicU64,
+    pub reruns: AtomicU64,
     /// Compute dispatches recorded.
     pub dispatches: AtomicU64,
     /// Read-backs the host waited for (a submission and a wait for the queue each: on a GPU
@@ -157,6 +163,8 @@ pub struct CounterValues {
     pub field_runs: u64,
     pub localize_runs: u64,
     pub render_runs: u64,
+    pub predicted: u64,
+    pub reruns: u64,
     pub dispatches: u64,
     pub waits: u64,
     pub bytes_up: u64,
@@ -318,6 +326,8 @@ impl Gpu {
             field_runs: c.field_runs.load(Ordering::Relaxed),
             localize_runs: c.localize_runs.load(Ordering::Relaxed),
             render_runs: c.render_runs.load(Ordering::Relaxed),
+            predicted: c.predicted.load(Ordering::Relaxed),
+            reruns: c.reruns.load(Ordering::Relaxed),
             dispatches: c.dispatches.load(Ordering::Relaxed),
             waits: c.waits.load(Ordering::Relaxed),
             bytes_up: c.bytes_up.load(Ordering::Relaxed),
@@ -420,30 +430,39 @@ impl Gpu {
         &self.counters
     }
 
-    /// Map the first `bytes` of `staging` (MAP_READ) for reading once submission `after` (and
-    /// those before it on the one queue) is done. The stages share the queue: waiting for
-    /// one's own submission and not for what other stages' threads submitted after it keeps
-    /// them from waiting on each other. The callback answers once: a one-slot channel.
+    /// Map the first bytes of each staging buffer (MAP_READ) for reading once submission
+    /// `after` (and those before it on the one queue) is done: one wait for them all. The
+    /// stages share the queue: waiting for one's own submission and not for what other
+    /// stages' threads submitted after it keeps them from waiting on each other. Each
+    /// callback answers once: a one-slot channel.
     fn map_read(
         &self,
-        staging: &wgpu::Buffer,
-        bytes: u64,
+        stagings: &[(&wgpu::Buffer, u64)],
         after: wgpu::SubmissionIndex,
     ) -> Result<(), String> {
         self.counters.waits.fetch_add(1, Ordering::Relaxed);
-        let (tx, rx) = std::sync::mpsc::sync_channel(1);
-        staging.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-            let _ = tx.try_send(r);
-        });
+        let rxs: Vec<_> = stagings
+            .iter()
+            .map(|(staging, bytes)| {
+                let (tx, rx) = std::sync::mpsc::sync_channel(1);
+                staging.map_async(wgpu::MapMode::Read, 0..*bytes, move |r| {
+                    let _ = tx.try_send(r);
+                });
+                rx
+            })
+            .collect();
         self.device
             .poll(wgpu::PollType::Wait {
                 submission_index: Some(after),
                 timeout: None,
             })
             .map_err(|e| format!("the adapter did not finish: {e}"))?;
-        rx.recv()
-            .map_err(|_| "the read-back was dropped".to_string())?
-            .map_err(|e| format!("cannot map the result: {e}"))
+        for rx in rxs {
+            rx.recv()
+                .map_err(|_| "the read-back was dropped".to_string())?
+                .map_err(|e| format!("cannot map the result: {e}"))?;
+        }
+        Ok(())
     }
 
     /// Read `len` f32 from the start of `buf` back to the host ([`Gpu::submit_and_read_into`]).
@@ -481,22 +500,35 @@ impl Gpu {
         staging: &wgpu::Buffer,
         out: &mut [u8],
     ) -> Result<wgpu::SubmissionIndex, String> {
-        let bytes = out.len() as u64;
+        self.submit_and_read_many(encoder, &mut [(staging, out)])
+    }
+
+    /// [`Gpu::submit_and_read_bytes`] from several staging buffers, after one wait.
+    pub(crate) fn submit_and_read_many(
+        &self,
+        encoder: wgpu::CommandEncoder,
+        reads: &mut [(&wgpu::Buffer, &mut [u8])],
+    ) -> Result<wgpu::SubmissionIndex, String> {
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let index = self.queue.submit([encoder.finish()]);
-        let mapped = self.map_read(staging, bytes, index.clone());
+        let maps: Vec<(&wgpu::Buffer, u64)> =
+            reads.iter().map(|(s, o)| (*s, o.len() as u64)).collect();
+        let mapped = self.map_read(&maps, index.clone());
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("the adapter refused the work: {e}"));
         }
         mapped?;
-        {
-            let view = staging
-                .get_mapped_range(0..bytes)
-                .map_err(|e| format!("cannot read the result: {e}"))?;
-            out.copy_from_slice(&view);
+        for (staging, out) in reads.iter_mut() {
+            let bytes = out.len() as u64;
+            {
+                let view = staging
+                    .get_mapped_range(0..bytes)
+                    .map_err(|e| format!("cannot read the result: {e}"))?;
+                out.copy_from_slice(&view);
+            }
+            staging.unmap();
+            self.counters.bytes_down.fetch_add(bytes, Ordering::Relaxed);
         }
-        staging.unmap();
-        self.counters.bytes_down.fetch_add(bytes, Ordering::Relaxed);
         Ok(index)
     }
 }
@@ -576,87 +608,6 @@ impl Timer {
         }));
         enc.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
         enc.copy_buffer_to_buffer(&self.resolved, 0, dst, offset, 16);
-    }
-}
-
-/// Bind group layout entries, bind group entries, modules, layouts and pipelines with explicit
-/// layouts (the kernels whose bind groups several entry points share).
-pub(crate) mod kit {
-    pub(crate) fn layout_entry(
-        binding: u32,
-        ty: wgpu::BufferBindingType,
-    ) -> wgpu::BindGroupLayoutEntry {
-        wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        }
-    }
-
-    pub(crate) fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-        layout_entry(binding, wgpu::BufferBindingType::Storage { read_only })
-    }
-
-    pub(crate) fn uniform(binding: u32) -> wgpu::BindGroupLayoutEntry {
-        layout_entry(binding, wgpu::BufferBindingType::Uniform)
-    }
-
-    pub(crate) fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-        wgpu::BindGroupEntry {
-            binding,
-            resource: b.as_entire_binding(),
-        }
-    }
-
-    pub(crate) fn bind_layout(
-        d: &wgpu::Device,
-        label: &str,
-        entries: &[wgpu::BindGroupLayoutEntry],
-    ) -> wgpu::BindGroupLayout {
-        d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some(label),
-            entries,
-        })
-    }
-
-    pub(crate) fn module(d: &wgpu::Device, label: &str, src: &str) -> wgpu::ShaderModule {
-        d.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(src.into()),
-        })
-    }
-
-    pub(crate) fn pipeline_layout(
-        d: &wgpu::Device,
-        groups: &[&wgpu::BindGroupLayout],
-    ) -> wgpu::PipelineLayout {
-        let groups: Vec<Option<&wgpu::BindGroupLayout>> = groups.iter().map(|g| Some(*g)).collect();
-        d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: None,
-            bind_group_layouts: &groups,
-            immediate_size: 0,
-        })
-    }
-
-    pub(crate) fn pipeline(
-        d: &wgpu::Device,
-        m: &wgpu::ShaderModule,
-        layout: &wgpu::PipelineLayout,
-        entry: &str,
-    ) -> wgpu::ComputePipeline {
-        d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(entry),
-            layout: Some(layout),
-            module: m,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        })
     }
 }
 

@@ -15,7 +15,7 @@
 
 use super::kit::entry;
 use super::localize::{
-    CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, OVERFLOW, Tiling,
+    CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, MARK, Retry, RoundWaits, Tiling,
 };
 use super::{Gpu, groups};
 use crate::grid::GridSpec;
@@ -175,6 +175,13 @@ impl GpuRenderer {
         self
     }
 
+    /// When the levels' conflict rounds are read ([`GpuLocalizer::with_round_waits`]; the
+    /// final level's loop reads after each round either way).
+    pub fn with_round_waits(mut self, waits: RoundWaits) -> Self {
+        self.loc = self.loc.with_round_waits(waits);
+        self
+    }
+
     /// Lists of `cap` entries at first (tests make them small to exercise their growth).
     pub fn with_list_capacity(mut self, cap: usize) -> Self {
         self.loc = self.loc.with_list_capacity(cap);
@@ -280,39 +287,47 @@ impl GpuRenderer {
         }
         self.loc.prepare(field, spec, coarse, true)?;
         loop {
-            if self.attempt(spec, coarse, fine, drop_apart)? {
-                self.loc.done = true;
-                return Ok(&self.out);
+            match self.attempt(spec, coarse, fine, drop_apart)? {
+                None => {
+                    self.loc.done = true;
+                    return Ok(&self.out);
+                }
+                Some(r) => self.loc.retry(r, spec)?,
             }
-            self.loc.grow(spec)?;
         }
     }
 
-    /// One attempt into `self.out`; `false` when a list overflowed.
+    /// One attempt into `self.out`; `Some` when it must run again (a list overflowed, or the
+    /// levels' predicted rounds fell short).
     fn attempt(
         &mut self,
         spec: GridSpec,
         coarse: u32,
         fine: u32,
         drop_apart: Option<f32>,
-    ) -> Result<bool, String> {
+    ) -> Result<Option<Retry>, String> {
         // The localizer's buffers first (the column bind groups hold its lists).
         self.column_bufs(spec)?;
         let cb = self.columns.as_ref().expect("made above");
         let rp = &self.pipes;
-        let mut rec = self.loc.recorder(spec, HierarchicalMode::Paper)?;
-        let (stats, overflow) = rec.levels(coarse, fine, HierarchicalMode::Paper)?;
-        if overflow {
-            return Ok(false);
+        let mode = HierarchicalMode::Paper;
+        let mut rec = self.loc.recorder(spec, coarse, mode)?;
+        if let Some(r) = rec.levels(coarse, fine, mode)? {
+            return Ok(Some(r));
         }
-        // Pieces apart from the body left out (render.rs step 1b).
+        let p = rec.p;
+        rec.pass(&[(&p.mark_evals, fine, 0, Dispatch::One)]);
+        // Pieces apart from the body left out (render.rs step 1b); its read-back the first
+        // of a predicted frame's, which may say to run it again.
         let dropped_apart = match drop_apart {
-            Some(frac) => self.apart.run(&mut rec, &rp.apart, spec, fine, frac)?,
+            Some(frac) => match self.apart.run(&mut rec, &rp.apart, spec, fine, frac)? {
+                Ok(n) => n,
+                Err(r) => return Ok(Some(r)),
+            },
             None => 0,
         };
         let big_l = spec.level();
         let plane = (spec.n() * spec.n()) as u32;
-        let p = rec.p;
         let ev = rec.eval_pipe();
         let r0 = &cb.binds[0];
         let pts = rec.level_points(big_l);
@@ -365,8 +380,8 @@ impl GpuRenderer {
                     (&rp.conflict_keep, big_l, o, Dispatch::With(r0, None)),
                 ]);
                 let counts = rec.counts()?;
-                if counts[OVERFLOW] != 0 {
-                    return Ok(false);
+                if let Some(r) = Retry::of(&counts) {
+                    return Ok(Some(r));
                 }
                 if counts[LIST[1 - o]] == 0 {
                     break;
@@ -391,8 +406,8 @@ impl GpuRenderer {
             ]);
             x = 1 - x;
             let counts = rec.counts()?;
-            if counts[OVERFLOW] != 0 {
-                return Ok(false);
+            if let Some(r) = Retry::of(&counts) {
+                return Ok(Some(r));
             }
             first = false;
             if counts[LOG] == 0 {
@@ -400,19 +415,20 @@ impl GpuRenderer {
             }
         }
         rec.pass(&[(&rp.surface, big_l, 0, Dispatch::With(r0, Some(plane)))]);
-        let counts = rec.counts()?;
-        let dispatches = std::mem::take(&mut rec.dispatches);
-        drop(rec);
-        let c = self.gpu.count();
-        c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
-        c.render_runs.fetch_add(1, Ordering::Relaxed);
+        // The columns come back with the counters, after one wait.
         let n2 = plane as usize;
         let raw = &mut self.raw;
         raw.resize(4 * n2, 0);
-        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(&cb.cols, 0, &cb.staging, 0, (raw.len() * 4) as u64);
-        self.gpu
-            .submit_and_read_bytes(enc, &cb.staging, bytemuck::cast_slice_mut(raw))?;
+        let counts = rec.counts_and_read(&cb.cols, &cb.staging, bytemuck::cast_slice_mut(raw))?;
+        let dispatches = std::mem::take(&mut rec.dispatches);
+        drop(rec);
+        if let Some(r) = Retry::of(&counts) {
+            return Ok(Some(r));
+        }
+        self.loc.learn(spec, coarse, mode, &counts);
+        let c = self.gpu.count();
+        c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
+        c.render_runs.fetch_add(1, Ordering::Relaxed);
         let hit = |h: &u32| *h as i32 - 1;
         let o = &mut self.out;
         let fill_i = |v: &mut Vec<i32>, r: &[u32]| {
@@ -427,11 +443,11 @@ impl GpuRenderer {
         fill_i(&mut o.coarse_hit, &raw[n2..2 * n2]);
         fill_f(&mut o.v_in, &raw[2 * n2..3 * n2]);
         fill_f(&mut o.v_out, &raw[3 * n2..]);
-        o.coarse_evaluations = stats.evaluations;
-        o.final_evaluations = (counts[EVALS] as u64).saturating_sub(stats.evaluations);
+        o.coarse_evaluations = counts[MARK] as u64;
+        o.final_evaluations = (counts[EVALS] as u64).saturating_sub(counts[MARK] as u64);
         o.culled = counts[CULLED[x]] as u64;
         o.dropped_apart = dropped_apart;
-        Ok(true)
+        Ok(None)
     }
 
     /// The last frame at `size x size` pixels (`render.rs` `render_display`'s rule, from the

@@ -5,7 +5,7 @@ use anyhow::anyhow;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
-use volcapd::config::RenderDevice;
+use volcapd::config::{RenderDevice, RoundWaits};
 
 /// The label's note on `render.drop_apart` where it is not the daemon's default.
 fn apart_note(g: f32) -> String {
@@ -66,12 +66,19 @@ pub(super) fn table(rows: &[Row]) -> String {
                 (Some(e), _) => e.clone(),
                 // The GPU backend's traffic: what crosses between host and adapter per frame.
                 (None, true) => format!(
-                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for (up to {} conflict rounds each){}; {} networks planned while measured{}",
+                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for ({}){}; {} networks planned while measured{}",
                     r.bytes_up_per_frame / 1e6,
                     r.bytes_down_per_frame / 1e6,
                     r.dispatches_per_frame,
                     r.waits_per_frame,
-                    r.rounds_per_wait,
+                    if r.predicted_per_frame > 0.0 {
+                        format!(
+                            "the levels' rounds predicted, one read-back for them; {:.1} % of frames run again",
+                            100.0 * r.reruns_per_frame / r.predicted_per_frame
+                        )
+                    } else {
+                        format!("up to {} conflict rounds each", r.rounds_per_wait)
+                    },
                     if r.render_device == RenderDevice::Own.name() {
                         "; the render stage on a device of its own"
                     } else {
@@ -155,12 +162,17 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             // The GPU backend's knobs, where a row sets them: without them in the key the
             // rows of `--render-device shared,own` or `--rounds-per-wait 1,8` drew one line.
             format!(
-                "{}{} {}{}{}",
+                "{}{} {}{}{}{}",
                 r.model,
                 apart_note(r.drop_apart),
                 r.runtime,
                 if r.render_device == RenderDevice::Own.name() {
                     " own device"
+                } else {
+                    ""
+                },
+                if r.round_waits == RoundWaits::PerFrame.name() && r.dispatches_per_frame > 0.0 {
+                    " rounds predicted"
                 } else {
                     ""
                 },

@@ -1,12 +1,14 @@
 //! Recording a frame's localization: compute passes on one encoder, the levels of the
 //! hierarchical method, the conflict rounds one submission each (the first with its level's
 //! passes; in batches with `GpuLocalizer::with_rounds_per_wait`), the counters read back
-//! after each.
+//! after each; or, with a plan (`plan.rs`), every level's predicted rounds in the one
+//! submission the frame's first read-back ends.
 
-use super::{Bufs, COUNTS, EVALS, FieldBufs, LIST, OVERFLOW, Pipes, ROUNDS};
+use super::plan::{LEVEL_KEYS, level_key};
+use super::{Bufs, COUNTS, FieldBufs, LEVEL_ROUNDS, LIST, MISS, OVERFLOW, Pipes};
 use crate::gpu::{Gpu, groups};
 use crate::grid::GridSpec;
-use crate::localize::{HierarchicalMode, LocalizeStats};
+use crate::localize::HierarchicalMode;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
@@ -25,6 +27,36 @@ pub(in crate::gpu) struct Rec<'a> {
     pub(in crate::gpu) dispatches: u64,
     /// Conflict rounds per submission at most (`GpuLocalizer::with_rounds_per_wait`).
     pub(super) rounds_per_wait: usize,
+    /// Loop iterations to record per level key, read back once (`plan.rs`); `None`: read
+    /// after each round.
+    pub(super) plan: Option<[u32; LEVEL_KEYS]>,
+    /// The counters last read, while nothing was recorded since.
+    pub(super) last: Option<[u32; COUNTS]>,
+}
+
+/// Why a frame is run again.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(in crate::gpu) enum Retry {
+    /// A list overflowed: larger lists.
+    Overflow,
+    /// A level's predicted rounds fell short: the rounds each level ran (a level's up to
+    /// the one that fell short are exact, that one's a lower bound).
+    Missed([u32; LEVEL_KEYS]),
+}
+
+impl Retry {
+    /// What counters read back say of the frame so far.
+    pub(in crate::gpu) fn of(counts: &[u32; COUNTS]) -> Option<Retry> {
+        if counts[OVERFLOW] != 0 {
+            Some(Retry::Overflow)
+        } else if counts[MISS] != 0 {
+            let mut seen = [0; LEVEL_KEYS];
+            seen.copy_from_slice(&counts[LEVEL_ROUNDS..LEVEL_ROUNDS + LEVEL_KEYS]);
+            Some(Retry::Missed(seen))
+        } else {
+            None
+        }
+    }
 }
 
 impl<'a> Rec<'a> {
@@ -97,8 +129,31 @@ impl<'a> Rec<'a> {
         nl * nl * nl
     }
 
-    /// Submit what was recorded with a copy of the counters and read them.
+    /// Submit what was recorded with a copy of the counters and read them (no read-back when
+    /// nothing was recorded since the last).
     pub(in crate::gpu) fn counts(&mut self) -> Result<[u32; COUNTS], String> {
+        if let (None, Some(last)) = (&self.enc, self.last) {
+            return Ok(last);
+        }
+        self.read(None)
+    }
+
+    /// [`Self::counts`], and the first `out.len()` bytes of `src` copied after what was
+    /// recorded (through `staging`) into `out`: one wait for both.
+    pub(in crate::gpu) fn counts_and_read(
+        &mut self,
+        src: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        out: &mut [u8],
+    ) -> Result<[u32; COUNTS], String> {
+        let enc = self
+            .enc
+            .get_or_insert_with(|| self.gpu.device.create_command_encoder(&Default::default()));
+        enc.copy_buffer_to_buffer(src, 0, staging, 0, out.len() as u64);
+        self.read(Some((staging, out)))
+    }
+
+    fn read(&mut self, also: Option<(&wgpu::Buffer, &mut [u8])>) -> Result<[u32; COUNTS], String> {
         let mut enc = self
             .enc
             .take()
@@ -112,8 +167,15 @@ impl<'a> Rec<'a> {
         }
         let mut raw = [0u8; COUNTS * 4 + 16];
         let len = COUNTS * 4 + if timer.is_some() { 16 } else { 0 };
-        self.gpu
-            .submit_and_read_bytes(enc, &b.counts_staging, &mut raw[..len])?;
+        match also {
+            Some((staging, out)) => self.gpu.submit_and_read_many(
+                enc,
+                &mut [(&b.counts_staging, &mut raw[..len]), (staging, out)],
+            )?,
+            None => self
+                .gpu
+                .submit_and_read_bytes(enc, &b.counts_staging, &mut raw[..len])?,
+        };
         if timer.is_some() {
             let c = &self.gpu.count().localize_gpu_ns;
             self.gpu.add_span(c, &raw[COUNTS * 4..]);
@@ -122,36 +184,20 @@ impl<'a> Rec<'a> {
         for (o, w) in out.iter_mut().zip(raw.chunks_exact(4)) {
             *o = u32::from_le_bytes([w[0], w[1], w[2], w[3]]);
         }
+        self.last = Some(out);
         Ok(out)
     }
 
-    /// [`Self::counts`], and the first `out.len()` bytes of `src` copied after what was
-    /// recorded (through `staging`) into `out`.
-    pub(in crate::gpu) fn counts_and_read(
-        &mut self,
-        src: &wgpu::Buffer,
-        staging: &wgpu::Buffer,
-        out: &mut [u8],
-    ) -> Result<[u32; COUNTS], String> {
-        let enc = self
-            .enc
-            .get_or_insert_with(|| self.gpu.device.create_command_encoder(&Default::default()));
-        enc.copy_buffer_to_buffer(src, 0, staging, 0, out.len() as u64);
-        let counts = self.counts()?;
-        // Submitted and done: the mapping waits on an empty submission.
-        let enc = self.gpu.device.create_command_encoder(&Default::default());
-        self.gpu.submit_and_read_bytes(enc, staging, out)?;
-        Ok(counts)
-    }
-
-    /// Levels `coarse..=last` (the coarsest evaluated whole): (stats, whether a list
-    /// overflowed). With the conflict loop, a submission per round (per batch of rounds).
+    /// Record levels `coarse..=last` (the coarsest evaluated whole). Waiting per round, a submission per round (per
+    /// batch of rounds) and `Some` when a read showed a list overflowed; with a plan, the
+    /// levels' predicted rounds and no read (the next one tells whether a list overflowed or
+    /// a plan fell short: [`Retry::of`]).
     pub(in crate::gpu) fn levels(
         &mut self,
         coarse: u32,
         last: u32,
         mode: HierarchicalMode,
-    ) -> Result<(LocalizeStats, bool), String> {
+    ) -> Result<Option<Retry>, String> {
         let p = self.p;
         let ev = self.eval;
         let pts = self.level_points(coarse);
@@ -188,22 +234,25 @@ impl<'a> Rec<'a> {
             // batch: the rounds after the last one that listed something run over empty lists
             // and change nothing; `prep_round` counts only the rounds that evaluated.
             // The first batch goes with the level's own passes, in the same submission.
+            // With a plan, the level's predicted rounds, then the check of the last one's list.
             let mut o = 1usize;
+            if let Some(plan) = self.plan {
+                for _ in 0..plan[level_key(self.spec, l)].max(1) {
+                    self.round(l, o);
+                    o = 1 - o;
+                }
+                self.pass(&[(&p.check_round, l, o, Dispatch::One)]);
+                continue;
+            }
             let mut per = 1usize;
             loop {
                 for _ in 0..per {
-                    self.pass(&[
-                        (&p.prep_round, l, o, Dispatch::Prep),
-                        (ev, l, o, Dispatch::Eval),
-                        (&p.zero, l, o, Dispatch::One),
-                        (&p.prep_src, l, o, Dispatch::Prep),
-                        (&p.conflict, l, o, Dispatch::Indirect),
-                    ]);
+                    self.round(l, o);
                     o = 1 - o;
                 }
                 let counts = self.counts()?;
                 if counts[OVERFLOW] != 0 {
-                    return Ok((LocalizeStats::default(), true));
+                    return Ok(Some(Retry::Overflow));
                 }
                 if counts[LIST[o]] == 0 {
                     break;
@@ -211,17 +260,23 @@ impl<'a> Rec<'a> {
                 per = (per * 2).min(self.rounds_per_wait);
             }
         }
-        let counts = self.counts()?;
         let c = self.gpu.count();
         c.dispatches
             .fetch_add(std::mem::take(&mut self.dispatches), Ordering::Relaxed);
         c.localize_runs.fetch_add(1, Ordering::Relaxed);
-        let stats = LocalizeStats {
-            evaluations: counts[EVALS] as u64,
-            conflict_rounds: counts[ROUNDS],
-            empty: false,
-        };
-        Ok((stats, counts[OVERFLOW] != 0))
+        Ok(None)
+    }
+
+    /// One conflict round at level `l`: list `o` evaluated, then scanned into the other.
+    fn round(&mut self, l: u32, o: usize) {
+        let p = self.p;
+        self.pass(&[
+            (&p.prep_round, l, o, Dispatch::Prep),
+            (self.eval, l, o, Dispatch::Eval),
+            (&p.zero, l, o, Dispatch::One),
+            (&p.prep_src, l, o, Dispatch::Prep),
+            (&p.conflict, l, o, Dispatch::Indirect),
+        ]);
     }
 }
 

@@ -8,7 +8,7 @@
 //! hit, and culls nothing behind it.
 
 use super::super::kit::{bind_layout, entry, module, pipeline, pipeline_layout, storage};
-use super::super::localize::{Dispatch, Rec, Tiling};
+use super::super::localize::{Dispatch, Rec, Retry, Tiling};
 use crate::grid::GridSpec;
 use crate::pieces::{Pieces, gap_points, lattice_words};
 
@@ -101,7 +101,8 @@ impl Apart {
     }
 
     /// The pass on the frame `rec` records, its levels up to `fine` (`L - 1`) localized:
-    /// the points dropped (the CPU's `RenderStats::dropped_apart`). `frac` is the gap, a
+    /// the points dropped (the CPU's `RenderStats::dropped_apart`), or why the frame must run
+    /// again (its read-back is the counters' too: [`Retry::of`]). `frac` is the gap, a
     /// fraction of the grid's side ([`gap_points`] on level `L - 1`, as `render.rs`).
     pub(super) fn run(
         &mut self,
@@ -110,7 +111,7 @@ impl Apart {
         spec: GridSpec,
         fine: u32,
         frac: f32,
-    ) -> Result<u64, String> {
+    ) -> Result<Result<u64, Retry>, String> {
         let gpu = rec.gpu;
         let d = &gpu.device;
         let words = lattice_words(spec, 2);
@@ -123,13 +124,17 @@ impl Apart {
             Dispatch::With(&b.bind, Some(words as u32)),
         )]);
         self.bits.resize(words, 0);
-        rec.counts_and_read(&b.buf, &b.staging, bytemuck::cast_slice_mut(&mut self.bits))?;
+        let counts =
+            rec.counts_and_read(&b.buf, &b.staging, bytemuck::cast_slice_mut(&mut self.bits))?;
+        if let Some(r) = Retry::of(&counts) {
+            return Ok(Err(r));
+        }
         let coarser = spec.coarser().ok_or("a grid too small for pieces")?;
         let gap = gap_points(coarser, frac);
         let st = self.host.drop_apart_bits(spec, 2, &self.bits, [gap; 3])?;
         let dropped = self.host.dropped();
         if dropped.is_empty() {
-            return Ok(0);
+            return Ok(Ok(0));
         }
         let count = dropped.len() as u32;
         self.list.clear();
@@ -144,6 +149,6 @@ impl Apart {
             std::sync::atomic::Ordering::Relaxed,
         );
         rec.pass(&[(&pipes.drop, fine, 0, Dispatch::With(&b.bind, Some(count)))]);
-        Ok(st.dropped_points as u64)
+        Ok(Ok(st.dropped_points as u64))
     }
 }
