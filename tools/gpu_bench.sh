@@ -16,8 +16,9 @@
 # pipeline.md/.png (the daemon's pipeline in-process, CPU and GPU backends side by side, 257^3
 # and 513^3, fourier-small and fourier-medium, the camera replayed fast enough never to cap
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
-# the adapter's with one and up to eight conflict rounds per read-back), rounds/pipeline.md
-# (the GPU backend's pipeline with `compute.rounds_per_wait` 1 and 8), queues.md (the
+# the adapter's with a read-back per conflict round and with the rounds predicted),
+# rounds/pipeline.md (the GPU backend's pipeline with `compute.round_waits` per-round and
+# per-frame), coarse/pipeline.md (from coarse levels 2, 3 and 4), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
 # nets.md (the networks, tract and the GPU kernels, each profiled per node or step), with
@@ -98,6 +99,11 @@ case "$mode" in
     # 1,8) were measured three times and stay at one.
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --round-waits per-round,per-frame --out "$out/rounds"
+    echo "== the GPU backend's pipeline from other coarse levels (issue 33 item 4: 'coarse levels')"
+    # The default starts the levels at 9^3 (3); 5^3 (2) has fewer points a level and more
+    # levels (more waits), 17^3 (4) more points and fewer levels.
+    "$bin" bench pipeline --backend wgpu --model fourier-small --res "${res%%,*}" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --coarse-level 2,3,4 --out "$out/coarse"
     echo "== localization on the model's field"
     # The adapter's rows twice: a read-back per conflict round, and the rounds predicted.
     "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \

@@ -457,10 +457,22 @@ impl Gpu {
                 timeout: None,
             })
             .map_err(|e| format!("the adapter did not finish: {e}"))?;
-        for rx in rxs {
-            rx.recv()
-                .map_err(|_| "the read-back was dropped".to_string())?
-                .map_err(|e| format!("cannot map the result: {e}"))?;
+        let results: Vec<Result<(), String>> = rxs
+            .into_iter()
+            .map(|rx| {
+                rx.recv()
+                    .map_err(|_| "the read-back was dropped".to_string())?
+                    .map_err(|e| format!("cannot map the result: {e}"))
+            })
+            .collect();
+        if let Some(Err(e)) = results.iter().find(|r| r.is_err()) {
+            // Those that did map are unmapped: the next read-back maps them again.
+            for ((staging, _), r) in stagings.iter().zip(&results) {
+                if r.is_ok() {
+                    staging.unmap();
+                }
+            }
+            return Err(e.clone());
         }
         Ok(())
     }

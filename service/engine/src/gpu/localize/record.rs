@@ -188,10 +188,10 @@ impl<'a> Rec<'a> {
         Ok(out)
     }
 
-    /// Record levels `coarse..=last` (the coarsest evaluated whole). Waiting per round, a submission per round (per
-    /// batch of rounds) and `Some` when a read showed a list overflowed; with a plan, the
-    /// levels' predicted rounds and no read (the next one tells whether a list overflowed or
-    /// a plan fell short: [`Retry::of`]).
+    /// Record levels `coarse..=last` (the coarsest evaluated whole). Waiting per round, a
+    /// submission per round (per batch of rounds) and `Some` when a read showed a list
+    /// overflowed; with a plan, the levels' predicted rounds and no read (the next one tells
+    /// whether a list overflowed or a plan fell short: [`Retry::of`]).
     pub(in crate::gpu) fn levels(
         &mut self,
         coarse: u32,
