@@ -276,8 +276,9 @@ fn analytic_tables(
 /// before (one read-back a frame), frames whose prediction fell short run again.
 #[test]
 fn hierarchical_localization_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
-    use volcap_engine::gpu::localize::{GpuField, GpuLocalizer, RoundWaits};
+    use volcap_engine::gpu::localize::{GpuField, GpuLocalizer};
     use volcap_engine::grid::{Grid, GridSpec};
+    use volcap_engine::localize::RoundWaits;
     use volcap_engine::localize::{HierarchicalMode, Localizer, Method};
     let Some(gpu) = gpu() else { return };
     let mut cpu_loc = Localizer::new();
@@ -543,9 +544,10 @@ fn index_lists_stop_growing_at_one_binding_with_an_error_not_a_panic() {
 /// 99.9 % of pixels.
 #[test]
 fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
-    use volcap_engine::gpu::localize::{GpuField, RoundWaits};
+    use volcap_engine::gpu::localize::GpuField;
     use volcap_engine::gpu::render::GpuRenderer;
     use volcap_engine::grid::GridSpec;
+    use volcap_engine::localize::RoundWaits;
     use volcap_engine::render::{RenderOptions, Renderer};
     let Some(gpu) = gpu() else { return };
     let mut cpu = Renderer::new();

@@ -157,6 +157,28 @@ impl Stages {
 
 /// `--segment-passes` of `eval` and `bench pipeline`: a list of counts, each in the engine's
 /// range (`model::SEGMENT_PASSES`).
+/// The values a comma-separated flag names (`flag`: its name for the error), each one of
+/// `all` by `name`; an unknown one is refused with the names it may take.
+pub fn by_names<T: Copy>(
+    flag: &str,
+    given: &[String],
+    all: &[T],
+    name: impl Fn(&T) -> &'static str,
+) -> anyhow::Result<Vec<T>> {
+    given
+        .iter()
+        .map(|g| {
+            all.iter()
+                .copied()
+                .find(|v| name(v) == g.trim())
+                .ok_or_else(|| {
+                    let names: Vec<_> = all.iter().map(&name).collect();
+                    anyhow!("{flag} {g:?}: one of {}", names.join(", "))
+                })
+        })
+        .collect()
+}
+
 pub fn check_segment_passes(passes: &[u8]) -> anyhow::Result<()> {
     let range = volcap_engine::model::SEGMENT_PASSES;
     if passes.is_empty() || passes.iter().any(|p| !range.contains(p)) {

@@ -170,8 +170,8 @@ fn adapter_rows(
     a: &LocalizeArgs,
     rows: &mut Vec<Row>,
 ) -> anyhow::Result<()> {
-    use volcap_engine::gpu::localize::{GpuLocalizer, RoundWaits};
-    use volcap_engine::localize::HierarchicalMode;
+    use volcap_engine::gpu::localize::GpuLocalizer;
+    use volcap_engine::localize::{HierarchicalMode, RoundWaits};
     let BenchField::Model(model, Some(gpu)) = field else {
         return Ok(());
     };
@@ -183,11 +183,12 @@ fn adapter_rows(
     if let Some(bad) = per_wait.iter().find(|n| !(1..=64).contains(*n)) {
         anyhow::bail!("--rounds-per-wait {bad}: must lie in 1..=64");
     }
-    let round_waits = a
-        .round_waits
-        .iter()
-        .map(|w| RoundWaits::parse(w.trim()).map_err(|e| anyhow::anyhow!("--round-waits: {e}")))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let round_waits = crate::backend::by_names(
+        "--round-waits",
+        &a.round_waits,
+        &RoundWaits::ALL,
+        RoundWaits::name,
+    )?;
     let plans = per_wait
         .iter()
         .flat_map(|p| round_waits.iter().map(move |w| (*p, *w)));

@@ -287,26 +287,18 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     if let Some(r) = a.rounds_per_wait.iter().find(|r| !(1..=64).contains(*r)) {
         bail!("--rounds-per-wait {r} must be in 1..=64");
     }
-    let render_devices = a
-        .render_devices
-        .iter()
-        .map(|d| {
-            RenderDevice::by_name(d.trim()).ok_or_else(|| {
-                let names: Vec<_> = RenderDevice::ALL.iter().map(|d| d.name()).collect();
-                anyhow!("--render-device {d:?}: one of {}", names.join(", "))
-            })
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let round_waits = a
-        .round_waits
-        .iter()
-        .map(|w| {
-            RoundWaits::by_name(w.trim()).ok_or_else(|| {
-                let names: Vec<_> = RoundWaits::ALL.iter().map(|w| w.name()).collect();
-                anyhow!("--round-waits {w:?}: one of {}", names.join(", "))
-            })
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let render_devices = crate::backend::by_names(
+        "--render-device",
+        &a.render_devices,
+        &RenderDevice::ALL,
+        RenderDevice::name,
+    )?;
+    let round_waits = crate::backend::by_names(
+        "--round-waits",
+        &a.round_waits,
+        &RoundWaits::ALL,
+        RoundWaits::name,
+    )?;
     if !a.segment_passes.is_empty() {
         crate::backend::check_segment_passes(&a.segment_passes)?;
     }

@@ -2,6 +2,7 @@
 
 use serde::Deserialize;
 use std::path::PathBuf;
+pub use volcap_engine::localize::RoundWaits;
 use volcap_engine::model::RuntimeChoice;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
@@ -139,42 +140,9 @@ pub struct ComputeConfig {
     pub render_device: RenderDevice,
     /// `backend = "wgpu"`: when the render stage's localization reads the conflict loop's
     /// progress: `per-round` (default: after each round, batched by `rounds_per_wait`) or
-    /// `per-frame` ([`RoundWaits`]).
+    /// `per-frame` ([`RoundWaits`], the engine's).
     #[serde(default)]
     pub round_waits: RoundWaits,
-}
-
-/// `compute.round_waits`: when the host reads the localization levels' conflict rounds on
-/// the adapter (`engine::gpu::localize::RoundWaits`; the frames are the same either way).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum RoundWaits {
-    /// After each round: a read-back per round and level (some ten a frame at 257^3).
-    /// The default until a GPU measures the other (docs/bench/pipeline-gpu.md).
-    #[default]
-    PerRound,
-    /// Once for the levels: each level's rounds predicted from the last frame's (plus a
-    /// spare one over an empty list); a frame the prediction fell short of runs again
-    /// per round (counted: `adapter_work.reruns` in `/state`). `volcap bench pipeline
-    /// --round-waits per-round,per-frame` measures what it buys.
-    PerFrame,
-}
-
-impl RoundWaits {
-    pub const ALL: [RoundWaits; 2] = [RoundWaits::PerRound, RoundWaits::PerFrame];
-
-    /// The config value (`volcap bench pipeline --round-waits` takes the same).
-    pub fn name(&self) -> &'static str {
-        match self {
-            RoundWaits::PerRound => "per-round",
-            RoundWaits::PerFrame => "per-frame",
-        }
-    }
-
-    /// The value named `name` (as [`Self::name`] writes it).
-    pub fn by_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|d| d.name() == name)
-    }
 }
 
 /// Accepted range of `compute.rounds_per_wait`.

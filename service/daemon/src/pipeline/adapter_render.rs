@@ -24,7 +24,6 @@ impl AdapterRenderer {
         mode: FieldMode,
         compute: &crate::config::ComputeConfig,
     ) -> Option<Self> {
-        use volcap_engine::gpu::localize::RoundWaits;
         let device = compute.render_device;
         let volcap_engine::model::Runtime::Wgpu(g) = &models?.runtime else {
             return None;
@@ -64,10 +63,7 @@ impl AdapterRenderer {
             Ok(gpu) => Some(AdapterRenderer {
                 gpu: gpu
                     .with_rounds_per_wait(compute.rounds_per_wait)
-                    .with_round_waits(match compute.round_waits {
-                        crate::config::RoundWaits::PerRound => RoundWaits::PerRound,
-                        crate::config::RoundWaits::PerFrame => RoundWaits::PerFrame,
-                    }),
+                    .with_round_waits(compute.round_waits),
                 cpu_because: None,
                 own_device,
             }),

@@ -23,7 +23,7 @@
 use super::Gpu;
 use super::kit::entry;
 use crate::grid::{Grid, GridSpec};
-use crate::localize::{HierarchicalMode, LocalizeStats, check_coarse};
+use crate::localize::{HierarchicalMode, LocalizeStats, RoundWaits, check_coarse};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
@@ -33,8 +33,8 @@ mod record;
 mod tiling;
 use field::FieldBufs;
 pub use field::{GpuField, MapsRef};
+use plan::LEVEL_KEYS;
 use plan::Predictor;
-pub use plan::{LEVEL_KEYS, MISS_SPARE_ROUNDS, RoundWaits, SPARE_ROUNDS};
 pub(super) use record::{Dispatch, Rec, Retry};
 pub use tiling::Tiling;
 
@@ -139,7 +139,7 @@ pub struct GpuLocalizer {
     /// Conflict rounds per read-back at most ([`Self::with_rounds_per_wait`]).
     rounds_per_wait: usize,
     /// The last frame's rounds per level, when they are predicted ([`Self::with_round_waits`]).
-    predictor: Predictor,
+    pub(super) predictor: Predictor,
     /// Maps on the adapter to copy into the field's buffer, recorded ahead of the next
     /// localization's work ([`Self::recorder`]).
     pending_copy: Option<(wgpu::Buffer, u64)>,
@@ -425,17 +425,6 @@ impl GpuLocalizer {
                 Ok(())
             }
         }
-    }
-
-    /// A completed frame's counters: its rounds per level are the next frame's plan.
-    pub(super) fn learn(
-        &mut self,
-        spec: GridSpec,
-        coarse: u32,
-        mode: HierarchicalMode,
-        counts: &[u32; COUNTS],
-    ) {
-        self.predictor.learn(spec, coarse, mode, counts);
     }
 
     pub(super) fn pipes(&self) -> &Pipes {

@@ -430,49 +430,53 @@ impl Gpu {
         &self.counters
     }
 
-    /// Map the first bytes of each staging buffer (MAP_READ) for reading once submission
-    /// `after` (and those before it on the one queue) is done: one wait for them all. The
-    /// stages share the queue: waiting for one's own submission and not for what other
-    /// stages' threads submitted after it keeps them from waiting on each other. Each
-    /// callback answers once: a one-slot channel.
+    /// Map the first `out.len()` bytes of each staging buffer (MAP_READ) for reading once
+    /// submission `after` (and those before it on the one queue) is done: one wait for them
+    /// all. The stages share the queue: waiting for one's own submission and not for what
+    /// other stages' threads submitted after it keeps them from waiting on each other. The
+    /// callbacks answer once each on one channel; where one fails, those that mapped are
+    /// unmapped (the next read-back maps them again).
     fn map_read(
         &self,
-        stagings: &[(&wgpu::Buffer, u64)],
+        reads: &[(&wgpu::Buffer, &mut [u8])],
         after: wgpu::SubmissionIndex,
     ) -> Result<(), String> {
+        debug_assert!(reads.len() <= 64, "a bit each in `mapped`");
         self.counters.waits.fetch_add(1, Ordering::Relaxed);
-        let rxs: Vec<_> = stagings
-            .iter()
-            .map(|(staging, bytes)| {
-                let (tx, rx) = std::sync::mpsc::sync_channel(1);
-                staging.map_async(wgpu::MapMode::Read, 0..*bytes, move |r| {
-                    let _ = tx.try_send(r);
-                });
-                rx
-            })
-            .collect();
+        let (tx, rx) = std::sync::mpsc::sync_channel(reads.len());
+        for (i, (staging, out)) in reads.iter().enumerate() {
+            let tx = tx.clone();
+            staging.map_async(wgpu::MapMode::Read, 0..out.len() as u64, move |r| {
+                let _ = tx.try_send((i, r));
+            });
+        }
+        drop(tx);
         self.device
             .poll(wgpu::PollType::Wait {
                 submission_index: Some(after),
                 timeout: None,
             })
             .map_err(|e| format!("the adapter did not finish: {e}"))?;
-        let results: Vec<Result<(), String>> = rxs
-            .into_iter()
-            .map(|rx| {
-                rx.recv()
-                    .map_err(|_| "the read-back was dropped".to_string())?
-                    .map_err(|e| format!("cannot map the result: {e}"))
-            })
-            .collect();
-        if let Some(Err(e)) = results.iter().find(|r| r.is_err()) {
-            // Those that did map are unmapped: the next read-back maps them again.
-            for ((staging, _), r) in stagings.iter().zip(&results) {
-                if r.is_ok() {
+        let (mut mapped, mut failed) = (0u64, None);
+        for _ in 0..reads.len() {
+            match rx.recv() {
+                Ok((i, Ok(()))) => mapped |= 1 << i,
+                Ok((_, Err(e))) => {
+                    failed = failed.or(Some(format!("cannot map the result: {e}")));
+                }
+                Err(_) => {
+                    failed = failed.or(Some("the read-back was dropped".to_string()));
+                    break;
+                }
+            }
+        }
+        if let Some(e) = failed {
+            for (i, (staging, _)) in reads.iter().enumerate() {
+                if mapped & (1 << i) != 0 {
                     staging.unmap();
                 }
             }
-            return Err(e.clone());
+            return Err(e);
         }
         Ok(())
     }
@@ -523,9 +527,7 @@ impl Gpu {
     ) -> Result<wgpu::SubmissionIndex, String> {
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let index = self.queue.submit([encoder.finish()]);
-        let maps: Vec<(&wgpu::Buffer, u64)> =
-            reads.iter().map(|(s, o)| (*s, o.len() as u64)).collect();
-        let mapped = self.map_read(&maps, index.clone());
+        let mapped = self.map_read(reads, index.clone());
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("the adapter refused the work: {e}"));
         }

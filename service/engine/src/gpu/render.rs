@@ -15,11 +15,11 @@
 
 use super::kit::entry;
 use super::localize::{
-    CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, MARK, Retry, RoundWaits, Tiling,
+    CULLED, Dispatch, EVALS, GpuField, GpuLocalizer, LIST, LOG, MARK, Retry, Tiling,
 };
 use super::{Gpu, groups};
 use crate::grid::GridSpec;
-use crate::localize::HierarchicalMode;
+use crate::localize::{HierarchicalMode, RoundWaits};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
@@ -425,7 +425,7 @@ impl GpuRenderer {
         if let Some(r) = Retry::of(&counts) {
             return Ok(Some(r));
         }
-        self.loc.learn(spec, coarse, mode, &counts);
+        self.loc.predictor.learn(spec, coarse, mode, &counts);
         let c = self.gpu.count();
         c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
         c.render_runs.fetch_add(1, Ordering::Relaxed);

@@ -10,8 +10,10 @@ mod dense;
 mod hierarchical;
 mod mise;
 mod octree;
+mod waits;
 
 pub use hierarchical::{Hierarchical, HierarchicalMode};
+pub use waits::RoundWaits;
 
 use crate::field::{Evaluator, FieldError, OccupancyField};
 use crate::grid::{BitSet, Grid, GridError, GridSpec, is_inside};

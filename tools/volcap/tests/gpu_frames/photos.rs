@@ -108,7 +108,7 @@ fn the_renderer_on_the_adapter_draws_the_cpus_frames_of_real_photos() {
     // same frames, drawn twice each (the second time the prediction is the frame's own).
     let mut predicted = GpuRenderer::new(gpu.clone())
         .unwrap()
-        .with_round_waits(volcap_engine::gpu::localize::RoundWaits::PerFrame);
+        .with_round_waits(volcap_engine::localize::RoundWaits::PerFrame);
     let counted0 = gpu.counters();
     let (mut a, mut b, mut c) = (Renderer::new(), Renderer::new(), Renderer::new());
     let opts = RenderOptions {

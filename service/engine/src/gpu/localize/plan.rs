@@ -1,6 +1,6 @@
 //! How the host waits for the conflict loop's rounds: after each round (the lists' lengths
 //! read back: exact, a read-back per round), or once a frame with each level's rounds
-//! predicted from the last frame's ([`RoundWaits::PerFrame`]).
+//! predicted from the last frame's ([`RoundWaits::PerFrame`], `localize/waits.rs`).
 //!
 //! Predicted, a level is recorded with the rounds the same level took last frame plus
 //! [`SPARE_ROUNDS`] (a round over an empty list lists, evaluates and counts nothing:
@@ -16,7 +16,7 @@
 
 use super::{COUNTS, LEVEL_ROUNDS};
 use crate::grid::GridSpec;
-use crate::localize::HierarchicalMode;
+use crate::localize::{HierarchicalMode, RoundWaits};
 
 /// Rounds recorded beyond the last frame's at each level when predicting.
 pub const SPARE_ROUNDS: u32 = 1;
@@ -28,36 +28,6 @@ pub const MISS_SPARE_ROUNDS: u32 = 3;
 /// finest; a 2^16 + 1 grid would need 17).
 pub const LEVEL_KEYS: usize = 16;
 
-/// When the host reads the conflict loop's progress (`compute.round_waits`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum RoundWaits {
-    /// After each round (batches with `with_rounds_per_wait`): exact, a wait each.
-    #[default]
-    PerRound,
-    /// Once a frame, each level's rounds predicted from the last frame; a frame the
-    /// prediction fell short of is run again per round.
-    PerFrame,
-}
-
-impl RoundWaits {
-    pub const ALL: [RoundWaits; 2] = [RoundWaits::PerRound, RoundWaits::PerFrame];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            RoundWaits::PerRound => "per-round",
-            RoundWaits::PerFrame => "per-frame",
-        }
-    }
-
-    /// `per-round` or `per-frame`.
-    pub fn parse(s: &str) -> Result<Self, String> {
-        Self::ALL
-            .into_iter()
-            .find(|w| w.name() == s)
-            .ok_or_else(|| format!("unknown round waits {s:?} (per-round or per-frame)"))
-    }
-}
-
 /// The slot of level `l`'s round counter in a grid of `spec`.
 pub(super) fn level_key(spec: GridSpec, l: u32) -> usize {
     (spec.level().saturating_sub(l) as usize).min(LEVEL_KEYS - 1)
@@ -65,7 +35,7 @@ pub(super) fn level_key(spec: GridSpec, l: u32) -> usize {
 
 /// The last frame's rounds per level, for the next frame's plan.
 #[derive(Debug, Default)]
-pub(super) struct Predictor {
+pub(in crate::gpu) struct Predictor {
     pub(super) waits: RoundWaits,
     /// The grid, coarse level and mode the rounds were counted on.
     seen: Option<(GridSpec, u32, HierarchicalMode)>,
@@ -104,7 +74,7 @@ impl Predictor {
     }
 
     /// A frame completed with these counters: its rounds are the next plan.
-    pub(super) fn learn(
+    pub(in crate::gpu) fn learn(
         &mut self,
         spec: GridSpec,
         coarse: u32,
@@ -177,17 +147,9 @@ mod tests {
     }
 
     #[test]
-    fn level_keys_are_stride_exponents_and_names_round_trip() {
+    fn level_keys_are_stride_exponents() {
         let spec = GridSpec::from_resolution(257).unwrap();
         assert_eq!(level_key(spec, spec.level()), 0);
         assert_eq!(level_key(spec, 3), spec.level() as usize - 3);
-        for w in RoundWaits::ALL {
-            assert_eq!(RoundWaits::parse(w.name()), Ok(w));
-        }
-        assert!(
-            RoundWaits::parse("sometimes")
-                .unwrap_err()
-                .contains("sometimes")
-        );
     }
 }
