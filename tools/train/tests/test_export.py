@@ -229,7 +229,39 @@ def test_fine_int8_percentile_sets_the_activation_ranges(tmp_path):
     assert any(lo[t] < 0.9 * hi[t] for t in lo)
     names = [s[0] for s in FOURIER_INT8_SCHEMES]
     assert len(set(names)) == len(names)
-    assert len({(f, p) for _, f, p in FOURIER_INT8_SCHEMES}) == len(FOURIER_INT8_SCHEMES)
+    assert len({(f, p, k) for _, f, p, k in FOURIER_INT8_SCHEMES}) == len(FOURIER_INT8_SCHEMES)
+
+
+def test_int8_keeps_the_named_convolutions_in_f32(tmp_path):
+    """quantize(keep_f32=KEEP_F32): the Fourier net's first two convolutions (named as every
+    Fourier export names them) read float32 weights and inputs, every other convolution int8
+    ones; the file runs near its f32; a name the graph lacks is refused, named."""
+    from volcap_train.export import KEEP_F32, quantize
+
+    x = fresh_fourier_onnx(tmp_path / "f.onnx")
+    feeds = [{"image": torch.rand(1, 4, 256, 256).numpy()} for _ in range(4)] + [{"image": x.numpy()}]
+    q = tmp_path / "q.onnx"
+    quantize(tmp_path / "f.onnx", q, feeds, fine=True, keep_f32=KEEP_F32)
+    m = onnx.load(str(q))
+    made_by = {o: n for n in m.graph.node for o in n.output}
+    inits = {i.name for i in m.graph.initializer}
+
+    def dequantized(t):
+        return t in made_by and made_by[t].op_type == "DequantizeLinear"
+
+    convs = {n.name: n for n in m.graph.node if n.op_type == "Conv"}
+    assert set(KEEP_F32) <= convs.keys(), sorted(convs)
+    for name, n in convs.items():
+        kept = name in KEEP_F32
+        assert dequantized(n.input[1]) != kept, name
+        assert (n.input[1] in inits) == kept, name
+        assert dequantized(n.input[0]) != kept, name
+    ref = run(tmp_path / "f.onnx", {"image": x.numpy()})
+    out = run(q, {"image": x.numpy()})
+    assert np.isfinite(out).all()
+    assert np.abs(out - ref).mean() < 0.1 * np.abs(ref).mean() + 1e-3
+    with pytest.raises(ValueError, match="/e9/nowhere/Conv"):
+        quantize(tmp_path / "f.onnx", tmp_path / "bad.onnx", feeds, keep_f32=("/e9/nowhere/Conv",))
 
 
 def test_export_reads_a_light_checkpoint_as_a_run_s(tmp_path):

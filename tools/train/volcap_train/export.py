@@ -88,10 +88,11 @@ def export(module, inputs, names_in, names_out, path: Path, meta: dict, dynamic_
     onnx.save(m, str(path))
 
 
-def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False, percentile: float = 99.999):
+def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False, percentile: float = 99.999, keep_f32: tuple[str, ...] = ()):
     """int8 QDQ export of `src`. `fine`: weights per output channel and activation ranges at the
     (100 - `percentile`) / `percentile` percentiles of the calibration histogram; else weights
-    per tensor and MinMax ranges (the MLP family's files). The Fourier export tries several
+    per tensor and MinMax ranges (the MLP family's files). `keep_f32`: names of nodes left in
+    float32 (their inputs then stay float32 too: KEEP_F32). The Fourier export tries several
     (export_fourier, FOURIER_INT8_SCHEMES)."""
     from onnxruntime.quantization import CalibrationDataReader, CalibrationMethod, QuantFormat, QuantType, quantize_static
 
@@ -102,9 +103,13 @@ def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False, percen
         def get_next(self):
             return next(self.it, None)
 
+    names = {n.name for n in onnx.load(str(src)).graph.node}
+    missing = [k for k in keep_f32 if k not in names]
+    if missing:
+        raise ValueError(f"{src}: no node named {', '.join(missing)} to keep in float32")
     method = CalibrationMethod.Percentile if fine else CalibrationMethod.MinMax
     extra = {"CalibPercentile": percentile} if fine else {}
-    quantize_static(str(src), str(dst), Reader(), quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv", "MatMul", "Gemm"], per_channel=fine, calibrate_method=method, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, extra_options=extra)
+    quantize_static(str(src), str(dst), Reader(), quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv", "MatMul", "Gemm"], per_channel=fine, calibrate_method=method, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, extra_options=extra, nodes_to_exclude=list(keep_f32))
     m = onnx.load(str(dst))
     src_meta = {p.key: p.value for p in onnx.load(str(src)).metadata_props}
     del m.metadata_props[:]
@@ -424,24 +429,41 @@ def int8_drift(f32: Path, int8: Path, x: torch.Tensor, pts: torch.Tensor, k: int
     return (occ(int8) - occ(f32)).abs().mean().item()
 
 
-# The Fourier export's int8 candidates, (file tag, quantize's fine, its percentile; unused for
-# MinMax): the one that reads the golden query's occupancy closest to f32 is kept. The best
-# scheme differs from run to run and the drift is not monotone in the percentile (figures in
-# models/README.md and each model card's int8 row).
-FOURIER_INT8_SCHEMES = [("minmax", False, 0.0), ("p99.999", True, 99.999), ("p99.9999", True, 99.9999), ("p99.99995", True, 99.99995)]
+# The Fourier nets' first two convolutions (the input's, at 128 px, and the first of the
+# 64-px block), left in float32 by the KEEP_F32 candidates: with them in int8, run (51) of
+# fourier-medium read the golden query 0.44 off f32 from 96, 192 or 256 calibration images
+# and 0.024-0.031 from 128 or 160 (two outcomes, nothing between); with both kept, 0.015 from
+# 96 and 0.021 from 256 (one of them kept: 0.43-0.45; docs/eval/hands.md section 36). 17.7
+# million of fourier-medium's 580 million MACs a frame.
+KEEP_F32 = ("/e0/e0.0/Conv", "/e1/e1.0/e1.0.0/Conv")
+
+# The Fourier export's int8 candidates, (file tag, quantize's fine, its percentile (unused for
+# MinMax), the nodes kept in float32): the one that reads the golden query's occupancy closest
+# to f32 is kept. The best scheme differs from run to run and the drift is not monotone in the
+# percentile (figures in models/README.md and each model card's int8 row).
+FOURIER_INT8_SCHEMES = [
+    ("minmax", False, 0.0, ()),
+    ("p99.999", True, 99.999, ()),
+    ("p99.9999", True, 99.9999, ()),
+    ("p99.99995", True, 99.99995, ()),
+    ("minmax-keep", False, 0.0, KEEP_F32),
+    ("p99.999-keep", True, 99.999, KEEP_F32),
+    ("p99.9999-keep", True, 99.9999, KEEP_F32),
+]
 
 
-def scheme_text(fine: bool, percentile: float) -> str:
+def scheme_text(fine: bool, percentile: float, keep: tuple[str, ...] = ()) -> str:
+    kept = f", {' and '.join(keep)} kept in f32" if keep else ""
     if not fine:
-        return "activation ranges (MinMax, per tensor)"
-    return f"weights per output channel, activation ranges ({100 - percentile:.5g}-{percentile:.8g} percentiles, per tensor)"
+        return f"activation ranges (MinMax, per tensor){kept}"
+    return f"weights per output channel, activation ranges ({100 - percentile:.5g}-{percentile:.8g} percentiles, per tensor){kept}"
 
 
-def calib_row(seg: Path | None, upper_every: int, fine: bool = False, percentile: float = 99.999, images: int = INT8_CALIB_IMAGES) -> str:
+def calib_row(seg: Path | None, upper_every: int, fine: bool = False, percentile: float = 99.999, images: int = INT8_CALIB_IMAGES, keep: tuple[str, ...] = ()) -> str:
     """The model card's int8 calibration row (`fine`: quantize(fine=True, percentile)'s scheme)."""
     masks = "the product's masks" if seg is not None else "true masks"
     upper = ", half of them upper bodies" if upper_every > 0 else ""
-    return f"{scheme_text(fine, percentile)} from {images} training images, {masks}{upper}"
+    return f"{scheme_text(fine, percentile, keep)} from {images} training images, {masks}{upper}"
 
 
 def fourier_meta(variant: str, k: int, frame: str, iso: float, name: str, passes: int, size: int = 128) -> dict:
@@ -483,18 +505,21 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     int8_path = out / f"{base}.fourier.int8.onnx"
     # Every scheme of FOURIER_INT8_SCHEMES is tried; the one closest to f32 is kept.
     feeds = fourier_calib(data, k, seg, upper_every, images=calib_images, passes=passes)
-    tried = []  # (drift, fine, percentile, file)
-    for tag, fine, pct in FOURIER_INT8_SCHEMES:
+    tried = []  # (drift, fine, percentile, kept in f32, file)
+    # The candidates keeping nodes this variant's graph has (an -hr or two-net variant may
+    # name its first convolutions otherwise: the plain schemes then).
+    nodes = {n.name for n in onnx.load(str(path)).graph.node}
+    for tag, fine, pct, keep in (s for s in FOURIER_INT8_SCHEMES if set(s[3]) <= nodes):
         tmp = out / f"{base}.fourier.int8.{tag}.tmp"
-        quantize(path, tmp, feeds, fine=fine, percentile=pct)
-        tried.append((int8_drift(path, tmp, x, pts, k), fine, pct, tmp))
-    drift, fine, pct, best = min(tried, key=lambda t: t[0])
-    rest = [t for t in tried if t[3] != best]
+        quantize(path, tmp, feeds, fine=fine, percentile=pct, keep_f32=keep)
+        tried.append((int8_drift(path, tmp, x, pts, k), fine, pct, keep, tmp))
+    drift, fine, pct, keep, best = min(tried, key=lambda t: t[0])
+    rest = [t for t in tried if t[4] != best]
     shutil.move(best, int8_path)
     for *_, tmp in rest:
         tmp.unlink()
-    scheme = calib_row(seg, upper_every, fine, pct, calib_images)
-    others = "; ".join(f"{scheme_text(f, p)} {d:.3f}" for d, f, p, _ in rest)
+    scheme = calib_row(seg, upper_every, fine, pct, calib_images, keep)
+    others = "; ".join(f"{scheme_text(f, p, kp)} {d:.3f}" for d, f, p, kp, _ in rest)
     calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the others: {others})"
     if drift < INT8_MAX_DRIFT:
         files.append(int8_path.name)
