@@ -103,10 +103,11 @@ def quantize(src: Path, dst: Path, feeds: list[dict], fine: bool = False, percen
         def get_next(self):
             return next(self.it, None)
 
-    names = {n.name for n in onnx.load(str(src)).graph.node}
-    missing = [k for k in keep_f32 if k not in names]
-    if missing:
-        raise ValueError(f"{src}: no node named {', '.join(missing)} to keep in float32")
+    if keep_f32:
+        names = {n.name for n in onnx.load(str(src)).graph.node}
+        missing = [k for k in keep_f32 if k not in names]
+        if missing:
+            raise ValueError(f"{src}: no node named {', '.join(missing)} to keep in float32")
     method = CalibrationMethod.Percentile if fine else CalibrationMethod.MinMax
     extra = {"CalibPercentile": percentile} if fine else {}
     quantize_static(str(src), str(dst), Reader(), quant_format=QuantFormat.QDQ, op_types_to_quantize=["Conv", "MatMul", "Gemm"], per_channel=fine, calibrate_method=method, activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, extra_options=extra, nodes_to_exclude=list(keep_f32))
