@@ -319,5 +319,18 @@ def test_the_card_names_the_calibration_count_and_a_bad_count_is_refused(tmp_pat
     assert f"from {INT8_CALIB_IMAGES} training images" in calib_row(None, 0)
     row = calib_row(Path("seg.onnx"), 0, True, 99.9999, 320)
     assert "from 320 training images, the product's masks" in row and "99.9999" in row
-    with pytest.raises(SystemExit, match="--int8-calib-images 0"):
-        main(["--data", str(tmp_path), "--runs", str(tmp_path), "--out", str(tmp_path), "--int8-calib-images", "0"])
+    for bad in ["0", "256,0", "256,x", "", "192,192"]:
+        with pytest.raises(SystemExit):
+            main(["--data", str(tmp_path), "--runs", str(tmp_path), "--out", str(tmp_path), "--int8-calib-images", bad])
+
+
+def test_calibration_counts_parse_in_order_and_name_the_bad_value():
+    import argparse
+
+    from volcap_train.export import calib_counts
+
+    assert calib_counts("256") == [256]
+    assert calib_counts("256,192,160") == [256, 192, 160]
+    for bad, says in [("0", "at least 1"), ("256,-3", "-3 images"), ("2x6", "'2x6'"), ("192,192", "named twice")]:
+        with pytest.raises(argparse.ArgumentTypeError, match=says):
+            calib_counts(bad)
