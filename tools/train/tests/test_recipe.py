@@ -36,12 +36,13 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     # --geom-weight: the training-only surfaces head goes through the whole recipe too, and
     # stays out of the light checkpoint, which holds the series network only.)
     # --init: a start checkpoint named from the caller's directory (the two-pass network's);
-    # --amp bf16: the steps' forward in bfloat16 through the whole recipe.
+    # --amp bf16: the steps' forward in bfloat16 through the whole recipe; --teacher: distilling
+    # the committed fourier-medium beside the truth.
     (tmp_path / "start").mkdir()
     (tmp_path / "start" / "seg2.pt").write_bytes((REPO / "models/checkpoints/shape-fourier-small-seg2.pt").read_bytes())
     missing = subprocess.run([str(bundle / "run.sh"), str(tmp_path / "refused"), "--tiny", "--init", "start/none.pt"], capture_output=True, text=True, env=env, cwd=tmp_path)
     assert missing.returncode == 2 and "--init start/none.pt: no such checkpoint" in missing.stderr, missing.stderr
-    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--init", "start/seg2.pt", "--", "--sync-parts", "--geom-weight", "0.1", "--amp", "bf16", "--ema", "0.5"], check=True, env=env, cwd=tmp_path)
+    subprocess.run([str(bundle / "run.sh"), str(res), "--tiny", "--init", "start/seg2.pt", "--", "--sync-parts", "--geom-weight", "0.1", "--amp", "bf16", "--ema", "0.5", "--teacher", str(REPO / "models/checkpoints/shape-fourier-medium.pt")], check=True, env=env, cwd=tmp_path)
     ck = res / "checkpoint.pt"
     assert 0 < ck.stat().st_size <= 16 * 2**20
     light = torch.load(ck, weights_only=False)
@@ -55,6 +56,8 @@ def test_the_bundle_runs_the_recipe_end_to_end(tmp_path):
     assert budget["args"]["sync_parts"] == "True", budget["args"]
     assert budget["args"]["geom_weight"] == "0.1", budget["args"]
     assert budget["args"]["amp"] == "bf16", budget["args"]
+    # --teacher: the committed fourier-medium distilled through the whole recipe.
+    assert budget["args"]["teacher"].endswith("shape-fourier-medium.pt") and budget["args"]["teacher_weight"] == "1.0", budget["args"]
     assert budget["args"]["init"] == str(tmp_path / "start" / "seg2.pt"), budget["args"]
     assert not any(n.startswith("geom") for n in w), sorted(w)[:5]
     # --ema: the run keeps the weights' moving average beside them, and the light checkpoint

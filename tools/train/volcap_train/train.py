@@ -18,6 +18,7 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from torch import nn
 from tqdm import tqdm
 
 from . import crop as C
@@ -315,6 +316,39 @@ def training_forward(fn, modules, amp: str = "off", compile: bool = False):
     return forward
 
 
+def load_teacher(path: Path, variant: str, k: int) -> nn.Module:
+    """--teacher: a trained Fourier net (a light checkpoint or a run's ckpt.pt: its moving
+    average where it has one) of `variant`, frozen in inference mode; refused, naming the file,
+    where it is missing, is not a checkpoint, does not fit the variant or has another K."""
+    if variant not in FOURIER_VARIANTS:
+        raise SystemExit(f"--teacher-variant {variant}: not a Fourier variant ({', '.join(sorted(FOURIER_VARIANTS))})")
+    tk = fourier_variant(variant)[0]
+    if tk != k:
+        raise SystemExit(f"--teacher-variant {variant}: K = {tk}, the student's K = {k}: their maps cannot be compared")
+    if not path.exists():
+        raise SystemExit(f"--teacher {path}: no such checkpoint")
+    net = make_fourier(variant)
+    try:
+        net.load_state_dict(init_weights(torch.load(path, weights_only=False, map_location="cpu"), path))
+    except RuntimeError as e:
+        raise SystemExit(f"--teacher {path}: not a {variant} checkpoint ({str(e).splitlines()[0]})")
+    net.eval().requires_grad_(False)
+    return net
+
+
+def teacher_maps(teacher: nn.Module, x: torch.Tensor, amp: str = "off") -> torch.Tensor:
+    """The teacher's coefficient maps of an encoder input (its forward in bfloat16 with --amp
+    bf16, as the student's; float32 out), without gradients."""
+    with torch.no_grad(), torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=amp == "bf16"):
+        return teacher(x).float()
+
+
+def distill_loss(pred: torch.Tensor, teacher_pred: torch.Tensor, flips: torch.Tensor | None = None) -> torch.Tensor:
+    """The Parseval L2 of the net's maps against the teacher's (`teacher_pred` from the mirrored
+    input where `flips` says so, mirrored back here), over every pixel."""
+    return FO.parseval_l2(pred, mirror_some(teacher_pred, flips), dim=1).mean()
+
+
 def train_fourier(args):
     """The Fourier head, densely supervised: every pixel's whole ray (Parseval L2 on the
     coefficients) plus BCE on labelled 3D points through the basis (OHEM on points and images).
@@ -323,6 +357,8 @@ def train_fourier(args):
     torch.manual_seed(args.seed)
     gen = torch.Generator().manual_seed(args.seed)
     k, width, shift = fourier_variant(args.variant)
+    # --teacher: checked before the data are read.
+    teacher = load_teacher(args.teacher, args.teacher_variant, k) if args.teacher else None
     # --seg: the crops and mask channels from the product's segmentation (what the engine
     # feeds the encoder), for training and validation alike; targets stay the ground truth's.
     # --more-data: further datasets' training images (new poses of the same identities, or new
@@ -415,6 +451,8 @@ def train_fourier(args):
         # step from the starting weights (--init's); it is what validates and ships (export,
         # light checkpoints, --init from this run). A checkpoint keeps it beside the net.
         modules["ema"] = make_ema(net, args.ema)
+    if teacher is not None:
+        teacher.to(dev)
     # The augmentations draw on the device they run on (`gen` stays the host's: OHEM, flips).
     agen = gen if dev.type == "cpu" else torch.Generator(device=dev).manual_seed(args.seed + 1)
     print(f"training on {dev}, items on {'the device' if on_dev else 'the host'}")
@@ -493,6 +531,10 @@ def train_fourier(args):
         d = mirror_some(d, flips) if d is not None else None
         dense, bce, occ, lab = losses(pred, target, tr, items, pidx, args.thin_weight, args.centre_align)
         loss = dense + args.point_weight * bce.mean()
+        if teacher is not None:
+            # --teacher: the teacher's maps of the same (augmented, mirrored) input, mirrored
+            # back as the net's are, a second dense target beside the truth's.
+            loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(teacher, mirror_some(x, flips), args.amp), flips)
         if args.ray_bce_weight > 0:
             loss = loss + args.ray_bce_weight * ray_level_bce(pred, target, k, args.ray_samples, gen, tau)
         if args.moment_weight > 0:
@@ -597,6 +639,9 @@ def main(argv=None):
     ap.add_argument("--compile", action="store_true", help="fourier: the training forward compiled (torch.compile, channels-last weights and input); the first steps pay the compilation")
     ap.add_argument("--ema", type=float, default=0.0, help="fourier: keep a moving average of the weights with this decay per step (e.g. 0.999: about the last 1,000 steps) and validate, export and resume --init from it; 0: off")
     ap.add_argument("--ema-bn-images", type=int, default=800, help="fourier with --ema: at the run's end, the average's BatchNorm statistics recomputed on this many training images (its weights' own, not the average of the net's); 0: keep the averaged statistics")
+    ap.add_argument("--teacher", type=Path, default=None, help="fourier: distil from this trained Fourier net (a light checkpoint, e.g. ../../models/checkpoints/shape-fourier-medium.pt, or a run's ckpt.pt): its maps of each training input are a second dense target (Parseval L2, --teacher-weight) beside the truth's")
+    ap.add_argument("--teacher-variant", default="fourier-medium", help="fourier --teacher: the teacher's variant (its K must be the student's)")
+    ap.add_argument("--teacher-weight", type=float, default=1.0, help="fourier --teacher: weight of the L2 to the teacher's maps (the truth's dense loss has weight 1)")
     ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
