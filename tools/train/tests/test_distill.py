@@ -40,7 +40,11 @@ def test_a_bad_teacher_is_refused_naming_it(tmp_path):
     torch.save({"something": 1}, tmp_path / "bad.pt")
     with pytest.raises(SystemExit, match="bad.pt"):
         load_teacher(tmp_path / "bad.pt", "fourier-medium", 15)
-    # Through the command line, before any data are read (--data does not exist).
+    # Through the command line, before any data are read (--data does not exist); a weight
+    # that would not distil (or would push away from the teacher) is refused by value.
+    with pytest.raises(SystemExit):
+        main(["fourier", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "run"), "--teacher", str(MEDIUM), "--teacher-weight", "-1"])
+    assert not (tmp_path / "run").exists()
     with pytest.raises(SystemExit, match="none.pt: no such checkpoint"):
         main(["fourier", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "run"), "--variant", "fourier-small", "--teacher", str(tmp_path / "none.pt")])
 

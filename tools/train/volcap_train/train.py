@@ -524,7 +524,8 @@ def train_fourier(args):
         synced()
         parts["batch"] += time.time() - tb
         flips = (torch.rand(len(items), generator=gen) < 0.5).to(dev) if args.flip else None
-        pred, d, geo = predict(mirror_some(x, flips))
+        xin = mirror_some(x, flips)
+        pred, d, geo = predict(xin)
         # A mirrored image's maps, mirrored back, are compared with the image's own targets:
         # the same as training on the mirrored person with mirrored targets.
         pred = mirror_some(pred, flips)
@@ -534,7 +535,7 @@ def train_fourier(args):
         if teacher is not None:
             # --teacher: the teacher's maps of the same (augmented, mirrored) input, mirrored
             # back as the net's are, a second dense target beside the truth's.
-            loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(teacher, mirror_some(x, flips), args.amp), flips)
+            loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(teacher, xin, args.amp), flips)
         if args.ray_bce_weight > 0:
             loss = loss + args.ray_bce_weight * ray_level_bce(pred, target, k, args.ray_samples, gen, tau)
         if args.moment_weight > 0:
@@ -646,6 +647,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
         ap.error(COMPILE_BF16_REFUSED)
+    if args.teacher and not args.teacher_weight > 0:
+        ap.error(f"--teacher-weight {args.teacher_weight}: must be above 0 with --teacher")
     if args.threads:
         torch.set_num_threads(args.threads)
     return {"seg": train_seg, "shape": train_shape, "color": train_color, "fourier": train_fourier}[args.task](args)
