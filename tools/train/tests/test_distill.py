@@ -8,7 +8,7 @@ import torch
 
 from volcap_train import fourier as FO
 from volcap_train.nets import make_fourier
-from volcap_train.train import distill_loss, load_teacher, main, mirror_some, teacher_maps
+from volcap_train.train import distill_loss, load_teacher, main, mirror_some, teacher_forward
 
 REPO = Path(__file__).resolve().parents[3]
 MEDIUM = REPO / "models/checkpoints/shape-fourier-medium.pt"
@@ -19,12 +19,12 @@ def test_the_committed_medium_net_loads_as_a_frozen_teacher_and_reads_finite_map
     t = load_teacher(MEDIUM, "fourier-medium", 15)
     assert not t.training and not any(p.requires_grad for p in t.parameters())
     x = torch.rand(2, 4, 256, 256) * 2 - 1
-    m = teacher_maps(t, x)
+    m = teacher_forward(t)(x)
     assert m.shape == (2, 31, 128, 128) and m.dtype == torch.float32 and torch.isfinite(m).all()
     with torch.no_grad():
         assert torch.allclose(m, t(x), atol=1e-6)
     # bfloat16 as the student's forward with --amp bf16: close to float32, not equal.
-    b = teacher_maps(t, x, "bf16")
+    b = teacher_forward(t, "bf16")(x)
     assert torch.isfinite(b).all() and (b - m).abs().max() < 0.1 * m.abs().max()
 
 
@@ -72,4 +72,4 @@ def test_a_student_equal_to_its_teacher_has_no_distillation_loss():
     net.eval()
     x = torch.rand(1, 4, 256, 256) * 2 - 1
     with torch.no_grad():
-        assert distill_loss(net(x), teacher_maps(net, x)).item() < 1e-10
+        assert distill_loss(net(x), teacher_forward(net)(x)).item() < 1e-10

@@ -336,11 +336,16 @@ def load_teacher(path: Path, variant: str, k: int) -> nn.Module:
     return net
 
 
-def teacher_maps(teacher: nn.Module, x: torch.Tensor, amp: str = "off") -> torch.Tensor:
-    """The teacher's coefficient maps of an encoder input (its forward in bfloat16 with --amp
-    bf16, as the student's; float32 out), without gradients."""
-    with torch.no_grad(), torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=amp == "bf16"):
-        return teacher(x).float()
+def teacher_forward(teacher: nn.Module, amp: str = "off"):
+    """The teacher's coefficient maps of an encoder input, without gradients, through the
+    student's `training_forward` (bfloat16 and channels-last with --amp bf16; float32 out)."""
+    forward = training_forward(lambda x: (teacher(x),), [teacher], amp)
+
+    def maps(x: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            return forward(x)[0]
+
+    return maps
 
 
 def distill_loss(pred: torch.Tensor, teacher_pred: torch.Tensor, flips: torch.Tensor | None = None) -> torch.Tensor:
@@ -452,7 +457,7 @@ def train_fourier(args):
         # light checkpoints, --init from this run). A checkpoint keeps it beside the net.
         modules["ema"] = make_ema(net, args.ema)
     if teacher is not None:
-        teacher.to(dev)
+        teacher_maps = teacher_forward(teacher.to(dev), args.amp)
     # The augmentations draw on the device they run on (`gen` stays the host's: OHEM, flips).
     agen = gen if dev.type == "cpu" else torch.Generator(device=dev).manual_seed(args.seed + 1)
     print(f"training on {dev}, items on {'the device' if on_dev else 'the host'}")
@@ -535,7 +540,7 @@ def train_fourier(args):
         if teacher is not None:
             # --teacher: the teacher's maps of the same (augmented, mirrored) input, mirrored
             # back as the net's are, a second dense target beside the truth's.
-            loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(teacher, xin, args.amp), flips)
+            loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(xin), flips)
         if args.ray_bce_weight > 0:
             loss = loss + args.ray_bce_weight * ray_level_bce(pred, target, k, args.ray_samples, gen, tau)
         if args.moment_weight > 0:
