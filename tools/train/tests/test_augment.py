@@ -64,3 +64,16 @@ def test_items_stay_on_the_host_unless_a_gpu_trains():
     assert items_bytes(items) == 96
     for choice in ("auto", "host", "device"):
         assert not data_on_device(choice, torch.device("cpu"), items)
+
+
+def test_mask_aug_zero_leaves_the_masks_and_draws_as_many_numbers():
+    # `train fourier --mask-aug 0`: no mask changed, and the generator left where p = 0.5 leaves
+    # it, so the run draws the same batches, flips and photometric changes as its control.
+    m = torch.zeros(50, 1, 32, 32)
+    m[:, :, 10:22, 12:20] = 1.0
+    g0, g5 = torch.Generator().manual_seed(7), torch.Generator().manual_seed(7)
+    assert torch.equal(perturb_mask(m, g0, 0.0), m)
+    perturb_mask(m, g5, 0.5)
+    assert torch.equal(torch.rand(4, generator=g0), torch.rand(4, generator=g5))
+    # Every image changed at p = 1.
+    assert bool((perturb_mask(m, torch.Generator().manual_seed(7), 1.0) != m).flatten(1).any(1).all())

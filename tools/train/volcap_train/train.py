@@ -26,7 +26,7 @@ from .data import Split, backgrounds, photometric, random_affine, sensor
 from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, FourierGeomNet, make_fourier, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
-from .ray_losses import centre_aligned, ray_level_bce, thin_mask
+from .ray_losses import centre_aligned, peak_hinge, ray_level_bce, thin_mask
 from .runs import Run, device, init_weights, loop, make_ema, recompute_bn
 from .surfaces import GeomHead, geometry_loss, surface_depths
 from .items import fourier_cached, fourier_union, fourier_upper_cached
@@ -468,7 +468,9 @@ def train_fourier(args):
         m = d["mask"][idx].to(dev).float() / 255.0
         if g is not None:
             rgb = sensor(photometric(rgb, g), g)
-            m = perturb_mask(m, g)
+            # --mask-aug: the draws are made at any fraction (0 included), so a run differs
+            # from its control in the masks alone.
+            m = perturb_mask(m, g, args.mask_aug)
         return encoder_input(rgb, m)
 
     def targets(d, idx):
@@ -541,6 +543,11 @@ def train_fourier(args):
             # --teacher: the teacher's maps of the same (augmented, mirrored) input, mirrored
             # back as the net's are, a second dense target beside the truth's.
             loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(xin), flips)
+        if args.peak_weight > 0:
+            # --peak-weight: the thin rays' series held to the truth's peak height (depth-free;
+            # fixed depths, so the run draws the same batches as without it).
+            only = thin_mask(target, args.thin_radius)[:, 0] > 0.5
+            loss = loss + args.peak_weight * peak_hinge(pred, target, k, only, args.ray_samples, window=args.peak_window, cap=args.peak_cap)
         if args.ray_bce_weight > 0:
             loss = loss + args.ray_bce_weight * ray_level_bce(pred, target, k, args.ray_samples, gen, tau)
         if args.moment_weight > 0:
@@ -626,6 +633,7 @@ def main(argv=None):
     ap.add_argument("--moment-weight", type=float, default=0.0, help="Fourier: weight of the L1 loss on each ray's first depth moment (depth order)")
     ap.add_argument("--depth-frame", default="body", choices=["body", "camera"], help="Fourier: targets with each image's mean depth at z = 0 (body, fourier.centre_depth) or as the camera saw them (camera: runs before 2026-11-23 evening)")
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
+    ap.add_argument("--mask-aug", type=float, default=0.5, help="fourier: the fraction of training images whose input mask is dilated or eroded by 1-3 pixels (perturb_mask) on top of the masks the data hold (with --seg: the product's own segmentation's); 0: none (the draws still made, so the batches match a run without it)")
     ap.add_argument("--flip", action="store_true", help="fourier: mirror half the training images left-right (their maps mirrored back before the losses): a mirrored person is a person")
     ap.add_argument("--upper-every", type=int, default=0, help="Fourier: add the upper-body variant (fourier_upper_cached: the person cut by the frame's lower edge) of every N-th training image; 0: none")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
@@ -636,8 +644,11 @@ def main(argv=None):
     ap.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="fourier: where the net trains (auto: CUDA when present)")
     ap.add_argument("--data-device", default="auto", choices=["auto", "host", "device"], help="fourier: where the training items live (auto: on the --device when it is a GPU and they take at most half its free memory; the batches are made there without the host)")
     ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
-    ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight")
+    ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight and --peak-weight")
+    ap.add_argument("--peak-weight", type=float, default=0.0, help="fourier: weight of the thin rays' peak hinge (peak_hinge: relu(the truth's series peak - the net's), depth-free, read at --ray-samples depths, on the rays --thin-radius's opening removes); 0: off")
     ap.add_argument("--max-minutes", type=float, default=0.0, help="stop at this wall-clock budget (a checkpoint, the validation and budget.json as at the last step; fourier: the learning rate anneals by it); 0: none")
+    ap.add_argument("--peak-window", type=float, default=None, help="fourier --peak-weight: read the net's peak only within this many zeta of the truth's peak depth (0.05 is about 2.5 cm); default: anywhere along the ray")
+    ap.add_argument("--peak-cap", type=float, default=None, help="fourier --peak-weight: ask each thin ray for at most this height (e.g. 0.65, just over the surface level); default: the truth's own peak")
     ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
     ap.add_argument("--geom-weight", type=float, default=0.0, help="fourier: weight of the front/back surface loss (surfaces.py: depths and slopes, i.e. normals) on a training-only head on the series head's features, or on the surface net of --variant fourier-geom (required there); 0: off")
     ap.add_argument("--geom-slope-weight", type=float, default=1.0, help="fourier: the slopes' (normals') share of --geom-weight's loss beside the depths' (0: depths only)")
@@ -648,10 +659,18 @@ def main(argv=None):
     ap.add_argument("--teacher", type=Path, default=None, help="fourier: distil from this trained Fourier net (a light checkpoint, e.g. ../../models/checkpoints/shape-fourier-medium.pt, or a run's ckpt.pt): its maps of each training input are a second dense target (Parseval L2, --teacher-weight) beside the truth's")
     ap.add_argument("--teacher-variant", default="fourier-medium", help="fourier --teacher: the teacher's variant (its K must be the student's)")
     ap.add_argument("--teacher-weight", type=float, default=1.0, help="fourier --teacher: weight of the L2 to the teacher's maps (the truth's dense loss has weight 1)")
-    ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight")
+    ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight and --peak-weight")
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
         ap.error(COMPILE_BF16_REFUSED)
+    if not 0.0 <= args.mask_aug <= 1.0:
+        ap.error(f"--mask-aug {args.mask_aug}: a fraction of the images, 0 to 1")
+    if args.peak_window is not None and not args.peak_window >= 0:
+        ap.error(f"--peak-window {args.peak_window}: a distance in zeta, 0 or above")
+    if args.peak_cap is not None and not 0.0 < args.peak_cap <= 2.0:
+        ap.error(f"--peak-cap {args.peak_cap}: an occupancy height, above 0 and at most 2")
+    if not args.peak_weight >= 0:
+        ap.error(f"--peak-weight {args.peak_weight}: must be 0 (off) or above")
     if args.teacher and not args.teacher_weight > 0:
         ap.error(f"--teacher-weight {args.teacher_weight}: must be above 0 with --teacher")
     if args.threads:
