@@ -116,6 +116,10 @@ def test_bad_values_are_refused_by_name_before_any_data_are_read(tmp_path, capsy
 
     for flag, value in (("--peak-weight", "-1"), ("--peak-window", "-0.1"), ("--peak-cap", "0"), ("--mask-aug", "1.5")):
         with pytest.raises(SystemExit):
-            main(["fourier", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "run"), flag, value])
+            main(["fourier", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "run"), "--peak-weight", "0.1", flag, value])
         assert f"{flag} {float(value)}" in capsys.readouterr().err
         assert not (tmp_path / "run").exists()
+    # A window or cap without the hinge would be silently ignored: refused instead.
+    with pytest.raises(SystemExit):
+        main(["fourier", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "run"), "--peak-cap", "0.65"])
+    assert "give --peak-weight too" in capsys.readouterr().err

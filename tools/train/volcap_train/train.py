@@ -646,9 +646,9 @@ def main(argv=None):
     ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
     ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight and --peak-weight")
     ap.add_argument("--peak-weight", type=float, default=0.0, help="fourier: weight of the thin rays' peak hinge (peak_hinge: relu(the truth's series peak - the net's), depth-free, read at --ray-samples depths, on the rays --thin-radius's opening removes); 0: off")
-    ap.add_argument("--max-minutes", type=float, default=0.0, help="stop at this wall-clock budget (a checkpoint, the validation and budget.json as at the last step; fourier: the learning rate anneals by it); 0: none")
     ap.add_argument("--peak-window", type=float, default=None, help="fourier --peak-weight: read the net's peak only within this many zeta of the truth's peak depth (0.05 is about 2.5 cm); default: anywhere along the ray")
     ap.add_argument("--peak-cap", type=float, default=None, help="fourier --peak-weight: ask each thin ray for at most this height (e.g. 0.65, just over the surface level); default: the truth's own peak")
+    ap.add_argument("--max-minutes", type=float, default=0.0, help="stop at this wall-clock budget (a checkpoint, the validation and budget.json as at the last step; fourier: the learning rate anneals by it); 0: none")
     ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
     ap.add_argument("--geom-weight", type=float, default=0.0, help="fourier: weight of the front/back surface loss (surfaces.py: depths and slopes, i.e. normals) on a training-only head on the series head's features, or on the surface net of --variant fourier-geom (required there); 0: off")
     ap.add_argument("--geom-slope-weight", type=float, default=1.0, help="fourier: the slopes' (normals') share of --geom-weight's loss beside the depths' (0: depths only)")
@@ -671,6 +671,8 @@ def main(argv=None):
         ap.error(f"--peak-cap {args.peak_cap}: an occupancy height, above 0 and at most 2")
     if not args.peak_weight >= 0:
         ap.error(f"--peak-weight {args.peak_weight}: must be 0 (off) or above")
+    if args.peak_weight == 0 and (args.peak_window is not None or args.peak_cap is not None):
+        ap.error("--peak-window / --peak-cap shape the thin rays' peak hinge: give --peak-weight too")
     if args.teacher and not args.teacher_weight > 0:
         ap.error(f"--teacher-weight {args.teacher_weight}: must be above 0 with --teacher")
     if args.threads:
