@@ -2,6 +2,7 @@
 put them, the geometry loss zero at the truth, blind to occlusion edges' cliffs and finite on
 wild input, and a GeomHead on the series head's features that learns a subject's surfaces."""
 import torch
+from series_maps import interval_maps
 
 from volcap_train import fourier as FO
 from volcap_train.nets import FourierNet
@@ -12,11 +13,7 @@ K = 15
 
 def _maps(intervals, n=4):
     """[1, 2K+1, n, n] maps: each listed pixel holds its intervals (zeta), the rest empty."""
-    c = torch.zeros(1, FO.channels(K), n, n, dtype=torch.float64)
-    for (y, x), ivs in intervals.items():
-        for lo, hi in ivs:
-            c[0, :, y, x] += FO.interval_coeffs(torch.tensor(lo, dtype=torch.float64), torch.tensor(hi, dtype=torch.float64), K)
-    return c.float()
+    return interval_maps(intervals, K, n)
 
 
 def test_front_and_back_are_the_outer_ends_of_the_inside():

@@ -2,6 +2,7 @@
 far its peak stays under the truth's, wherever its depth; a ray at or above the truth's height
 costs nothing; only the selected rays count; wild or empty maps stay finite."""
 import torch
+from series_maps import interval_maps
 
 from volcap_train import fourier as FO
 from volcap_train.ray_losses import peak_hinge, thin_mask
@@ -9,11 +10,8 @@ from volcap_train.ray_losses import peak_hinge, thin_mask
 K = 15
 
 
-def _maps(intervals, size=4):
-    c = torch.zeros(1, FO.channels(K), size, size)
-    for (y, x), (lo, hi) in intervals.items():
-        c[0, :, y, x] = FO.interval_coeffs(torch.tensor(lo, dtype=torch.float64), torch.tensor(hi, dtype=torch.float64), K).float()
-    return c
+def _maps(intervals):
+    return interval_maps(intervals, K)
 
 
 def _peak(series, n=4096):

@@ -2,6 +2,7 @@
 prediction reads the target's inside above the level, large where a thin ray's blurred series
 stays under it (what the Parseval L2 barely sees), and finite for wild series."""
 import torch
+from series_maps import interval_maps
 
 from volcap_train import fourier as FO
 from volcap_train.ray_losses import ray_level_bce
@@ -11,10 +12,7 @@ K = 15
 
 def _maps(intervals):
     """[1, 2K+1, 4, 4] maps: each listed pixel holds one interval (zeta), the rest empty."""
-    c = torch.zeros(1, FO.channels(K), 4, 4)
-    for (y, x), (lo, hi) in intervals.items():
-        c[0, :, y, x] = FO.interval_coeffs(torch.tensor(lo, dtype=torch.float64), torch.tensor(hi, dtype=torch.float64), K).float()
-    return c
+    return interval_maps(intervals, K)
 
 
 def test_a_blurred_thin_ray_costs_more_than_its_l2_says():

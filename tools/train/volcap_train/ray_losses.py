@@ -88,7 +88,7 @@ def centre_aligned(pred: torch.Tensor, target: torch.Tensor, k: int, min_mass: f
     return shift_series(target, shift, k), shift, l1
 
 
-def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Tensor, samples: int = 64, gen: torch.Generator | None = None, window: float | None = None, cap: float | None = None) -> torch.Tensor:
+def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Tensor, samples: int = 64, window: float | None = None, cap: float | None = None) -> torch.Tensor:
     """`train fourier --peak-weight`: how far each selected ray's series [B, 2K+1, H, W] peaks
     under the target's own peak, relu(max_z target - max_z pred), its mean over the rays of
     `only` ([B, H, W] bool; the thin parts, `thin_mask`); 0 (with a gradient graph) if none.
@@ -97,8 +97,9 @@ def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Ten
     ray whose depth the image leaves unsure by its own thickness, the mean of the pulses it could
     be, a low blur whose peak stays under the surface level (the thin rays peak at 0.56 against
     the truth's 0.84, hands.md section 31); this asks only that the ray hold its height
-    somewhere, and is zero once it does. The maxima are read at `samples` stratified depths on
-    [-1, 1] (one random offset per call when `gen` is given), both series at the same depths.
+    somewhere, and is zero once it does. The maxima are read at `samples` fixed depths (the
+    cells' centres on [-1, 1]; no random draw, so a run pairs with its control's batches), both
+    series at the same depths.
 
     `window` (zeta, optional): the prediction's peak is read only within this distance of the
     target's peak depth, so that height raised at the wrong depth does not count (a ray whose
@@ -110,11 +111,10 @@ def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Ten
         return pred.sum() * 0.0
     rp = pred[:, :c].permute(0, 2, 3, 1)[only]  # [N, 2K+1]
     rt = target[:, :c].permute(0, 2, 3, 1)[only]
-    off = torch.rand(1, generator=gen).item() if gen is not None else 0.5
-    z = ((torch.arange(samples, dtype=torch.float32) + off) / samples * 2.0 - 1.0).to(pred.device)
-    b = FO.basis(z, k).to(pred.dtype)  # [S, 2K+1]
+    z = ((torch.arange(samples, dtype=pred.dtype, device=pred.device) + 0.5) / samples * 2.0 - 1.0)
+    b = FO.basis(z, k)  # [S, 2K+1]
     vp = rp @ b.T  # [N, S]
-    peak_t, at = (rt.to(pred.dtype) @ b.T).max(1)
+    peak_t, at = (rt @ b.T).max(1)
     if window is not None:
         near = (z.unsqueeze(0) - z[at].unsqueeze(1)).abs() <= window  # [N, S]; the argmax itself always in
         vp = vp.masked_fill(~near, float("-inf"))

@@ -544,8 +544,7 @@ def train_fourier(args):
             # back as the net's are, a second dense target beside the truth's.
             loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(xin), flips)
         if args.peak_weight > 0:
-            # --peak-weight: the thin rays' series held to the truth's peak height (depth-free;
-            # fixed depths, so the run draws the same batches as without it).
+            # --peak-weight: the thin rays' series held to the truth's peak height.
             only = thin_mask(target, args.thin_radius)[:, 0] > 0.5
             loss = loss + args.peak_weight * peak_hinge(pred, target, k, only, args.ray_samples, window=args.peak_window, cap=args.peak_cap)
         if args.ray_bce_weight > 0:
