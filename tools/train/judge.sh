@@ -67,5 +67,5 @@ for s in $SEEDS; do
   done
 done
 (cd "$ROOT/tools/train" && PYTHONPATH=. .venv/bin/python -m volcap_train.compare_evals \
-  --a "${A[@]}" --b "${B[@]}") | tee "$OUT/judge.txt"
+  --a "${A[@]}" --b "${B[@]}" --by-subject) | tee "$OUT/judge.txt"
 echo "judge: A = $RUN, B = the committed default; $OUT/judge.txt" >&2

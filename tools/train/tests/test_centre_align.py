@@ -87,6 +87,19 @@ def test_the_thin_ray_diagnostic_tells_a_blur_from_a_miss():
     b = thin_rays(blur, d, K, 1)
     assert b["peak_median"] < 0.55 < b["truth_peak_median"]
     assert b["decoded_share"] == 0.0 and b["peak_depth_error_median"] < 0.01  # right depth, under the level
+    assert exact["missed_share"] == exact["false_decoded_share"] == 0.0 and exact["length_ratio_median"] == 1.0
+    assert b["missed_share"] == 1.0 and b["false_decoded_share"] == 0.0
+    # The hand twice as thick in depth: decoded, at its depth, twice as long above the level.
+    thick = coeff.clone()
+    thick[..., 60:66, 75:77] = pulse(0.1, 0.11).float()
+    t = thin_rays(lambda x: thick, d, K, 1)
+    assert t["missed_share"] == t["false_decoded_share"] == 0.0
+    assert 1.6 < t["length_ratio_median"] < 2.4, t["length_ratio_median"]
+    # A hand the truth leaves under the level (thinner than the series resolves), decoded by the net.
+    faint = coeff.clone()
+    faint[..., 60:66, 75:77] = pulse(0.1, 0.025).float()
+    f = thin_rays(lambda x: coeff, {**d, "coeff": faint}, K, 1)
+    assert f["truth_decoded_share"] == 0.0 and f["false_decoded_share"] == 1.0 and f["missed_share"] == 0.0
 
 
 def test_only_the_chosen_rays_are_moved():

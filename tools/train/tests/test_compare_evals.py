@@ -42,6 +42,24 @@ def test_pairs_by_image_and_gives_the_mean_difference_and_its_standard_error(tmp
     assert res["IoU"]["a_wins"] == 2  # higher is better: 0.7 > 0.6, 0.8 > 0.7
     assert math.isclose(res["hands cm"]["diff"], statistics.fmean([-1.0, 0.0, -1.0]))
     assert "| Chamfer cm | 3 |" in ce.table(list(res.values()))
+    assert math.isclose(c["median"], statistics.median(d))
+
+
+def test_the_median_and_the_subjects_show_a_difference_that_is_one_images(tmp_path):
+    # Five images alike and one that flips: the mean moves, the median does not, and the
+    # per-subject table puts the whole difference on the flipping image's subject.
+    rows_b = [(f"s{i % 3}", 0, 120.0 * (i // 3), "m", 1.0, 1.0, 0.7, 10.0) for i in range(6)]
+    rows_a = [(s, p, y, m, c, 4.0 if (s, y) == ("s2", 120.0) else pp, iou, h) for s, p, y, m, c, pp, iou, h in rows_b]
+    a, b = report(tmp_path, "a", rows_a), report(tmp_path, "b", rows_b)
+    pairs = ce.paired([ce.load_rows(a, None)], [ce.load_rows(b, None)])
+    p2s = {r["metric"]: r for r in ce.compare(pairs)}["P2S cm"]
+    assert math.isclose(p2s["diff"], 0.5) and p2s["median"] == 0.0
+    subj = {r["subject"]: r for r in ce.by_subject(pairs)}
+    assert sorted(subj) == ["s0", "s1", "s2"] and all(r["images"] == 2 for r in subj.values())
+    assert subj["s0"]["P2S cm"] == (0.0, 0.0) and subj["s1"]["P2S cm"] == (0.0, 0.0)
+    assert math.isclose(subj["s2"]["P2S cm"][0], 1.5) and math.isclose(subj["s2"]["P2S cm"][1], 1.5)
+    t = ce.subject_table(ce.by_subject(pairs))
+    assert "| s2 | 2 | +0.000 ± 0.000 | +1.500 ± 1.500 |" in t
 
 
 def test_report_pairs_pool_and_mismatches_are_refused(tmp_path):

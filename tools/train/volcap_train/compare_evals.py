@@ -1,15 +1,21 @@
 """Paired comparison of two models through the engine: `volcap eval` reports of the same
 images, image by image, with standard errors.
 
-  python -m volcap_train.compare_evals --a A1 [A2 ...] --b B1 [B2 ...] [--model-a M] [--model-b M]
+  python -m volcap_train.compare_evals --a A1 [A2 ...] --b B1 [B2 ...] [--model-a M] [--model-b M] [--by-subject]
 
 Each Ai / Bi is a `volcap eval --out` folder (its eval.json, or eval.json.xz as `slim_docs
 --pack-json` leaves the committed ones) or the file itself; Ai and Bi must
 be runs on the same images (same --subjects, --poses, --views and --seed), so their images pair
 by (subject, pose, yaw); the pairs of all the reports pool. Per metric it prints both means,
-the mean of the per-image differences A - B with its standard error, and how many images A
-wins. Means of 42 images move by 0.1-0.2 cm between checkpoints of one recipe (docs/eval/
+the mean of the per-image differences A - B with its standard error, how many images A
+wins, and the median difference. Means of 42 images move by 0.1-0.2 cm between checkpoints of one recipe (docs/eval/
 hands.md section 23): a difference within two standard errors of 0 is not a finding.
+
+The per-image differences are heavy-tailed: a few images flip between two readings from one
+checkpoint to the next (one held-out subject's side views, whose hidden leg lands at one depth
+or another: 1 cm against 3-5 cm P2S, hands.md section 42) and move the mean by several
+hundredths on their own. The median, and `--by-subject` (the mean differences per held-out
+subject), show whether a difference is everywhere or one subject's.
 """
 from __future__ import annotations
 
@@ -17,6 +23,7 @@ import argparse
 import json
 import lzma
 import math
+import statistics
 from pathlib import Path
 
 # (key in an image row, label, whether larger is better); part_cm[3] is the hands'
@@ -108,17 +115,52 @@ def compare(pairs: list[tuple[dict, dict]]) -> list[dict]:
                 "diff": mean,
                 "se": se,
                 "a_wins": wins,
+                "median": statistics.median(diff),
             }
         )
     return out
 
 
+# --by-subject: the metrics of the per-subject table (key, label).
+SUBJECT_METRICS = [("chamfer_cm", "Chamfer cm"), ("p2s_cm", "P2S cm"), ("hands_cm", "hands cm")]
+
+
+def by_subject(pairs: list[tuple[dict, dict]]) -> list[dict]:
+    """Per held-out subject (sorted): its images and, per metric of SUBJECT_METRICS, the mean
+    difference A - B and its standard error over that subject's pairs with both values finite
+    (NaN where none; the error NaN under two)."""
+    subjects = sorted({a["subject"] for a, _ in pairs})
+    out = []
+    for s in subjects:
+        sp = [(a, b) for a, b in pairs if a["subject"] == s]
+        row = {"subject": s, "images": len(sp)}
+        for key, label in SUBJECT_METRICS:
+            nan = float("nan")
+            d = [a.get(key, nan) - b.get(key, nan) for a, b in sp]
+            d = [x for x in d if math.isfinite(x)]
+            n = len(d)
+            mean = sum(d) / n if n else nan
+            se = math.sqrt(sum((x - mean) ** 2 for x in d) / (n - 1) / n) if n > 1 else nan
+            row[label] = (mean, se)
+        out.append(row)
+    return out
+
+
+def subject_table(rows: list[dict]) -> str:
+    labels = [label for _, label in SUBJECT_METRICS]
+    s = "| subject | images | " + " | ".join(f"{l}: A - B" for l in labels) + " |\n"
+    s += "|---|---|" + "---|" * len(labels) + "\n"
+    for r in rows:
+        s += f"| {r['subject']} | {r['images']} | " + " | ".join(f"{r[l][0]:+.3f} ± {r[l][1]:.3f}" for l in labels) + " |\n"
+    return s
+
+
 def table(res: list[dict]) -> str:
-    s = "| metric | images | A | B | A - B (per image) | A better on |\n|---|---|---|---|---|---|\n"
+    s = "| metric | images | A | B | A - B (per image) | A better on | median A - B |\n|---|---|---|---|---|---|---|\n"
     for r in res:
         s += (
             f"| {r['metric']} | {r['images']} | {r['a']:.3f} | {r['b']:.3f} | "
-            f"{r['diff']:+.3f} ± {r['se']:.3f} | {r['a_wins']} |\n"
+            f"{r['diff']:+.3f} ± {r['se']:.3f} | {r['a_wins']} | {r['median']:+.3f} |\n"
         )
     return s
 
@@ -129,10 +171,15 @@ def main(argv=None):
     ap.add_argument("--b", type=Path, nargs="+", required=True)
     ap.add_argument("--model-a", default=None)
     ap.add_argument("--model-b", default=None)
+    ap.add_argument("--by-subject", action="store_true", help="also the mean differences per held-out subject (Chamfer, P2S, hands)")
     args = ap.parse_args(argv)
     a = [load_rows(p, args.model_a) for p in args.a]
     b = [load_rows(p, args.model_b) for p in args.b]
-    print(table(compare(paired(a, b))), end="")
+    pairs = paired(a, b)
+    print(table(compare(pairs)), end="")
+    if args.by_subject:
+        print()
+        print(subject_table(by_subject(pairs)), end="")
 
 
 if __name__ == "__main__":

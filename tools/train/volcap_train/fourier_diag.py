@@ -66,12 +66,15 @@ def thin_rays(net, d: dict, k: int, images: int, radius: int = 2) -> dict:
     31): how high the predicted series peaks against the truth series (the surface level is
     0.55), how far its peak lies from the truth's in depth (zeta), and how much of them the
     input's mask covers. A thin ray whose peak sits at the right depth but under the level is
-    a blur in depth, not a miss."""
+    a blur in depth, not a miss. Where they disagree: `false_decoded_share` (the net decodes a
+    ray the truth leaves under the level: a surface where there is none), `missed_share` (the
+    reverse), and `length_ratio_median` (on rays both decode, the net's length above the level
+    over the truth's: over 1, the part thicker in depth than it is)."""
     n = len(d["rgb"])
     idx = torch.arange(0, n, max(1, n // images))[:images]
     z = torch.linspace(-1, 1, 512)
     basis = FO.basis(z, k)
-    peak, tpeak, err, cover = [], [], [], []
+    peak, tpeak, err, cover, plen, tlen = [], [], [], [], [], []
     with torch.no_grad():
         for s in range(0, len(idx), 8):
             i = idx[s : s + 8]
@@ -85,15 +88,21 @@ def thin_rays(net, d: dict, k: int, images: int, radius: int = 2) -> dict:
             tpeak.append(ot.max(1).values)
             err.append((z[op.argmax(1)] - z[ot.argmax(1)]).abs())
             cover.append(F.interpolate(m, size=tgt.shape[-2:], mode="area")[:, 0][thin])
-    peak, tpeak, err, cover = (torch.cat(t) for t in (peak, tpeak, err, cover))
+            plen.append((op > 0.55).sum(1))
+            tlen.append((ot > 0.55).sum(1))
+    peak, tpeak, err, cover, plen, tlen = (torch.cat(t) for t in (peak, tpeak, err, cover, plen, tlen))
     if len(peak) == 0:
         return {"rays": 0}
+    both = (plen > 0) & (tlen > 0)
     return {
         "rays": len(peak),
         "peak_median": float(peak.median()),
         "truth_peak_median": float(tpeak.median()),
         "decoded_share": float((peak > 0.55).float().mean()),
         "truth_decoded_share": float((tpeak > 0.55).float().mean()),
+        "false_decoded_share": float(((peak > 0.55) & (tpeak <= 0.55)).float().mean()),
+        "missed_share": float(((peak <= 0.55) & (tpeak > 0.55)).float().mean()),
+        "length_ratio_median": float((plen[both].float() / tlen[both].float()).median()) if bool(both.any()) else float("nan"),
         "peak_depth_error_median": float(err.median()),
         "peak_depth_within_0.05": float((err < 0.05).float().mean()),
         "mask_covers": float((cover > 0.5).float().mean()),
@@ -134,7 +143,9 @@ def main(argv=None):
     if t["rays"]:
         print(f"thin rays ({t['rays']}): series peak median {t['peak_median']:.3f} (truth {t['truth_peak_median']:.3f}), "
               f"decoded at 0.55 {t['decoded_share']:.3f} (truth {t['truth_decoded_share']:.3f}), peak depth off the truth's "
-              f"by {t['peak_depth_error_median']:.3f} (median; within 0.05: {t['peak_depth_within_0.05']:.3f}), mask covers {t['mask_covers']:.3f}")
+              f"by {t['peak_depth_error_median']:.3f} (median; within 0.05: {t['peak_depth_within_0.05']:.3f}), mask covers {t['mask_covers']:.3f}; "
+              f"decoded where the truth is not {t['false_decoded_share']:.3f}, missed {t['missed_share']:.3f}, "
+              f"length above the level against the truth's {t['length_ratio_median']:.2f} (median, rays both decode)")
 
 
 if __name__ == "__main__":

@@ -24,6 +24,17 @@ def thin_mask(coeff: torch.Tensor, radius: int) -> torch.Tensor:
     return occ * (1.0 - opened)
 
 
+def empty_band(coeff: torch.Tensor, band: int) -> torch.Tensor:
+    """[B, 2K+1, H, W] target maps -> [B, 1, H, W] in {0, 1}: the pixels the truth leaves empty
+    (c0 at most 0.005) within `band` map pixels of its occupied ones: the background next to
+    the person and the narrow gaps inside the silhouette (between the legs, between an arm and
+    the body), where a net that raises thin rays fills in a surface (hands.md section 42)."""
+    occ = (coeff[:, :1] > 0.005).float()
+    k = 2 * band + 1
+    near = F.max_pool2d(occ, k, stride=1, padding=band)
+    return near * (1.0 - occ)
+
+
 def ray_level_bce(pred: torch.Tensor, target: torch.Tensor, k: int, samples: int, gen: torch.Generator, tau: float = 10.0, level: float = 0.5, band: int = 2) -> torch.Tensor:
     """The surface level on every ray (`train fourier --ray-bce-weight`): both series [B, 2K+1,
     H, W] decoded at `samples` stratified depths (one random offset per call), the target's
@@ -88,6 +99,17 @@ def centre_aligned(pred: torch.Tensor, target: torch.Tensor, k: int, min_mass: f
     return shift_series(target, shift, k), shift, l1
 
 
+def _ray_readings(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Tensor, samples: int):
+    """Both series [B, 2K+1, H, W] on the rays of `only` ([B, H, W] bool, N of them) read at
+    `samples` fixed depths, the cells' centres on [-1, 1]: (z [S], pred [N, S], target [N, S])."""
+    c = FO.channels(k)
+    rp = pred[:, :c].permute(0, 2, 3, 1)[only]  # [N, 2K+1]
+    rt = target[:, :c].permute(0, 2, 3, 1)[only]
+    z = ((torch.arange(samples, dtype=pred.dtype, device=pred.device) + 0.5) / samples * 2.0 - 1.0)
+    b = FO.basis(z, k)  # [S, 2K+1]
+    return z, rp @ b.T, rt @ b.T
+
+
 def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Tensor, samples: int = 64, window: float | None = None, cap: float | None = None) -> torch.Tensor:
     """`train fourier --peak-weight`: how far each selected ray's series [B, 2K+1, H, W] peaks
     under the target's own peak, relu(max_z target - max_z pred), its mean over the rays of
@@ -106,15 +128,10 @@ def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Ten
     depth is unsure by about `window` may still put a sharp pulse anywhere inside it).
     `cap` (optional): the height asked for is at most this (e.g. just over the surface level: the
     ray decodes, its inside no thicker than the top of its pulse)."""
-    c = FO.channels(k)
     if not bool(only.any()):
         return pred.sum() * 0.0
-    rp = pred[:, :c].permute(0, 2, 3, 1)[only]  # [N, 2K+1]
-    rt = target[:, :c].permute(0, 2, 3, 1)[only]
-    z = ((torch.arange(samples, dtype=pred.dtype, device=pred.device) + 0.5) / samples * 2.0 - 1.0)
-    b = FO.basis(z, k)  # [S, 2K+1]
-    vp = rp @ b.T  # [N, S]
-    peak_t, at = (rt @ b.T).max(1)
+    z, vp, vt = _ray_readings(pred, target, k, only, samples)
+    peak_t, at = vt.max(1)
     if window is not None:
         near = (z.unsqueeze(0) - z[at].unsqueeze(1)).abs() <= window  # [N, S]; the argmax itself always in
         vp = vp.masked_fill(~near, float("-inf"))
@@ -122,3 +139,24 @@ def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Ten
     if cap is not None:
         peak_t = peak_t.clamp(max=cap)
     return F.relu(peak_t - peak_p).mean()
+
+
+def over_level(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Tensor, samples: int = 64, level: float = 0.55) -> torch.Tensor:
+    """`train fourier --over-weight`: how far each selected ray's series [B, 2K+1, H, W] rises
+    above the surface `level` at depths where the target's series stays under it,
+    relu(max over those depths of the prediction - level), its mean over the rays of `only`
+    ([B, H, W] bool; the thin parts); 0 (with a gradient graph) if none.
+
+    The other side of `peak_hinge`: a surface the truth does not have on that ray, whether the
+    whole ray is decoded where the truth's is not (a false hand) or a decoded interval is longer
+    in depth than the truth's (a part thicker than it is); both cost P2S (hands.md section 42).
+    Zero for a series that crosses the level only where the truth does, however high its peak
+    there. Read at the same `samples` fixed depths as `peak_hinge`; a ray the truth never raises
+    over the level is charged its whole height above it."""
+    if not bool(only.any()):
+        return pred.sum() * 0.0
+    _, vp, vt = _ray_readings(pred, target, k, only, samples)
+    outside = vt < level
+    vp = vp.masked_fill(~outside, float("-inf"))
+    excess = F.relu(vp.amax(1) - level)  # a ray the truth covers end to end: -inf -> 0
+    return excess.mean()

@@ -26,7 +26,7 @@ from .data import Split, backgrounds, photometric, random_affine, sensor
 from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, FourierGeomNet, make_fourier, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
-from .ray_losses import centre_aligned, peak_hinge, ray_level_bce, thin_mask
+from .ray_losses import centre_aligned, empty_band, over_level, peak_hinge, ray_level_bce, thin_mask
 from .runs import Run, device, init_weights, loop, make_ema, recompute_bn
 from .surfaces import GeomHead, geometry_loss, surface_depths
 from .items import fourier_cached, fourier_union, fourier_upper_cached
@@ -543,10 +543,18 @@ def train_fourier(args):
             # --teacher: the teacher's maps of the same (augmented, mirrored) input, mirrored
             # back as the net's are, a second dense target beside the truth's.
             loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(xin), flips)
+        if args.peak_weight > 0 or args.over_weight > 0:
+            only = thin_mask(target, args.thin_radius)[:, 0] > 0.5
         if args.peak_weight > 0:
             # --peak-weight: the thin rays' series held to the truth's peak height.
-            only = thin_mask(target, args.thin_radius)[:, 0] > 0.5
             loss = loss + args.peak_weight * peak_hinge(pred, target, k, only, args.ray_samples, window=args.peak_window, cap=args.peak_cap)
+        if args.over_weight > 0:
+            # --over-weight: and kept under the surface level where the truth's is.
+            loss = loss + args.over_weight * over_level(pred, target, k, only, args.ray_samples, args.over_level)
+        if args.empty_weight > 0:
+            # --empty-weight: and under it on the empty rays beside the person (the gaps).
+            gaps = empty_band(target, args.empty_band)[:, 0] > 0.5
+            loss = loss + args.empty_weight * over_level(pred, target, k, gaps, args.ray_samples, args.over_level)
         if args.ray_bce_weight > 0:
             loss = loss + args.ray_bce_weight * ray_level_bce(pred, target, k, args.ray_samples, gen, tau)
         if args.moment_weight > 0:
@@ -643,11 +651,15 @@ def main(argv=None):
     ap.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="fourier: where the net trains (auto: CUDA when present)")
     ap.add_argument("--data-device", default="auto", choices=["auto", "host", "device"], help="fourier: where the training items live (auto: on the --device when it is a GPU and they take at most half its free memory; the batches are made there without the host)")
     ap.add_argument("--thin-weight", type=float, default=0.0, help="fourier: extra weight of thin parts' rays and points (thin_mask: what an opening of --thin-radius map pixels removes; hands, wrists, ankles); 0: off")
-    ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight and --peak-weight")
+    ap.add_argument("--thin-radius", type=int, default=2, help="fourier: the opening's radius in 128-px map pixels for --thin-weight, --peak-weight and --over-weight")
     ap.add_argument("--peak-weight", type=float, default=0.0, help="fourier: weight of the thin rays' peak hinge (peak_hinge: relu(the truth's series peak - the net's), depth-free, read at --ray-samples depths, on the rays --thin-radius's opening removes); 0: off")
     ap.add_argument("--peak-window", type=float, default=None, help="fourier --peak-weight: read the net's peak only within this many zeta of the truth's peak depth (0.05 is about 2.5 cm); default: anywhere along the ray")
     ap.add_argument("--peak-cap", type=float, default=None, help="fourier --peak-weight: ask each thin ray for at most this height (e.g. 0.65, just over the surface level); default: the truth's own peak")
     ap.add_argument("--max-minutes", type=float, default=0.0, help="stop at this wall-clock budget (a checkpoint, the validation and budget.json as at the last step; fourier: the learning rate anneals by it); 0: none")
+    ap.add_argument("--over-weight", type=float, default=0.0, help="fourier: weight of the thin rays' over-level hinge (over_level: how far the net's series rises above --over-level at depths where the truth's stays under it; a false or too thick surface), read at --ray-samples depths on --thin-radius's rays; 0: off")
+    ap.add_argument("--empty-weight", type=float, default=0.0, help="fourier: weight of the over-level hinge (over_level) on the rays the truth leaves empty within --empty-band map pixels of the person (empty_band: the background beside it and the gaps between the legs or an arm and the body): a surface filled in where there is none; 0: off")
+    ap.add_argument("--empty-band", type=int, default=3, help="fourier --empty-weight: the band's width in 128-px map pixels")
+    ap.add_argument("--over-level", type=float, default=None, help="fourier --over-weight / --empty-weight: the surface level (default 0.55, the exported models' --iso-level)")
     ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
     ap.add_argument("--geom-weight", type=float, default=0.0, help="fourier: weight of the front/back surface loss (surfaces.py: depths and slopes, i.e. normals) on a training-only head on the series head's features, or on the surface net of --variant fourier-geom (required there); 0: off")
     ap.add_argument("--geom-slope-weight", type=float, default=1.0, help="fourier: the slopes' (normals') share of --geom-weight's loss beside the depths' (0: depths only)")
@@ -658,7 +670,7 @@ def main(argv=None):
     ap.add_argument("--teacher", type=Path, default=None, help="fourier: distil from this trained Fourier net (a light checkpoint, e.g. ../../models/checkpoints/shape-fourier-medium.pt, or a run's ckpt.pt): its maps of each training input are a second dense target (Parseval L2, --teacher-weight) beside the truth's")
     ap.add_argument("--teacher-variant", default="fourier-medium", help="fourier --teacher: the teacher's variant (its K must be the student's)")
     ap.add_argument("--teacher-weight", type=float, default=1.0, help="fourier --teacher: weight of the L2 to the teacher's maps (the truth's dense loss has weight 1)")
-    ap.add_argument("--ray-samples", type=int, default=48, help="fourier: stratified depths per ray for --ray-bce-weight and --peak-weight")
+    ap.add_argument("--ray-samples", type=int, default=48, help="fourier: depths per ray for --ray-bce-weight (stratified), --peak-weight and --over-weight (the cells' centres)")
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
         ap.error(COMPILE_BF16_REFUSED)
@@ -672,6 +684,18 @@ def main(argv=None):
         ap.error(f"--peak-weight {args.peak_weight}: must be 0 (off) or above")
     if args.peak_weight == 0 and (args.peak_window is not None or args.peak_cap is not None):
         ap.error("--peak-window / --peak-cap shape the thin rays' peak hinge: give --peak-weight too")
+    if not args.over_weight >= 0:
+        ap.error(f"--over-weight {args.over_weight}: must be 0 (off) or above")
+    if args.over_level is not None and not 0.0 < args.over_level < 1.0:
+        ap.error(f"--over-level {args.over_level}: a surface level, between 0 and 1")
+    if not args.empty_weight >= 0:
+        ap.error(f"--empty-weight {args.empty_weight}: must be 0 (off) or above")
+    if not args.empty_band >= 1:
+        ap.error(f"--empty-band {args.empty_band}: map pixels, 1 or more")
+    if args.over_weight == 0 and args.empty_weight == 0 and args.over_level is not None:
+        ap.error("--over-level is the over-level hinges' level: give --over-weight or --empty-weight too")
+    if args.over_level is None:
+        args.over_level = 0.55
     if args.teacher and not args.teacher_weight > 0:
         ap.error(f"--teacher-weight {args.teacher_weight}: must be above 0 with --teacher")
     if args.threads:

@@ -362,6 +362,14 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         _ => vec![None],
     };
     let cases = render_cases(a)?;
+    if a.turntable && a.turntable_image >= cases.len() {
+        bail!(
+            "--turntable-image {}: the set has {} images (0 to {})",
+            a.turntable_image,
+            cases.len(),
+            cases.len().saturating_sub(1)
+        );
+    }
     // None: the model's own count.
     let passes: Vec<Option<u8>> = if a.segment_passes.is_empty() {
         vec![None]
@@ -482,7 +490,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         );
         pb.set_message(label.clone());
         let frame = frame_of(a.depth_frame, &models, truth_k);
-        if let Some(c) = cases.first().filter(|_| a.turntable && truth_k.is_none()) {
+        if let Some(c) = cases
+            .get(a.turntable_image)
+            .filter(|_| a.turntable && truth_k.is_none())
+        {
             std::fs::create_dir_all(&a.out).with_context(|| format!("{}", a.out.display()))?;
             let path = a.out.join(format!("turntable-{label}.png"));
             turntable(

@@ -378,3 +378,64 @@ fn the_seen_truth_leaves_out_the_body_under_the_clothes() {
     let (clothed, seen) = (chamfer("clothed", "clothed"), chamfer("seen", "seen"));
     assert!(seen < clothed, "seen {seen} clothed {clothed}");
 }
+
+/// `--turntable-image N` turns image N of the set (its place in the per-image table), the
+/// report says which, and an N past the set's end is refused by name before any model runs.
+#[test]
+fn the_turntable_turns_the_image_asked_for() {
+    let dir = std::env::temp_dir().join(format!("volcap-eval-turn-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let manifest = dir.join("manifest.json");
+    std::fs::write(&manifest, MANIFEST).unwrap();
+    let run = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_volcap"))
+            .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+            .args(["eval", "--subjects", "val", "--poses", "1", "--views", "2"])
+            .args(["--res", "33", "--colour-res", "0", "--turntable-res", "33"])
+            .arg("--manifest")
+            .arg(&manifest)
+            .arg("--out")
+            .arg(&dir)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = run(&["--turntable", "--turntable-image", "2"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("--turntable-image 2") && err.contains("2 images"),
+        "{err}"
+    );
+    // Without --turntable the option would do nothing: refused.
+    let out = run(&["--turntable-image", "1"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--turntable"));
+    let out = run(&["--turntable", "--turntable-image", "1"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let md = std::fs::read_to_string(dir.join("eval.md")).unwrap();
+    assert!(md.contains("Image 1 of the per-image table's"), "{md}");
+    let turntable = || {
+        std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .find(|e| e.file_name().to_string_lossy().starts_with("turntable-"))
+            .map(|e| std::fs::read(e.path()).unwrap())
+            .expect("a turntable PNG")
+    };
+    let second = turntable();
+    // The first image (the person seen from the front, not from behind) turns otherwise.
+    let out = run(&["--turntable"]);
+    assert!(out.status.success());
+    assert!(
+        std::fs::read_to_string(dir.join("eval.md"))
+            .unwrap()
+            .contains("The first image's reconstruction")
+    );
+    assert_ne!(turntable(), second);
+    let _ = std::fs::remove_dir_all(&dir);
+}

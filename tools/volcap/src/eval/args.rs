@@ -59,6 +59,11 @@ pub struct EvalArgs {
     /// mesh-free at yaw 0/90/180/270 above the oracle's from the same views.
     #[arg(long)]
     pub turntable: bool,
+    /// `--turntable`: the image to turn, by its place in the report's per-image table
+    /// (0: the first; subjects, then poses, then views). The images are drawn for the whole
+    /// set, so another image of the same set is picked here, not by narrowing `--subjects`.
+    #[arg(long, default_value_t = 0, requires = "turntable")]
+    pub turntable_image: usize,
     /// Grid resolution of the turntable renders (pixels per tile).
     #[arg(long, default_value_t = 129)]
     pub turntable_res: usize,

@@ -362,9 +362,17 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         .filter(|m| !m.family.contains("truth"))
         .collect();
     if a.turntable {
+        let which = if a.turntable_image == 0 {
+            "The first image's".to_string()
+        } else {
+            format!(
+                "Image {} of the per-image table's (counted from 0)",
+                a.turntable_image
+            )
+        };
         let _ = writeln!(
             s,
-            "## Turntables\n\nThe first image's reconstruction, rendered mesh-free at yaw 0/90/180/270 (top) \
+            "## Turntables\n\n{which} reconstruction, rendered mesh-free at yaw 0/90/180/270 (top) \
              above the simulator's ground truth from the same views (bottom).\n"
         );
         for m in turntables {
