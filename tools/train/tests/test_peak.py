@@ -194,7 +194,7 @@ def test_bad_values_are_refused_by_name_before_any_data_are_read(tmp_path, capsy
         assert f"{flag} {shown}" in capsys.readouterr().err
         assert not (tmp_path / "run").exists()
     # A window, cap or level without its loss would be silently ignored: refused instead.
-    for flag, value, says in (("--peak-cap", "0.65", "give --peak-weight too"), ("--over-level", "0.5", "give --over-weight or --empty-weight too")):
+    for flag, value, says in (("--peak-cap", "0.65", "give --peak-weight too"), ("--over-level", "0.5", "give --over-weight or --empty-weight too"), ("--empty-band", "2", "give --empty-weight too")):
         with pytest.raises(SystemExit):
             main(["fourier", "--data", str(tmp_path / "nodata"), "--out", str(tmp_path / "run"), flag, value])
         assert says in capsys.readouterr().err

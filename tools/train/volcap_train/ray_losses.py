@@ -142,10 +142,11 @@ def peak_hinge(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Ten
 
 
 def over_level(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Tensor, samples: int = 64, level: float = 0.55) -> torch.Tensor:
-    """`train fourier --over-weight`: how far each selected ray's series [B, 2K+1, H, W] rises
-    above the surface `level` at depths where the target's series stays under it,
-    relu(max over those depths of the prediction - level), its mean over the rays of `only`
-    ([B, H, W] bool; the thin parts); 0 (with a gradient graph) if none.
+    """`train fourier --over-weight` and `--empty-weight`: how far each selected ray's series
+    [B, 2K+1, H, W] rises above the surface `level` at depths where the target's series stays
+    under it, relu(max over those depths of the prediction - level), its mean over the rays of
+    `only` ([B, H, W] bool: the thin parts, `thin_mask`, or the empty rays beside the person,
+    `empty_band`); 0 (with a gradient graph) if none.
 
     The other side of `peak_hinge`: a surface the truth does not have on that ray, whether the
     whole ray is decoded where the truth's is not (a false hand) or a decoded interval is longer

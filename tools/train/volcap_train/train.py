@@ -658,7 +658,7 @@ def main(argv=None):
     ap.add_argument("--max-minutes", type=float, default=0.0, help="stop at this wall-clock budget (a checkpoint, the validation and budget.json as at the last step; fourier: the learning rate anneals by it); 0: none")
     ap.add_argument("--over-weight", type=float, default=0.0, help="fourier: weight of the thin rays' over-level hinge (over_level: how far the net's series rises above --over-level at depths where the truth's stays under it; a false or too thick surface), read at --ray-samples depths on --thin-radius's rays; 0: off")
     ap.add_argument("--empty-weight", type=float, default=0.0, help="fourier: weight of the over-level hinge (over_level) on the rays the truth leaves empty within --empty-band map pixels of the person (empty_band: the background beside it and the gaps between the legs or an arm and the body): a surface filled in where there is none; 0: off")
-    ap.add_argument("--empty-band", type=int, default=3, help="fourier --empty-weight: the band's width in 128-px map pixels")
+    ap.add_argument("--empty-band", type=int, default=None, help="fourier --empty-weight: the band's width in 128-px map pixels (default 3)")
     ap.add_argument("--over-level", type=float, default=None, help="fourier --over-weight / --empty-weight: the surface level (default 0.55, the exported models' --iso-level)")
     ap.add_argument("--ray-bce-weight", type=float, default=0.0, help="fourier: weight of the surface-level BCE on every ray (ray_level_bce: both series decoded at --ray-samples depths, the target's reading above 0.5 the label); 0: off")
     ap.add_argument("--geom-weight", type=float, default=0.0, help="fourier: weight of the front/back surface loss (surfaces.py: depths and slopes, i.e. normals) on a training-only head on the series head's features, or on the surface net of --variant fourier-geom (required there); 0: off")
@@ -670,7 +670,7 @@ def main(argv=None):
     ap.add_argument("--teacher", type=Path, default=None, help="fourier: distil from this trained Fourier net (a light checkpoint, e.g. ../../models/checkpoints/shape-fourier-medium.pt, or a run's ckpt.pt): its maps of each training input are a second dense target (Parseval L2, --teacher-weight) beside the truth's")
     ap.add_argument("--teacher-variant", default="fourier-medium", help="fourier --teacher: the teacher's variant (its K must be the student's)")
     ap.add_argument("--teacher-weight", type=float, default=1.0, help="fourier --teacher: weight of the L2 to the teacher's maps (the truth's dense loss has weight 1)")
-    ap.add_argument("--ray-samples", type=int, default=48, help="fourier: depths per ray for --ray-bce-weight (stratified), --peak-weight and --over-weight (the cells' centres)")
+    ap.add_argument("--ray-samples", type=int, default=48, help="fourier: depths per ray for --ray-bce-weight (stratified), --peak-weight, --over-weight and --empty-weight (the cells' centres)")
     args = ap.parse_args(argv)
     if args.compile and args.amp != "off":
         ap.error(COMPILE_BF16_REFUSED)
@@ -690,8 +690,12 @@ def main(argv=None):
         ap.error(f"--over-level {args.over_level}: a surface level, between 0 and 1")
     if not args.empty_weight >= 0:
         ap.error(f"--empty-weight {args.empty_weight}: must be 0 (off) or above")
-    if not args.empty_band >= 1:
+    if args.empty_band is not None and not args.empty_band >= 1:
         ap.error(f"--empty-band {args.empty_band}: map pixels, 1 or more")
+    if args.empty_weight == 0 and args.empty_band is not None:
+        ap.error("--empty-band is the empty rays' band: give --empty-weight too")
+    if args.empty_band is None:
+        args.empty_band = 3
     if args.over_weight == 0 and args.empty_weight == 0 and args.over_level is not None:
         ap.error("--over-level is the over-level hinges' level: give --over-weight or --empty-weight too")
     if args.over_level is None:
