@@ -161,3 +161,50 @@ def over_level(pred: torch.Tensor, target: torch.Tensor, k: int, only: torch.Ten
     vp = vp.masked_fill(~outside, float("-inf"))
     excess = F.relu(vp.amax(1) - level)  # a ray the truth covers end to end: -inf -> 0
     return excess.mean()
+
+
+def ray_hinges(pred: torch.Tensor, target: torch.Tensor, k: int, args) -> torch.Tensor:
+    """`train fourier`'s ray hinges, each at its weight (0: off): `--peak-weight` (the thin rays'
+    series held to the truth's peak height, `peak_hinge`), `--over-weight` (and kept under the
+    level where the truth's is, `over_level`), `--empty-weight` (under it on the empty rays
+    beside the person, the gaps, `empty_band`). `args` as `check_hinge_options` left it."""
+    loss = pred.sum() * 0.0
+    if args.peak_weight > 0 or args.over_weight > 0:
+        only = thin_mask(target, args.thin_radius)[:, 0] > 0.5
+    if args.peak_weight > 0:
+        loss = loss + args.peak_weight * peak_hinge(pred, target, k, only, args.ray_samples, window=args.peak_window, cap=args.peak_cap)
+    if args.over_weight > 0:
+        loss = loss + args.over_weight * over_level(pred, target, k, only, args.ray_samples, args.over_level)
+    if args.empty_weight > 0:
+        gaps = empty_band(target, args.empty_band)[:, 0] > 0.5
+        loss = loss + args.empty_weight * over_level(pred, target, k, gaps, args.ray_samples, args.over_level)
+    return loss
+
+
+def check_hinge_options(args) -> str | None:
+    """The refusal of a bad ray-hinge option of `train` (named with its value), or None; fills
+    the defaults of `--empty-band` (3) and `--over-level` (0.55), which are refused without
+    their loss (they would be ignored)."""
+    if args.peak_window is not None and not args.peak_window >= 0:
+        return f"--peak-window {args.peak_window}: a distance in zeta, 0 or above"
+    if args.peak_cap is not None and not 0.0 < args.peak_cap <= 2.0:
+        return f"--peak-cap {args.peak_cap}: an occupancy height, above 0 and at most 2"
+    if not args.peak_weight >= 0:
+        return f"--peak-weight {args.peak_weight}: must be 0 (off) or above"
+    if args.peak_weight == 0 and (args.peak_window is not None or args.peak_cap is not None):
+        return "--peak-window / --peak-cap shape the thin rays' peak hinge: give --peak-weight too"
+    if not args.over_weight >= 0:
+        return f"--over-weight {args.over_weight}: must be 0 (off) or above"
+    if args.over_level is not None and not 0.0 < args.over_level < 1.0:
+        return f"--over-level {args.over_level}: a surface level, between 0 and 1"
+    if not args.empty_weight >= 0:
+        return f"--empty-weight {args.empty_weight}: must be 0 (off) or above"
+    if args.empty_band is not None and not args.empty_band >= 1:
+        return f"--empty-band {args.empty_band}: map pixels, 1 or more"
+    if args.empty_weight == 0 and args.empty_band is not None:
+        return "--empty-band is the empty rays' band: give --empty-weight too"
+    if args.over_weight == 0 and args.empty_weight == 0 and args.over_level is not None:
+        return "--over-level is the over-level hinges' level: give --over-weight or --empty-weight too"
+    args.empty_band = 3 if args.empty_band is None else args.empty_band
+    args.over_level = 0.55 if args.over_level is None else args.over_level
+    return None

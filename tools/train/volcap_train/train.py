@@ -26,7 +26,7 @@ from .data import Split, backgrounds, photometric, random_affine, sensor
 from . import fourier as FO
 from .nets import FOURIER_VARIANTS, ColorEncoder, FourierGeomNet, make_fourier, fourier_variant, ColorMlp, FourierNet, SegNet, encode_z, encoder_input, make_shape, sample_features
 from .ohem import OhemState
-from .ray_losses import centre_aligned, empty_band, over_level, peak_hinge, ray_level_bce, thin_mask
+from .ray_losses import centre_aligned, check_hinge_options, ray_hinges, ray_level_bce, thin_mask
 from .runs import Run, device, init_weights, loop, make_ema, recompute_bn
 from .surfaces import GeomHead, geometry_loss, surface_depths
 from .items import fourier_cached, fourier_union, fourier_upper_cached
@@ -543,18 +543,8 @@ def train_fourier(args):
             # --teacher: the teacher's maps of the same (augmented, mirrored) input, mirrored
             # back as the net's are, a second dense target beside the truth's.
             loss = loss + args.teacher_weight * distill_loss(pred, teacher_maps(xin), flips)
-        if args.peak_weight > 0 or args.over_weight > 0:
-            only = thin_mask(target, args.thin_radius)[:, 0] > 0.5
-        if args.peak_weight > 0:
-            # --peak-weight: the thin rays' series held to the truth's peak height.
-            loss = loss + args.peak_weight * peak_hinge(pred, target, k, only, args.ray_samples, window=args.peak_window, cap=args.peak_cap)
-        if args.over_weight > 0:
-            # --over-weight: and kept under the surface level where the truth's is.
-            loss = loss + args.over_weight * over_level(pred, target, k, only, args.ray_samples, args.over_level)
-        if args.empty_weight > 0:
-            # --empty-weight: and under it on the empty rays beside the person (the gaps).
-            gaps = empty_band(target, args.empty_band)[:, 0] > 0.5
-            loss = loss + args.empty_weight * over_level(pred, target, k, gaps, args.ray_samples, args.over_level)
+        # --peak-weight, --over-weight, --empty-weight: the thin and empty rays' hinges.
+        loss = loss + ray_hinges(pred, target, k, args)
         if args.ray_bce_weight > 0:
             loss = loss + args.ray_bce_weight * ray_level_bce(pred, target, k, args.ray_samples, gen, tau)
         if args.moment_weight > 0:
@@ -676,30 +666,9 @@ def main(argv=None):
         ap.error(COMPILE_BF16_REFUSED)
     if not 0.0 <= args.mask_aug <= 1.0:
         ap.error(f"--mask-aug {args.mask_aug}: a fraction of the images, 0 to 1")
-    if args.peak_window is not None and not args.peak_window >= 0:
-        ap.error(f"--peak-window {args.peak_window}: a distance in zeta, 0 or above")
-    if args.peak_cap is not None and not 0.0 < args.peak_cap <= 2.0:
-        ap.error(f"--peak-cap {args.peak_cap}: an occupancy height, above 0 and at most 2")
-    if not args.peak_weight >= 0:
-        ap.error(f"--peak-weight {args.peak_weight}: must be 0 (off) or above")
-    if args.peak_weight == 0 and (args.peak_window is not None or args.peak_cap is not None):
-        ap.error("--peak-window / --peak-cap shape the thin rays' peak hinge: give --peak-weight too")
-    if not args.over_weight >= 0:
-        ap.error(f"--over-weight {args.over_weight}: must be 0 (off) or above")
-    if args.over_level is not None and not 0.0 < args.over_level < 1.0:
-        ap.error(f"--over-level {args.over_level}: a surface level, between 0 and 1")
-    if not args.empty_weight >= 0:
-        ap.error(f"--empty-weight {args.empty_weight}: must be 0 (off) or above")
-    if args.empty_band is not None and not args.empty_band >= 1:
-        ap.error(f"--empty-band {args.empty_band}: map pixels, 1 or more")
-    if args.empty_weight == 0 and args.empty_band is not None:
-        ap.error("--empty-band is the empty rays' band: give --empty-weight too")
-    if args.empty_band is None:
-        args.empty_band = 3
-    if args.over_weight == 0 and args.empty_weight == 0 and args.over_level is not None:
-        ap.error("--over-level is the over-level hinges' level: give --over-weight or --empty-weight too")
-    if args.over_level is None:
-        args.over_level = 0.55
+    refused = check_hinge_options(args)
+    if refused:
+        ap.error(refused)
     if args.teacher and not args.teacher_weight > 0:
         ap.error(f"--teacher-weight {args.teacher_weight}: must be above 0 with --teacher")
     if args.threads:
