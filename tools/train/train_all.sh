@@ -181,3 +181,13 @@ fi
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5
 # The product's segmentation is MediaPipe's (pinned PyPI wheel, converted to ONNX); ours is seg-sim.onnx.
 $PY -m volcap_train.mediapipe_seg --out ../../models
+# ... its weights fine-tuned on the renders and mixed 0.3 of the way from MediaPipe's
+# (docs/eval/hands.md section 43; models/seg.md's fine-tuning paragraphs are kept by hand:
+# mediapipe_seg writes the original's card). DATA_SEG_TUNE: the sets, e.g. "DS16W DSF67 DSF53".
+if [ -n "${DATA_SEG_TUNE:-}" ]; then
+  read -r -a SEGSETS <<< "$DATA_SEG_TUNE"
+  cp ../../models/seg.onnx "$RUNS/seg-mediapipe.onnx"
+  $PY -m volcap_train.seg_tune --seg "$RUNS/seg-mediapipe.onnx" --data "${SEGSETS[0]}" --more-data "${SEGSETS[@]:1}" \
+    --out "$RUNS/seg" --steps 1500 --batch 16 --lr 1e-4 --anchor-weight 1 --threads 2 --seed 0 --mix 0.3 --install ../../models
+  $PY -m volcap_train.mediapipe_seg --out ../../models --golden-only
+fi

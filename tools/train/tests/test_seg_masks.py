@@ -160,3 +160,22 @@ def test_the_second_pass_adds_what_the_crop_shows_and_keeps_one_person(tmp_path,
     where = paste_max(lone, p, torch.zeros(64, 64)) > 0.5
     assert where.any() and not (body[0][where] > 0).any()
     assert (out[0][where] == 0).all()
+
+
+def test_the_caches_name_the_segmenters_contents_not_only_its_file_name(tmp_path):
+    """A retrained segmenter under the same name (seg_tune writes `seg.onnx`) never reads the
+    masks or items cached from another; the same file always names the same cache."""
+    import pytest
+
+    from volcap_train.items import fourier_cache_path
+    from volcap_train.seg_masks import model_tag
+
+    a, b = tmp_path / "a" / "seg.onnx", tmp_path / "b" / "seg.onnx"
+    for path, body in ((a, b"first weights"), (b, b"second weights")):
+        path.parent.mkdir()
+        path.write_bytes(body)
+    assert model_tag(a).startswith("seg-") and model_tag(a) != model_tag(b)
+    assert model_tag(a) == model_tag(tmp_path / "a" / "seg.onnx")
+    assert fourier_cache_path(tmp_path, "train", 15, a, 2) != fourier_cache_path(tmp_path, "train", 15, b, 2)
+    with pytest.raises(FileNotFoundError, match="missing.onnx: no such segmentation model"):
+        model_tag(tmp_path / "missing.onnx")

@@ -64,6 +64,7 @@ def test_bn_recomputed_on_a_datasets_items_is_the_soups_own(tmp_path):
     from volcap_train.nets import make_fourier
 
     seg = tmp_path / "seg.onnx"
+    seg.write_bytes(b"a segmenter")  # the cache's name carries the file's hash
     g = torch.Generator().manual_seed(3)
     items = {"rgb": torch.randint(0, 256, (20, 3, 64, 64), generator=g, dtype=torch.uint8), "mask": torch.randint(0, 256, (20, 1, 64, 64), generator=g, dtype=torch.uint8)}
     torch.save(items, fourier_cache_path(tmp_path, "train", 15, seg, 2))

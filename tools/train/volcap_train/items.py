@@ -96,9 +96,9 @@ def fourier_cache_path(root: Path, split: str, k: int, seg: Path | None = None, 
     """Where `fourier_cached` keeps a split's items."""
     if seg is None:
         return root / f"fourier-{split}-k{k}-v2.pt"
-    from .seg_masks import passes_tag
+    from .seg_masks import model_tag, passes_tag
 
-    return root / f"fourier-{split}-k{k}-seg-{seg.stem}{passes_tag(passes)}-v1.pt"
+    return root / f"fourier-{split}-k{k}-seg-{model_tag(seg)}{passes_tag(passes)}-v1.pt"
 
 
 def fourier_cached(root: Path, split: str, k: int, seg: Path | None = None, passes: int = 1):

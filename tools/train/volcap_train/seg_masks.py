@@ -137,6 +137,17 @@ def second_pass(model: Path, images: torch.Tensor, first: torch.Tensor) -> torch
     return out
 
 
+def model_tag(model: Path) -> str:
+    """The caches' name for a segmentation model: its file's stem and the first 8 hex digits of
+    its SHA-256, so that a retrained model of the same name (seg_tune's `seg.onnx`) never reads
+    masks cached from another."""
+    import hashlib
+
+    if not Path(model).is_file():
+        raise FileNotFoundError(f"{model}: no such segmentation model")
+    return f"{Path(model).stem}-{hashlib.sha256(Path(model).read_bytes()).hexdigest()[:8]}"
+
+
 def passes_tag(passes: int) -> str:
     """The caches' name part for masks made in `passes` segmentation passes ("" for one)."""
     return "-p2" if passes > 1 else ""
@@ -146,8 +157,8 @@ def predicted_masks(root: Path, split, split_name: str, model: Path, passes: int
     """u8 [B, 1, H, W] (soft mask x 255) of the engine's segmentation for every image of a
     dataset split, most prominent person only (all zero where none is found), with
     `passes` 2 the person's crop segmented again (`second_pass`); cached as
-    ROOT/seg-{split}-{model stem}[-p2]-v1.pt."""
-    cache = root / f"seg-{split_name}-{model.stem}{passes_tag(passes)}-v1.pt"
+    ROOT/seg-{split}-{model_tag(model)}[-p2]-v1.pt."""
+    cache = root / f"seg-{split_name}-{model_tag(model)}{passes_tag(passes)}-v1.pt"
     if cache.exists():
         out = torch.load(cache)
         if out.shape[0] == len(split):
