@@ -118,6 +118,9 @@ def test_a_few_steps_on_a_toy_set_learn_the_mask_and_write_a_graph_onnx_runtime_
     p = ort_run(onnx.load(str(out / "seg.onnx")), img.float().numpy() / 255.0)
     assert np.isfinite(p).all()
     assert float(iou(torch.from_numpy(p) > 0.5, mask > 0).mean()) > 0.9
+    # Both files say they were tuned (the toy graph has no `volcap.run`: the doc string).
+    for name in ("tuned.onnx", "seg.onnx"):
+        assert "seg_tune: 60 steps on the renders" in onnx.load(str(out / name)).doc_string
     # --mix 1 (the default): the shipped file is the tuned one.
     assert np.array_equal(p, ort_run(onnx.load(str(out / "tuned.onnx")), img.float().numpy() / 255.0))
 

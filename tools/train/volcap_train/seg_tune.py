@@ -154,9 +154,19 @@ class OnnxNet(torch.nn.Module):
         for i, init in enumerate(m.graph.initializer):
             if init.name in new:
                 m.graph.initializer[i].CopyFrom(numpy_helper.from_array(new[init.name], init.name))
-        if note:
-            m.doc_string = (m.doc_string + "\n" if m.doc_string else "") + note
-        return m
+        return with_note(m, note)
+
+
+def with_note(m: onnx.ModelProto, note: str) -> onnx.ModelProto:
+    """`note` appended to the model's doc string and to its `volcap.run` metadata (which
+    `mediapipe_seg --golden-only` and models.json read: a tuned file never passes for the
+    original)."""
+    if note:
+        m.doc_string = (m.doc_string + "\n" if m.doc_string else "") + note
+        props = {p.key: p for p in m.metadata_props}
+        if "volcap.run" in props:
+            props["volcap.run"].value = f"{props['volcap.run'].value}, {note}"
+    return m
 
 
 def mix_models(base: onnx.ModelProto, tuned: onnx.ModelProto, share: float, note: str = "") -> onnx.ModelProto:
@@ -174,12 +184,7 @@ def mix_models(base: onnx.ModelProto, tuned: onnx.ModelProto, share: float, note
         if w0.dtype == np.float32 and not np.array_equal(t[init.name], w0):
             w = (w0.astype(np.float64) + share * (t[init.name].astype(np.float64) - w0)).astype(np.float32)
             out.graph.initializer[i].CopyFrom(numpy_helper.from_array(w, init.name))
-    if note:
-        out.doc_string = (out.doc_string + "\n" if out.doc_string else "") + note
-        props = {p.key: p for p in out.metadata_props}
-        if "volcap.run" in props:
-            props["volcap.run"].value = f"{props['volcap.run'].value}, {note}"
-    return out
+    return with_note(out, note)
 
 
 def install(seg: Path, models: Path) -> None:
@@ -301,10 +306,10 @@ def train(args) -> dict:
             log.append({"step": step + 1, "bce": bce.item(), "anchor": anchor.item(), "val_mask_iou": v, "seconds": time.time() - t0})
             tqdm.write(f"step {step + 1}: held-out mask IoU {v:.4f} (start {base:.4f})")
     torch.save({"net": {k: p.detach() for k, p in zip(net.names, net.params)}, "seg": str(args.seg)}, args.out / "ckpt.pt")
-    tuned = net.to_onnx()
+    done = f"seg_tune: {args.steps} steps on the renders (seed {args.seed})"
+    tuned = net.to_onnx(done)
     onnx.save(tuned, str(args.out / "tuned.onnx"))
-    note = f"seg_tune: {args.steps} steps on the renders (seed {args.seed}), mixed {args.mix:g}"
-    onnx.save(mix_models(net.model, tuned, args.mix, note), str(args.out / "seg.onnx"))
+    onnx.save(mix_models(net.model, tuned, args.mix, f"{done}, mixed {args.mix:g}"), str(args.out / "seg.onnx"))
     budget = {
         "steps": args.steps, "batch": args.batch, "lr": args.lr, "anchor_weight": args.anchor_weight, "composite": args.composite,
         "affine": args.affine, "crop": args.crop, "mix": args.mix, "seed": args.seed, "threads": args.threads, "train_images": len(img), "seconds": time.time() - t0,
