@@ -122,7 +122,8 @@ def reference_mask(image_u8: np.ndarray, onnx_path: Path) -> tuple[np.ndarray, s
     """Person probability [256, 256] of a 256x256 RGB8 image: MediaPipe's runtime if present and
     the file holds MediaPipe's own weights (its `volcap.run` is the conversion's), else ONNX
     Runtime on the file (a `seg_tune`d file: MediaPipe's runtime knows only the original)."""
-    if run_of(onnx_path) == RUN:
+    run = run_of(onnx_path)
+    if run == RUN:
         try:
             import mediapipe as mp  # noqa: F401
 
@@ -134,7 +135,7 @@ def reference_mask(image_u8: np.ndarray, onnx_path: Path) -> tuple[np.ndarray, s
 
     sess = ort.InferenceSession(str(onnx_path))
     x = (image_u8.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
-    return sess.run(None, {"image": x})[0][0, 0], f"onnxruntime on {onnx_path.name} ({run_of(onnx_path)})"
+    return sess.run(None, {"image": x})[0][0, 0], f"onnxruntime on {onnx_path.name} ({run})"
 
 
 def run_of(onnx_path: Path) -> str:

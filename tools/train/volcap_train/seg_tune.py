@@ -265,11 +265,16 @@ def evaluate(net: OnnxNet, img, mask, chunk: int = 16) -> float:
     return float(torch.cat(out).mean())
 
 
-def anchor_loss(net: OnnxNet, start: list[torch.Tensor]) -> torch.Tensor:
+def anchor_loss(net: OnnxNet, start: list[tuple[torch.Tensor, torch.Tensor]]) -> torch.Tensor:
     """Mean over the parameters of their squared distance to the original weights, each relative
-    to the original's mean square: 1.0 means a tensor moved as far as it is large."""
-    terms = [((p - p0) ** 2).mean() / (p0.pow(2).mean() + 1e-8) for p, p0 in zip(net.params, start)]
+    to the original's mean square: 1.0 means a tensor moved as far as it is large. `start`:
+    `anchor_start(net)`, each original tensor with its mean square (fixed for the run)."""
+    terms = [((p - p0) ** 2).mean() / scale for p, (p0, scale) in zip(net.params, start)]
     return torch.stack(terms).mean()
+
+
+def anchor_start(net: OnnxNet) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    return [(p.detach().clone(), p.detach().pow(2).mean() + 1e-8) for p in net.params]
 
 
 def train(args) -> dict:
@@ -277,7 +282,7 @@ def train(args) -> dict:
     torch.set_num_threads(args.threads)
     gen = torch.Generator().manual_seed(args.seed)
     net = OnnxNet(onnx.load(str(args.seg)))
-    start = [p.detach().clone() for p in net.params]
+    start = anchor_start(net)
     img, mask = load_images([args.data, *args.more_data], "train", args.limit)
     vimg, vmask = load_images([args.data], "val", args.val_images)
     base = evaluate(net, vimg, vmask)
@@ -305,7 +310,6 @@ def train(args) -> dict:
             v = evaluate(net, vimg, vmask)
             log.append({"step": step + 1, "bce": bce.item(), "anchor": anchor.item(), "val_mask_iou": v, "seconds": time.time() - t0})
             tqdm.write(f"step {step + 1}: held-out mask IoU {v:.4f} (start {base:.4f})")
-    torch.save({"net": {k: p.detach() for k, p in zip(net.names, net.params)}, "seg": str(args.seg)}, args.out / "ckpt.pt")
     done = f"seg_tune: {args.steps} steps on the renders (seed {args.seed})"
     tuned = net.to_onnx(done)
     onnx.save(tuned, str(args.out / "tuned.onnx"))
