@@ -8,7 +8,7 @@ import pytest
 from volcap_train import compare_evals as ce
 
 
-def report(tmp_path, name, rows, facing=None):
+def report(tmp_path, name, rows, facing=None, shown=None):
     d = tmp_path / name
     d.mkdir()
     images = []
@@ -21,6 +21,8 @@ def report(tmp_path, name, rows, facing=None):
         )
         if facing is not None:
             images[-1]["facing_error"] = facing[i]
+        if shown is not None:
+            images[-1]["part_shown"] = [1, 1, 1, shown[i], 1, 1]
     (d / "eval.json").write_text(json.dumps({"images": images, "models": []}))
     return d
 
@@ -60,6 +62,18 @@ def test_the_median_and_the_subjects_show_a_difference_that_is_one_images(tmp_pa
     assert math.isclose(subj["s2"]["P2S cm"][0], 1.5) and math.isclose(subj["s2"]["P2S cm"][1], 1.5)
     t = ce.subject_table(ce.by_subject(pairs))
     assert "| s2 | 2 | +0.000 ± 0.000 | +1.500 ± 1.500 |" in t
+
+
+def test_the_hands_shown_compare_in_percent_higher_better_and_only_where_both_reports_have_them(tmp_path):
+    rows = [("s1", 0, 0.0, "m", 2.0, 1.0, 0.7, 10.0), ("s1", 0, 120.0, "m", 2.0, 1.0, 0.7, 10.0)]
+    a = report(tmp_path, "a", rows, shown=[0.6, None])  # the second image shows no hand (null)
+    b = report(tmp_path, "b", rows, shown=[0.4, 0.5])
+    old = report(tmp_path, "old", rows)  # made before the column
+    res = {r["metric"]: r for r in ce.compare(ce.paired([ce.load_rows(a, None)], [ce.load_rows(b, None)]))}
+    h = res["hands shown %"]
+    assert h["images"] == 1 and math.isclose(h["diff"], 20.0) and h["a_wins"] == 1
+    res_old = {r["metric"] for r in ce.compare(ce.paired([ce.load_rows(old, None)], [ce.load_rows(b, None)]))}
+    assert "hands shown %" not in res_old and "hands cm" in res_old
 
 
 def test_report_pairs_pool_and_mismatches_are_refused(tmp_path):

@@ -33,6 +33,9 @@ METRICS = [
     ("p2s_cm", "P2S cm", False),
     ("iou", "IoU", True),
     ("hands_cm", "hands cm", False),
+    # part_shown[3] in %: the share of the hands' true surface within 2 cm of the
+    # reconstruction (reports made before 2026-12-01 have none: left out for them).
+    ("hands_shown", "hands shown %", True),
     # 1 on a facing error (`volcap eval`'s `facing_error`: the reconstruction nearer the truth
     # turned around in depth), else 0: its mean is the share of such images. Reports made
     # before 2026-11-29 have no such field: the metric is left out for them.
@@ -64,6 +67,9 @@ def load_rows(path: Path, model: str | None) -> dict:
         r = dict(r)
         parts = r.get("part_cm") or []
         r["hands_cm"] = parts[3] if len(parts) > 3 else float("nan")
+        shown = r.get("part_shown")
+        if shown is not None:
+            r["hands_shown"] = shown[3] * 100.0 if len(shown) > 3 and shown[3] is not None else float("nan")
         if "facing_error" in r:
             r["facing"] = float(r["facing_error"])
         for key, _, _ in METRICS:
@@ -71,8 +77,9 @@ def load_rows(path: Path, model: str | None) -> dict:
             # not show, so no true sample of it) as null: such an image drops out of that
             # metric's pairs only. (Reports made before 2026-11-29 also hold nulls from a
             # metric bug, degenerate mesh triangles: docs/eval/hands.md section 27.)
-            # (The facing column is absent from reports made before it: left out, not NaN.)
-            if key != "facing" and r.get(key) is None:
+            # (The facing and hands-shown columns are absent from reports made before them:
+            # left out, not NaN.)
+            if key not in ("facing", "hands_shown") and r.get(key) is None:
                 r[key] = float("nan")
         out[(r["subject"], r["pose"], r["yaw_deg"])] = r
     return out

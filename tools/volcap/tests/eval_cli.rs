@@ -95,6 +95,17 @@ fn both_framings_score_the_truth_as_near_exact() {
                 }
                 // Feet: in the whole framing only.
                 assert_eq!(parts[5].is_null(), cut, "{framing}: feet: {r}");
+                // The share of each part within 2 cm: over 85 % of every part but the hands
+                // for the truth's series (the hands about 60-70 % at 65^3, coarse as above);
+                // the feet as above.
+                let shown = r["part_shown"].as_array().unwrap();
+                assert_eq!(shown.len(), 6);
+                for (i, v) in shown[..5].iter().enumerate() {
+                    let v = v.as_f64().unwrap_or(f64::NAN);
+                    let least = if i == 3 { 0.45 } else { 0.85 };
+                    assert!((least..=1.0).contains(&v), "{framing}: part {i} shown: {r}");
+                }
+                assert_eq!(shown[5].is_null(), cut, "{framing}: feet shown: {r}");
                 // The parts' shares of the P2S are each non-negative and add up to it (a
                 // part not shown has no reconstructed samples nearest it: 0).
                 let shares: Vec<f64> = r["part_p2s_cm"]

@@ -15,6 +15,9 @@ pub(super) struct Distances {
     pub part_cm: [f64; 6],
     /// Per body part, the share of the P2S ([`super::ImageRow::part_p2s_cm`]).
     pub part_p2s_cm: [f64; 6],
+    /// Per body part, the share of its true samples within [`SHOWN_WITHIN_M`] of the
+    /// reconstruction ([`super::ImageRow::part_shown`]).
+    pub part_shown: [f64; 6],
     /// The Chamfer distance of the reconstruction turned around in depth (its samples
     /// reflected through the plane across the view axis at their mean depth): the same
     /// silhouette with front and back swapped, i.e. for a near-symmetric body the person
@@ -22,6 +25,11 @@ pub(super) struct Distances {
     /// ([`super::ImageRow::facing_error`]).
     pub reversed_chamfer_cm: f64,
 }
+
+/// How near the reconstruction a true surface sample must be to count as shown
+/// ([`Distances::part_shown`]): about a hand's thickness, so a hand reconstructed as a stub at
+/// the wrist shows its wrist and not its fingers, and one in place shows nearly all of it.
+pub(super) const SHOWN_WITHIN_M: f64 = 0.02;
 
 /// Chamfer and point-to-surface distance (cm) of a mesh in the model's crop NDC against
 /// the ground-truth world mesh, both where the frame shows them (10,000 samples each), and
@@ -66,25 +74,10 @@ pub(super) fn surface_distances(
             .unwrap_or(1)
     };
     // Completeness per part: each true sample's distance to the reconstruction.
-    let mut sum = [0.0f64; 6];
-    let mut n = [0usize; 6];
-    if let Some(l) = parts {
-        let index = TriangleIndex::of_mesh(&mesh);
-        for p in &gt {
-            if let Some((_, _, _, d)) = index.nearest(*p) {
-                let i = part_of(l, *p);
-                sum[i] += d;
-                n[i] += 1;
-            }
-        }
-    }
-    let part_cm = std::array::from_fn(|i| {
-        if n[i] == 0 {
-            f64::NAN
-        } else {
-            sum[i] / n[i] as f64 * 100.0
-        }
-    });
+    let (part_cm, part_shown) = match parts {
+        Some(l) => completeness(&gt, &mesh, |p| part_of(l, p)),
+        None => ([f64::NAN; 6], [f64::NAN; 6]),
+    };
     // Accuracy per part: each reconstructed sample's distance to the true surface, summed
     // by the part of the body vertex nearest it (over all samples: the shares add up to
     // the P2S).
@@ -112,8 +105,44 @@ pub(super) fn surface_distances(
         p2s_cm: p2s_sum / n_pred * 100.0,
         part_cm,
         part_p2s_cm,
+        part_shown,
         reversed_chamfer_cm: chamfer(&reversed, &gt) * 100.0,
     })
+}
+
+/// Per part (`part_of`: an index into `Part::ALL`), over the true samples `gt`: the mean
+/// distance (cm) to `mesh` and the share within [`SHOWN_WITHIN_M`]; NaN for a part without
+/// samples.
+fn completeness(
+    gt: &[DVec3],
+    mesh: &Mesh,
+    part_of: impl Fn(DVec3) -> usize,
+) -> ([f64; 6], [f64; 6]) {
+    let mut sum = [0.0f64; 6];
+    let mut near = [0usize; 6];
+    let mut n = [0usize; 6];
+    let index = TriangleIndex::of_mesh(mesh);
+    for p in gt {
+        if let Some((_, _, _, d)) = index.nearest(*p) {
+            let i = part_of(*p).min(5);
+            sum[i] += d;
+            near[i] += usize::from(d <= SHOWN_WITHIN_M);
+            n[i] += 1;
+        }
+    }
+    let per_sample = |v: [f64; 6], scale: f64| -> [f64; 6] {
+        std::array::from_fn(|i| {
+            if n[i] == 0 {
+                f64::NAN
+            } else {
+                v[i] / n[i] as f64 * scale
+            }
+        })
+    };
+    (
+        per_sample(sum, 100.0),
+        per_sample(near.map(|c| c as f64), 1.0),
+    )
 }
 
 /// How far beyond a true surface point [`seen_surface`] looks for the outside (metres).
@@ -207,6 +236,42 @@ mod tests {
             );
         }
         p
+    }
+
+    /// A hand that is half there: its samples within 2 cm count as shown, the far half
+    /// does not, and the mean distance is led by the far half; a part with no samples is NaN.
+    #[test]
+    fn completeness_counts_a_part_as_shown_where_it_lies_within_two_centimetres() {
+        let mesh = Mesh {
+            vertices: vec![
+                glam::Vec3::new(-1.0, -1.0, 0.0),
+                glam::Vec3::new(1.0, -1.0, 0.0),
+                glam::Vec3::new(0.0, 1.0, 0.0),
+            ],
+            triangles: vec![[0, 1, 2]],
+            colors: None,
+        };
+        // Torso (1): on the surface; hands (3): at 1 cm (x < 0) and 10 cm (x >= 0).
+        let mut gt = vec![];
+        for i in 0..40 {
+            let x = -0.4 + 0.02 * i as f64;
+            gt.push(DVec3::new(x, 0.0, 0.0));
+            gt.push(DVec3::new(x, -0.2, if x < 0.0 { 0.01 } else { 0.10 }));
+        }
+        let part = |p: DVec3| if p.y < -0.1 { 3 } else { 1 };
+        let (cm, shown) = completeness(&gt, &mesh, part);
+        assert!(
+            cm[1].abs() < 1e-9 && (shown[1] - 1.0).abs() < 1e-12,
+            "{cm:?} {shown:?}"
+        );
+        assert!((cm[3] - 5.5).abs() < 1e-6, "{cm:?}");
+        assert!((shown[3] - 0.5).abs() < 1e-12, "{shown:?}");
+        for i in [0, 2, 4, 5] {
+            assert!(
+                cm[i].is_nan() && shown[i].is_nan(),
+                "part {i}: {cm:?} {shown:?}"
+            );
+        }
     }
 
     #[test]

@@ -38,6 +38,8 @@ pub struct ModelRow {
     pub part_cm: [f64; 6],
     /// [`ImageRow::part_p2s_cm`] averaged over the images (they add up to the P2S).
     pub part_p2s_cm: [f64; 6],
+    /// [`ImageRow::part_shown`] averaged over the images that show the part.
+    pub part_shown: [f64; 6],
     /// How many times each frame was segmented (`Models::segment_passes`).
     pub segment_passes: u8,
     /// Images whose reconstruction faces the wrong way ([`ImageRow::facing_error`]).
@@ -101,6 +103,7 @@ impl ModelRow {
             params: card.2,
             part_cm: part(|r| r.part_cm),
             part_p2s_cm: part(|r| r.part_p2s_cm),
+            part_shown: part(|r| r.part_shown),
             segment_passes,
             facing_errors: ok.iter().filter(|r| r.facing_error).count(),
             facing_right: [
@@ -306,6 +309,30 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             m.model,
             cells(&m.part_p2s_cm),
             m.p2s_cm
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n**Per body part** (shown): the share of each part's true surface samples within {:.0} cm of \
+         the reconstruction, in %: how much of the part is there at all (a hand that ends at the wrist \
+         shows its wrist only), where the mean distance above is led by the farthest samples.\n\n\
+         | model | head | torso | arms | hands | legs | feet |\n|---|---|---|---|---|---|---|",
+        super::distances::SHOWN_WITHIN_M * 100.0
+    );
+    for m in summary {
+        let _ = writeln!(
+            s,
+            "| {} | {} |",
+            m.model,
+            m.part_shown
+                .iter()
+                .map(|v| if v.is_finite() {
+                    format!("{:.1}", v * 100.0)
+                } else {
+                    "-".into()
+                })
+                .collect::<Vec<_>>()
+                .join(" | ")
         );
     }
     let _ = writeln!(
