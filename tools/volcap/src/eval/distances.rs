@@ -251,12 +251,12 @@ mod tests {
             triangles: vec![[0, 1, 2]],
             colors: None,
         };
-        // Torso (1): on the surface; hands (3): at 1 cm (x < 0) and 10 cm (x >= 0).
+        // Torso (1): on the surface; hands (3): half at 1 cm, half at 10 cm.
         let mut gt = vec![];
         for i in 0..40 {
             let x = -0.4 + 0.02 * i as f64;
             gt.push(DVec3::new(x, 0.0, 0.0));
-            gt.push(DVec3::new(x, -0.2, if x < 0.0 { 0.01 } else { 0.10 }));
+            gt.push(DVec3::new(x, -0.2, if i < 20 { 0.01 } else { 0.10 }));
         }
         let part = |p: DVec3| if p.y < -0.1 { 3 } else { 1 };
         let (cm, shown) = completeness(&gt, &mesh, part);
