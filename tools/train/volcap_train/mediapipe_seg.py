@@ -121,8 +121,13 @@ use, so keep watching mask IoU on the appliance's own scenes (`volcap eval` repo
 def reference_mask(image_u8: np.ndarray, onnx_path: Path) -> tuple[np.ndarray, str]:
     """Person probability [256, 256] of a 256x256 RGB8 image: MediaPipe's runtime if present and
     the file holds MediaPipe's own weights (its `volcap.run` is the conversion's), else ONNX
-    Runtime on the file (a `seg_tune`d file: MediaPipe's runtime knows only the original)."""
-    run = run_of(onnx_path)
+    Runtime on the file (a `seg_tune`d file: MediaPipe's runtime knows only the original). The
+    metadata is read through the same ONNX Runtime session (not the onnx package, which may not
+    import beside mediapipe's protobuf 4)."""
+    import onnxruntime as ort
+
+    sess = ort.InferenceSession(str(onnx_path))
+    run = sess.get_modelmeta().custom_metadata_map.get("volcap.run", "")
     if run == RUN:
         try:
             import mediapipe as mp  # noqa: F401
@@ -131,19 +136,8 @@ def reference_mask(image_u8: np.ndarray, onnx_path: Path) -> tuple[np.ndarray, s
                 return np.asarray(s.process(image_u8).segmentation_mask, np.float32), "mediapipe 0.10.21 runtime (TFLite)"
         except ImportError:
             pass
-    import onnxruntime as ort
-
-    sess = ort.InferenceSession(str(onnx_path))
     x = (image_u8.astype(np.float32) / 255.0).transpose(2, 0, 1)[None]
     return sess.run(None, {"image": x})[0][0, 0], f"onnxruntime on {onnx_path.name} ({run})"
-
-
-def run_of(onnx_path: Path) -> str:
-    """The file's `volcap.run` metadata ("" without one), read without the onnx package (which
-    may not import beside mediapipe's protobuf 4): onnxruntime's model metadata."""
-    import onnxruntime as ort
-
-    return ort.InferenceSession(str(onnx_path)).get_modelmeta().custom_metadata_map.get("volcap.run", "")
 
 
 def main(argv=None):

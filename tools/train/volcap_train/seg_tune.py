@@ -348,9 +348,8 @@ def main(argv=None):
     for name in ("steps", "batch", "eval_every", "threads", "val_images"):
         if getattr(args, name) <= 0:
             ap.error(f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}")
-    for name in ("lr",):
-        if not (getattr(args, name) > 0 and np.isfinite(getattr(args, name))):
-            ap.error(f"--{name} must be a positive number, got {getattr(args, name)}")
+    if not (args.lr > 0 and np.isfinite(args.lr)):
+        ap.error(f"--lr must be a positive number, got {args.lr}")
     for name in ("anchor_weight", "composite", "affine", "crop", "mix"):
         v = getattr(args, name)
         if not (np.isfinite(v) and v >= 0) or (name != "anchor_weight" and v > 1):

@@ -280,11 +280,12 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
          feet = foot and toes) to the reconstruction; a part the reconstruction misses (hands that end \
          at the wrist) shows as a large value.\n\n| model | head | torso | arms | hands | legs | feet |\n|---|---|---|---|---|---|---|"
     );
-    let cells = |v: &[f64; 6]| {
+    // The six parts' cells: each value times `scale` to `digits` decimals, "-" where not finite.
+    let cells = |v: &[f64; 6], scale: f64, digits: usize| {
         v.iter()
             .map(|v| {
                 if v.is_finite() {
-                    format!("{v:.2}")
+                    format!("{:.*}", digits, v * scale)
                 } else {
                     "-".into()
                 }
@@ -293,7 +294,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             .join(" | ")
     };
     for m in summary {
-        let _ = writeln!(s, "| {} | {} |", m.model, cells(&m.part_cm));
+        let _ = writeln!(s, "| {} | {} |", m.model, cells(&m.part_cm, 1.0, 2));
     }
     let _ = writeln!(
         s,
@@ -307,7 +308,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             s,
             "| {} | {} | {:.2} |",
             m.model,
-            cells(&m.part_p2s_cm),
+            cells(&m.part_p2s_cm, 1.0, 2),
             m.p2s_cm
         );
     }
@@ -320,20 +321,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         super::distances::SHOWN_WITHIN_M * 100.0
     );
     for m in summary {
-        let _ = writeln!(
-            s,
-            "| {} | {} |",
-            m.model,
-            m.part_shown
-                .iter()
-                .map(|v| if v.is_finite() {
-                    format!("{:.1}", v * 100.0)
-                } else {
-                    "-".into()
-                })
-                .collect::<Vec<_>>()
-                .join(" | ")
-        );
+        let _ = writeln!(s, "| {} | {} |", m.model, cells(&m.part_shown, 100.0, 1));
     }
     let _ = writeln!(
         s,
