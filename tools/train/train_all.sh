@@ -164,10 +164,18 @@ fi
 # input's exposure; on DS16W when it is given (the committed run), else on DATA (either made by
 # a simulator that samples the seen surface: `"surface": "seen"` in its dataset.json).
 $T color --data "${WHOLE[0]:-$DATA}" --out "$RUNS/color" --steps "${COLOR_STEPS:-3000}"
-# fourier-small-upper: stage (3) resumed with upper bodies (the person cut by the frame's lower
-# edge) added to the training images, for close-range framing.
-$T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
-$T fourier --data "$DATA" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 2000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 4 --init "$RUNS/stages/fourier-small-upper-1/ckpt.pt"
+# fourier-small-upper: upper bodies (the person cut by the frame's lower edge) added to the
+# training images, for close-range framing. With DS16W: the default resumed, every training
+# image of DS16W also cut (runs (77), (78), 2026-12-01: 4,000 + 4,000 steps; the committed one
+# started from the default's light checkpoint, run (54)); without it: stage (3) resumed (runs
+# (4), (5) of its first card).
+if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
+  $T fourier --data "${WHOLE[0]}" --out "$RUNS/stages/fourier-small-upper-77" --variant fourier-small --steps 4000 --seed 35 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --upper-every 1 --init "$RUNS/fourier-small-seg2/ckpt.pt"
+  $T fourier --data "${WHOLE[0]}" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 4000 --seed 36 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --upper-every 1 --init "$RUNS/stages/fourier-small-upper-77/ckpt.pt"
+else
+  $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
+  $T fourier --data "$DATA" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 2000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 4 --init "$RUNS/stages/fourier-small-upper-1/ckpt.pt"
+fi
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 # fourier-small's surface level comes from a sweep on training subjects (its model card):
 #   volcap eval --subjects train --poses 1 --views 2 --res 129 --seed 7 --model fourier-small --iso-level 0.45,0.5,0.55,0.6
@@ -178,7 +186,7 @@ if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
 elif [ -n "${DATA_SEG2:-}" ]; then
   $PY -m volcap_train.export --data "${SEG2N[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 320
 fi
-$PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5
+$PY -m volcap_train.export --data "${WHOLE[0]:-$DATA}" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5 --int8-calib-images 256
 # The product's segmentation is MediaPipe's (pinned PyPI wheel, converted to ONNX); ours is seg-sim.onnx.
 $PY -m volcap_train.mediapipe_seg --out ../../models
 # ... its weights fine-tuned on the renders and mixed 0.3 of the way from MediaPipe's

@@ -223,7 +223,10 @@ fn the_close_range_model_encodes_people_cut_by_the_frame_and_only_them() {
         .with_close_range(&dir, "fourier-small-upper")
         .unwrap();
     let main = Models::load(&dir, "fourier-small", Precision::F32).unwrap();
-    let close = Models::load(&dir, "fourier-small-upper", Precision::F32).unwrap();
+    // The frame is segmented before the cut is known, as often as the main model asks
+    // (`Models::segment_passes`): alone, the close-range model is given the same count.
+    let mut close = Models::load(&dir, "fourier-small-upper", Precision::F32).unwrap();
+    close.segment_passes = both.segment_passes;
     let occ = |m: &Models, rgb: &[u8], w: usize, h: usize| {
         let mut info = FrameInfo::default();
         let (img, mask, crop) = m.prepare(rgb, w, h, &mut info).unwrap();

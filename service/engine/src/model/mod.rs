@@ -443,7 +443,9 @@ impl Models {
     /// Also load `shape-NAME.*` (at the same precision) as the close-range shape model: frames
     /// whose person the frame's lower edge cuts are encoded with it (`FrameInfo::close_range`
     /// says so). It must be of the same family as the main shape model's colour and crop
-    /// contract, which every committed shape model shares.
+    /// contract, which every committed shape model shares. The frame is segmented before the
+    /// cut is known, [`Self::segment_passes`] times (the main model's count unless set): the
+    /// close-range model encodes that mask, whatever count it was trained with.
     pub fn with_close_range(mut self, dir: &Path, name: &str) -> Result<Self, ModelError> {
         let shape = ShapeModel::load_on(dir, name, self.precision, &self.runtime)?;
         self.close_range = Some((name.into(), shape));
