@@ -171,8 +171,8 @@ fn a_trained_field_renders_as_dense_evaluation_finds_it() {
                 // nothing): dense's first inside node is a piece of at most one cell of the
                 // next level (2^3 nodes), which no coarse-to-fine search is bound to find
                 // (the ringing of the series, one voxel at 257^3).
-                let piece = piece_size(&dense, [i, j, first as usize], 9);
-                if first >= 0 && hit < first && piece <= 8 {
+                let piece = usize::try_from(first).map_or(0, |k| piece_size(&dense, [i, j, k], 9));
+                if hit < first && piece <= 8 {
                     specks += 1;
                 } else {
                     wrong.push((i, j, hit, first, piece));
