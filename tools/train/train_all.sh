@@ -166,12 +166,13 @@ fi
 $T color --data "${WHOLE[0]:-$DATA}" --out "$RUNS/color" --steps "${COLOR_STEPS:-3000}"
 # fourier-small-upper: upper bodies (the person cut by the frame's lower edge) added to the
 # training images, for close-range framing. With DS16W: the default resumed, every training
-# image of DS16W also cut (runs (77), (78), 2026-12-01: 4,000 + 4,000 steps; the committed one
+# image of DS16W also cut (runs (77)-(79), 2026-12-01: 3 x 4,000 steps; the committed one
 # started from the default's light checkpoint, run (54)); without it: stage (3) resumed (runs
 # (4), (5) of its first card).
 if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
   $T fourier --data "${WHOLE[0]}" --out "$RUNS/stages/fourier-small-upper-77" --variant fourier-small --steps 4000 --seed 35 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --upper-every 1 --init "$RUNS/fourier-small-seg2/ckpt.pt"
-  $T fourier --data "${WHOLE[0]}" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 4000 --seed 36 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --upper-every 1 --init "$RUNS/stages/fourier-small-upper-77/ckpt.pt"
+  $T fourier --data "${WHOLE[0]}" --out "$RUNS/stages/fourier-small-upper-78" --variant fourier-small --steps 4000 --seed 36 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --upper-every 1 --init "$RUNS/stages/fourier-small-upper-77/ckpt.pt"
+  $T fourier --data "${WHOLE[0]}" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 4000 --seed 37 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --upper-every 1 --init "$RUNS/stages/fourier-small-upper-78/ckpt.pt"
 else
   $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
   $T fourier --data "$DATA" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 2000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 4 --init "$RUNS/stages/fourier-small-upper-1/ckpt.pt"
