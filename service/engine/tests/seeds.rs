@@ -202,15 +202,12 @@ fn piece_size(dense: &Grid, at: [usize; 3], cap: usize) -> usize {
         let p = seen[next];
         next += 1;
         for d in 0..27i64 {
-            let q = [d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1]
-                .iter()
-                .zip(p)
-                .map(|(o, v)| v as i64 + o)
-                .collect::<Vec<_>>();
+            let o = [d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1];
+            let q = std::array::from_fn(|a| p[a] as i64 + o[a]);
             if q.iter().any(|&v| v < 0 || v >= n) {
                 continue;
             }
-            let q = [q[0] as usize, q[1] as usize, q[2] as usize];
+            let q = q.map(|v| v as usize);
             if is_inside(dense.value(q)) && !seen.contains(&q) {
                 seen.push(q);
             }

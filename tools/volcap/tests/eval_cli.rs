@@ -96,8 +96,8 @@ fn both_framings_score_the_truth_as_near_exact() {
                 // Feet: in the whole framing only.
                 assert_eq!(parts[5].is_null(), cut, "{framing}: feet: {r}");
                 // The share of each part within 2 cm: over 85 % of every part but the hands
-                // for the truth's series (the hands about 60-70 % at 65^3, coarse as above);
-                // the feet as above.
+                // for the truth's series (the hands, coarse at 65^3 as above, over 45 %); the
+                // feet as above.
                 let shown = r["part_shown"].as_array().unwrap();
                 assert_eq!(shown.len(), 6);
                 for (i, v) in shown[..5].iter().enumerate() {
