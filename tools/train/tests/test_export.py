@@ -10,10 +10,10 @@ import onnx
 import onnxruntime as ort
 import pytest
 import torch
-from safetensors.numpy import load_file
 
 from volcap_train import crop as C
 from volcap_train.export import INT8_MAX_DRIFT, Sig, export
+from volcap_train.golden import golden_path, load_golden
 from volcap_train.nets import SegNet, encode_z, make_shape, sample_features
 
 MODELS = Path(__file__).resolve().parents[3] / "models"
@@ -113,7 +113,7 @@ def committed():
 
 @pytest.mark.parametrize("name", committed())
 def test_committed_models_match_their_golden_vectors(name):
-    g = load_file(str(MODELS / "golden" / f"{name}.safetensors"))
+    g = load_golden(golden_path(MODELS / "golden", name))
     img = torch.from_numpy(g["image_u8"]).permute(2, 0, 1).float() / 255
     mask = torch.from_numpy(g["mask_u8"]).float()[None] / 255
     crop = tuple(float(v) for v in g["crop"])
@@ -157,7 +157,7 @@ def test_committed_fourier_int8_stays_near_its_f32(name):
     from volcap_train import fourier as FO
     from volcap_train.nets import encoder_input
 
-    g = load_file(str(MODELS / "golden" / f"{name}.safetensors"))
+    g = load_golden(golden_path(MODELS / "golden", name))
     img = torch.from_numpy(g["image_u8"]).permute(2, 0, 1).float() / 255
     mask = torch.from_numpy(g["mask_u8"]).float()[None] / 255
     crop = tuple(float(v) for v in g["crop"])

@@ -23,7 +23,7 @@ import numpy as np
 import onnx
 import torch
 import torch.nn as nn
-from safetensors.numpy import save_file
+from .golden import golden_path, save_golden
 
 from . import crop as C
 from . import light
@@ -238,7 +238,7 @@ def main(argv=None):
                 prgb = sample_features(x[:, :3] * 0.5 + 0.5, pts[None, :, :2])[0]
                 col = mlp(f, prgb, pts[:, 2:3])
             iy, ix, fv = golden_sample(feat[0], 256, gen)
-            save_file({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "rgb_out": col.numpy()}, str(out / "golden" / "color.safetensors"))
+            save_golden({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "rgb_out": col.numpy()}, golden_path(out / "golden", "color"))
             cards["color"] = {"files": ["color.encoder.onnx", "color.mlp.onnx"], "params": params(enc) + params(mlp), "gmacs_frame": count_macs(enc, x) / 1e9, "macs_point": count_macs(mlp, fb[:1], rb[:1], zb[:1]), "budget": budget}
             if (run / "history.md").exists():
                 cards["color"]["history"] = (run / "history.md").read_text()
@@ -269,7 +269,7 @@ def main(argv=None):
             f = sample_features(feat, pts[None, :, :2])[0]
             occ = torch.sigmoid(mlp(f, encode_z(pts[:, 2], zenc)))[:, 0]
         iy, ix, fv = golden_sample(feat[0], 256, gen)
-        save_file({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "occ": occ.numpy()}, str(out / "golden" / f"{base}.safetensors"))
+        save_golden({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "occ": occ.numpy()}, golden_path(out / "golden", base))
         if name in ("compact", "large"):
             quantize(out / f"{base}.encoder.onnx", out / f"{base}.encoder.int8.onnx", [{"image": c.numpy()} for c in calib])
             with torch.no_grad():
@@ -560,8 +560,8 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
         coeff = net(x)
         occ = (FO.decode(sample_features(coeff, pts[None, :, :2])[0], pts[:, 2] * FO.ZETA_SCALE, k) + (0.5 - iso)).clamp(0.0, 1.0)
     iy, ix, fv = golden_sample(coeff[0], 256, gen)
-    save_file({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "occ": occ.numpy()}, str(out / "golden" / f"{base}.safetensors"))
-    save_file(geometry_golden(net, va, 0, gen, iso), str(out / "golden" / f"geometry-{base}.safetensors"))
+    save_golden({**common, "iy": iy.int().numpy(), "ix": ix.int().numpy(), "features": fv.numpy(), "occ": occ.numpy()}, golden_path(out / "golden", base))
+    save_golden(geometry_golden(net, va, 0, gen, iso), golden_path(out / "golden", f"geometry-{base}"))
     # A light checkpoint (weights and step, no optimizer state) for resuming training in a
     # later session: `train fourier --init models/checkpoints/shape-NAME.pt`.
     st = torch.load(run / "ckpt.pt", weights_only=False, map_location="cpu")
@@ -587,7 +587,7 @@ def export_overfit(run: Path, data: Path, out: Path):
     x = encoder_input(C.apply_crop(tr.rgb01(0), p)[None], C.apply_crop(m, p)[None])
     meta = {"kind": "shape-fourier", "variant": budget["args"]["variant"], "input_size": 256, "fourier_k": net.k, "coeff_size": 128, "zeta_scale": FO.ZETA_SCALE, "sample": SAMPLE_RULE, "crop_fill": C.FILL, "precision": "f32", "run": "overfit"}
     export(net, (x,), ["image"], ["coeff"], out / "shape-overfit.fourier.onnx", meta, False)
-    save_file(geometry_golden(net, tr, 0, torch.Generator().manual_seed(7)), str(out / "geometry-shape-overfit.safetensors"))
+    save_golden(geometry_golden(net, tr, 0, torch.Generator().manual_seed(7)), golden_path(out, "geometry-shape-overfit"))
     info = {"scene": infos[0]["scene"], "frame": infos[0]["frame"], "yaws": [i["yaw_deg"] for i in infos], "budget": {k: budget[k] for k in ("steps", "wall_s", "val")}, "params": params(net)}
     (out / "overfit.json").write_text(json.dumps(info, indent=1))
     print(json.dumps(info, indent=1))

@@ -12,7 +12,7 @@ the engine checks. Input `image` [1, 3, 256, 256] RGB in [0, 1]; output `mask` [
 256], the person probability: the contract of our own segmentation network, so the engine
 and the daemon take it unchanged.
 
-The golden vectors (`models/golden/seg.safetensors`, checked by the engine's tests) come from
+The golden vectors (`models/golden/seg.safetensors.gz`, checked by the engine's tests) come from
 MediaPipe's own runtime when the `mediapipe` package is importable (install the same wheel in
 a side environment: it pins protobuf 4, which the training environment's onnx does not
 accept), otherwise from onnxruntime on the converted graph; the file says which. The
@@ -103,7 +103,7 @@ Not trained here: a third-party dependency, pinned like a crate.
 | parameters | {params:,} |
 | contract | `image` [1,3,256,256] RGB in [0,1] (letterboxed frame) -> `mask` [1,1,256,256] person probability |
 | conversion | `tools/train/volcap_train/tflite_onnx.py`: NCHW, fp16 weights widened to f32; max abs difference to MediaPipe's own runtime 4.3e-5 (astronaut, camera) |
-| golden | `golden/seg.safetensors`, from MediaPipe's runtime, checked against tract by `cargo test` |
+| golden | `golden/seg.safetensors.gz`, from MediaPipe's runtime, checked against tract by `cargo test` |
 | int8 | none: its statically quantized form lost 0.33 mask IoU on the astronaut photo and was slower in tract; `@int8` models use this f32 file |
 
 **Why this one.** Measured against our own sim-trained U-Net (`seg-sim.onnx`) by
@@ -142,14 +142,14 @@ def reference_mask(image_u8: np.ndarray, onnx_path: Path) -> tuple[np.ndarray, s
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="volcap_train.mediapipe_seg", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, required=True, help="models folder (writes seg.onnx, seg.md, LICENSE-mediapipe, golden/seg.safetensors, the models.json entry)")
+    ap.add_argument("--out", type=Path, required=True, help="models folder (writes seg.onnx, seg.md, LICENSE-mediapipe, golden/seg.safetensors.gz, the models.json entry)")
     ap.add_argument("--wheel", type=Path, default=None, help="a local copy of the pinned wheel (default: pip download it)")
-    ap.add_argument("--golden-only", action="store_true", help="only rewrite golden/seg.safetensors from the installed seg.onnx")
+    ap.add_argument("--golden-only", action="store_true", help="only rewrite golden/seg.safetensors.gz from the installed seg.onnx")
     args = ap.parse_args(argv)
-    from safetensors.numpy import load_file, save_file
+    from .golden import golden_path, load_golden, save_golden
 
     out = args.out
-    golden = out / "golden" / "seg.safetensors"
+    golden = golden_path(out / "golden", "seg")
     path = out / "seg.onnx"
     if not args.golden_only:
         import onnx  # not needed for --golden-only, which may run beside mediapipe's protobuf 4
@@ -168,13 +168,13 @@ def main(argv=None):
         print(f"wrote {path} ({path.stat().st_size} bytes), seg.md, LICENSE-mediapipe")
     if not golden.exists():
         raise SystemExit(f"{golden}: missing (it holds the golden image; export the trained models first)")
-    g = load_file(str(golden))
+    g = load_golden(golden)
     prob, source = reference_mask(g["image_u8"], path)
     gen = np.random.default_rng(7)
     iy = gen.integers(0, 256, 512).astype(np.int32)
     ix = gen.integers(0, 256, 512).astype(np.int32)
     keep = {k: v for k, v in g.items() if k not in ("iy", "ix", "mask_prob")}
-    save_file({**keep, "iy": iy, "ix": ix, "mask_prob": prob[iy, ix].astype(np.float32)}, str(golden), metadata={"source": source})
+    save_golden({**keep, "iy": iy, "ix": ix, "mask_prob": prob[iy, ix].astype(np.float32)}, golden, metadata={"source": source})
     print(json.dumps({"golden": str(golden), "source": source}))
 
 

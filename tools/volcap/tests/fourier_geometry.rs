@@ -8,7 +8,7 @@
 //!   subject and pose, `models/test/`) reproduces its own training subject through the
 //!   engine at yaw 0, 90 and 180 with IoU >= 0.9 against the oracle;
 //! * PyTorch's whole query (world point -> camera -> crop -> net -> sample -> basis) equals the
-//!   engine's at the same world points (`models/golden/geometry-*.safetensors`).
+//!   engine's at the same world points (`models/golden/geometry-*.safetensors.gz`).
 
 use glam::Vec3;
 use std::path::{Path, PathBuf};
@@ -198,11 +198,16 @@ fn whole_query_matches_pytorch_at_world_points() {
         let fname = e.file_name().to_string_lossy().to_string();
         let Some(name) = fname
             .strip_prefix("geometry-shape-")
-            .and_then(|n| n.strip_suffix(".safetensors"))
+            .and_then(|n| n.strip_suffix(".safetensors.gz"))
         else {
             continue;
         };
-        let bytes = std::fs::read(e.path()).unwrap();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(
+            &mut flate2::read::GzDecoder::new(std::fs::File::open(e.path()).unwrap()),
+            &mut bytes,
+        )
+        .unwrap();
         let st = safetensors::SafeTensors::deserialize(&bytes).unwrap();
         let cam: serde_json::Value =
             serde_json::from_slice(st.tensor("camera_json").unwrap().data()).unwrap();
@@ -264,8 +269,19 @@ fn whole_query_matches_pytorch_at_world_points() {
         );
         checked += 1;
     }
-    assert!(
-        checked > 0,
-        "no geometry golden file in models/golden or models/test"
+    // Every committed Fourier model has its geometry golden (and the overfit check's).
+    let cards: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(repo().join("models/models.json")).unwrap()).unwrap();
+    let fourier = cards
+        .as_object()
+        .unwrap()
+        .values()
+        .filter(|c| c["family"] == "fourier")
+        .count();
+    assert!(fourier >= 4, "{fourier} Fourier models in models.json");
+    assert_eq!(
+        checked,
+        fourier + 1,
+        "geometry golden files checked in models/golden and models/test, against the Fourier models of models.json and the overfit model"
     );
 }

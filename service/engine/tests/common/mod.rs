@@ -41,13 +41,25 @@ pub struct Golden {
     bytes: Vec<u8>,
 }
 
+/// A golden file's safetensors bytes: `NAME.safetensors.gz` (gzipped by the export,
+/// `volcap_train.golden`: the image and mask are mostly background).
+pub fn read_golden(p: &Path) -> Vec<u8> {
+    use std::io::Read;
+    let file = std::fs::File::open(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    let mut bytes = Vec::new();
+    flate2::read::GzDecoder::new(file)
+        .read_to_end(&mut bytes)
+        .unwrap_or_else(|e| panic!("{}: not gzip: {e}", p.display()));
+    bytes
+}
+
 impl Golden {
     pub fn load(name: &str) -> Self {
         let p = models_dir()
             .join("golden")
-            .join(format!("{name}.safetensors"));
+            .join(format!("{name}.safetensors.gz"));
         Golden {
-            bytes: std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+            bytes: read_golden(&p),
         }
     }
     pub fn f32(&self, key: &str) -> Vec<f32> {
