@@ -5,7 +5,8 @@
 #   here:   tools/gpu_bench.sh prepare
 #           builds the release `volcap` with the GPU backend, packs it stripped into .gpubench/
 #           (xz, ~12 MiB: the working tree that travels is limited to 64 MiB with what a call
-#           carries; the tracked tree is 45.6 MiB since 2026-11-29's slimming (73.3 before), and
+#           carries; the tracked tree is 45.5 MiB (2026-12-01: the golden vectors gzipped, 47.3 -> 42.4,
+#           then fourier-small-k31; 73.3 before 2026-11-29's slimming), and
 #           tools/train/tests/test_tree_size.py keeps it under 48)
 #           and downloads the Vulkan loader into .gl/ (both git-ignored)
 #   there:  device run, carry [".gpubench", ".gl"], command: tools/gpu_bench.sh run
@@ -18,7 +19,8 @@
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
 # the adapter's with a read-back per conflict round and with the rounds predicted),
 # rounds/pipeline.md (the GPU backend's pipeline with `compute.round_waits` per-round and
-# per-frame), coarse/pipeline.md (from coarse levels 2, 3 and 4), queues.md (the
+# per-frame), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
+# series' K: the default fourier-small-seg2 against fourier-small-k31, 63 maps), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
 # nets.md (the networks, tract and the GPU kernels, each profiled per node or step), with
@@ -104,6 +106,11 @@ case "$mode" in
     # levels (more waits), 17^3 (4) more points and fewer levels.
     "$bin" bench pipeline --backend wgpu --model fourier-small --res "${res%%,*}" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --coarse-level 2,3,4 --out "$out/coarse"
+    echo "== the series' K: 15 harmonics (fourier-small-seg2, the default) against 31 (fourier-small-k31, the issue's 'K = 31')"
+    # The same encoder but for its last convolution (63 maps instead of 31): the maps' traffic,
+    # the temporal filter and every field evaluation twice the terms.
+    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model fourier-small-seg2,fourier-small-k31 --res "$res" \
+      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --out "$out/k31"
     echo "== localization on the model's field"
     # The adapter's rows twice: a read-back per conflict round, and the rounds predicted.
     "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \

@@ -14,10 +14,11 @@
 # Environment: DATA, a dataset for export's int8 calibration (required; the run's own);
 # ASSETS (../shared/data/makehuman), VOLCAP (target/release/volcap; one that knows --colour-res), SEEDS ("100 200 300"),
 # NAME (the model's name, fourier-small-seg2), BASE_DIR (a folder of earlier reports of the
-# default named eval-base-SEED, reused instead of run again).
+# default named eval-base-SEED, reused instead of run again), BASE_NAME (the committed model it
+# is judged against, NAME), ISO (the surface level, the committed NAME's; needed for a new name).
 set -euo pipefail
 if [ $# -ne 2 ]; then
-  sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
@@ -29,6 +30,7 @@ ASSETS=${ASSETS:-$ROOT/../shared/data/makehuman}
 VOLCAP=${VOLCAP:-$ROOT/target/release/volcap}
 SEEDS=${SEEDS:-100 200 300}
 NAME=${NAME:-fourier-small-seg2}
+BASE_NAME=${BASE_NAME:-$NAME}
 for f in "$RUN/ckpt.pt" "$RUN/budget.json" "$VOLCAP" "$ASSETS/MANIFEST.md"; do
   [ -e "$f" ] || { echo "judge: $f is missing" >&2; exit 2; }
 done
@@ -37,7 +39,8 @@ done
 mkdir -p "$OUT/runs/$NAME"
 ln -sf "$RUN/ckpt.pt" "$OUT/runs/$NAME/ckpt.pt"
 cp "$RUN/budget.json" "$OUT/runs/$NAME/budget.json"
-ISO=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['shape-'+sys.argv[2]]['iso_level'])" \
+ISO=${ISO:-}
+[ -n "$ISO" ] || ISO=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['shape-'+sys.argv[2]]['iso_level'])" \
   "$ROOT/models/models.json" "$NAME")
 (cd "$ROOT/tools/train" && PYTHONPATH=. .venv/bin/python -m volcap_train.export \
   --data "$DATA" --runs "$OUT/runs" --out "$OUT/export" --only "$NAME" \
@@ -55,12 +58,12 @@ for s in $SEEDS; do
     if [ "$side" = base ] && [ -n "${BASE_DIR:-}" ] && [ -e "$BASE_DIR/eval-base-$s/eval.json" ]; then
       dir="$BASE_DIR/eval-base-$s"
     else
-      models="$ROOT/models"
-      [ "$side" = run ] && models="$OUT/models"
+      models="$ROOT/models" name="$BASE_NAME"
+      [ "$side" = run ] && models="$OUT/models" name="$NAME"
       echo "judge: $side, seed $s" >&2
       # The shape judged (the colour networks are shared: no colour columns).
       "$VOLCAP" eval --data "$ASSETS" --subjects val --poses 2 --views 3 --res 257 \
-        --seed "$s" --coarse-level 4 --model "$NAME" --models-dir "$models" --out "$dir" --colour-res 0 \
+        --seed "$s" --coarse-level 4 --model "$name" --models-dir "$models" --out "$dir" --colour-res 0 \
         > "$dir.log" 2>&1 || { echo "judge: volcap eval failed (see $dir.log)" >&2; exit 1; }
     fi
     if [ "$side" = base ]; then B+=("$dir"); else A+=("$dir"); fi

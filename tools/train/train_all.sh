@@ -177,6 +177,14 @@ else
   $T fourier --data "$DATA" --out "$RUNS/stages/fourier-small-upper-1" --variant fourier-small --steps 3000 --lr 3e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 2 --init "$RUNS/stages/fourier-small-gt/ckpt.pt"
   $T fourier --data "$DATA" --out "$RUNS/fourier-small-upper" --variant fourier-small --steps 2000 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --upper-every 4 --init "$RUNS/stages/fourier-small-upper-1/ckpt.pt"
 fi
+# fourier-small-k31: the default grown to 31 harmonics (the new ones start at zero) and trained
+# on (runs (80), (81), 2026-12-01; docs/eval/hands.md section 46): the series' K as a measured
+# knob, not a default. Only with DS16W (it starts from the default's run).
+if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
+  $PY -m volcap_train.widen --init "$RUNS/fourier-small-seg2/ckpt.pt" --from fourier-small --to fourier-small-k31 --out "$RUNS/stages/fourier-small-k31-init.pt"
+  $T fourier --data "${WHOLE[0]}" --out "$RUNS/stages/fourier-small-k31-80" --variant fourier-small-k31 --steps 8000 --seed 38 --lr 2e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --init "$RUNS/stages/fourier-small-k31-init.pt"
+  $T fourier --data "${WHOLE[0]}" --out "$RUNS/fourier-small-k31" --variant fourier-small-k31 --steps 4000 --seed 39 --lr 1e-4 --point-weight 0.1 --moment-weight 1 --ohem P+I --depth-frame body --points 2048 --threads 2 --seg ../../models/seg.onnx --segment-passes 2 --amp bf16 --ema 0.9995 --flip --init "$RUNS/stages/fourier-small-k31-80/ckpt.pt"
+fi
 $PY -m volcap_train.export --data "$DATA" --runs "$RUNS" --out ../../models
 # fourier-small's surface level comes from a sweep on training subjects (its model card):
 #   volcap eval --subjects train --poses 1 --views 2 --res 129 --seed 7 --model fourier-small --iso-level 0.45,0.5,0.55,0.6
@@ -188,6 +196,9 @@ elif [ -n "${DATA_SEG2:-}" ]; then
   $PY -m volcap_train.export --data "${SEG2N[0]}" --runs "$RUNS" --out ../../models --only fourier-small-seg2 --iso-level 0.55 --int8-calib-images 320
 fi
 $PY -m volcap_train.export --data "${WHOLE[0]:-$DATA}" --runs "$RUNS" --out ../../models --only fourier-small-upper --iso-level 0.5 --int8-calib-images 256
+if [ -n "${DATA_SEG2_WHOLE:-}" ]; then
+  $PY -m volcap_train.export --data "${WHOLE[0]}" --runs "$RUNS" --out ../../models --only fourier-small-k31 --iso-level 0.55 --int8-calib-images 256 --light-half
+fi
 # The product's segmentation is MediaPipe's (pinned PyPI wheel, converted to ONNX); ours is seg-sim.onnx.
 $PY -m volcap_train.mediapipe_seg --out ../../models
 # ... its weights fine-tuned on the renders and mixed 0.3 of the way from MediaPipe's

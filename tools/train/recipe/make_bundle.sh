@@ -7,7 +7,7 @@
 #
 #   tools/train/recipe/make_bundle.sh .recipe --lean     (a lent machine, through the device
 #   tool: the checkout travels, so the bundle holds only the binary (xz, ~12 MB) and run.sh,
-#   and takes the rest from the checkout around it: the checkout (47.6 MiB with the GPU boards' model, 45.6 MiB after
+#   and takes the rest from the checkout around it: the checkout (45.5 MiB on 2026-12-01, the golden vectors gzipped; 45.6 MiB after
 #   2026-11-29's slimming; tests/test_tree_size.py keeps it under 48) and a full bundle
 #   (52 MiB) together are over the tool's 64 MiB; the lean one packs the whole wardrobe on the
 #   runtime pack's bodies, `sim pack --wardrobe 256`, 3.6 MB as xz, when ../shared is here, else

@@ -44,6 +44,33 @@ def test_widened_net_computes_the_narrow_ones_function(c):
     assert not torch.equal(w_new, b.e0[0].weight[8:])
 
 
+def test_more_harmonics_start_at_zero_and_then_learn():
+    """fourier-small -> fourier-small-k31: the first 31 maps are the narrow net's, the 32 new
+    ones zero (so the decoded occupancy is the same along every ray), and they train."""
+    from volcap_train import fourier as FO
+
+    a = narrow_net().eval()
+    b = widen(a, FourierNet(31, 8), 8, 8).eval()
+    x = torch.randn(2, 4, 256, 256)
+    with torch.no_grad():
+        ya, yb = a(x), b(x)
+    assert yb.shape[1] == 63 and ya.shape[1] == 31
+    assert torch.allclose(ya, yb[:, :31], atol=1e-5)
+    assert yb[:, 31:].abs().max() == 0.0
+    z = torch.linspace(-1, 1, 97)
+    rays = lambda y: y[:, :, ::16, ::16].permute(0, 2, 3, 1).unsqueeze(-2)  # [2, 8, 8, 1, 2K+1]
+    occ_a = FO.decode(rays(ya), z, 15)
+    occ_b = FO.decode(rays(yb), z, 31)
+    assert occ_a.abs().max() > 0.1 and torch.allclose(occ_a, occ_b, atol=1e-4)
+    b.train()
+    opt = torch.optim.SGD(b.parameters(), lr=0.1)
+    opt.zero_grad()
+    b(x).sub(1.0).square().mean().backward()
+    opt.step()
+    with torch.no_grad():
+        assert b.eval()(x)[:, 31:].abs().max() > 0.0
+
+
 def test_cli_refuses_a_narrower_or_different_target(tmp_path):
     ck = tmp_path / "n.pt"
     torch.save({"net": narrow_net().state_dict(), "step": 5}, ck)
@@ -51,7 +78,9 @@ def test_cli_refuses_a_narrower_or_different_target(tmp_path):
     main(["--init", str(ck), "--from", "fourier-small", "--to", "fourier-medium", "--out", str(out)])
     wide = FourierNet(15, 12)
     wide.load_state_dict(torch.load(out)["net"])
-    for bad in ("fourier-tiny", "fourier-k7"):
+    main(["--init", str(ck), "--from", "fourier-small", "--to", "fourier-small-k31", "--out", str(out)])
+    FourierNet(31, 8).load_state_dict(torch.load(out)["net"])
+    for bad in ("fourier-tiny", "fourier-k7", "fourier-small", "fourier-geom"):
         try:
             main(["--init", str(ck), "--from", "fourier-small", "--to", bad, "--out", str(out)])
         except SystemExit as e:

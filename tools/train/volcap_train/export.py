@@ -629,7 +629,7 @@ def write_card(out: Path, name: str, c: dict, data: Path):
         f"| seed | {a.get('seed', '?')} |",
         f"| validation (held-out subjects) | {json.dumps(b.get('val', {}))} |",
         "",
-        *([f"**Run history.** {c['history'].strip()}", ""] if c.get("history") else []),
+        *([f"**Run history.** {c['history'].strip().removeprefix('**Run history.**').strip()}", ""] if c.get("history") else []),
         "**Data.** Rendered by `volcap sim dataset` from the CC0 MakeHuman assets (synthetic people, procedural poses,",
         "studio lighting unless the run history names another; segmentation composited over procedural backgrounds with photometric extremes). Validation",
         "subjects are held out by identity. Not trained on real photographs: expect a domain gap on real cameras.",

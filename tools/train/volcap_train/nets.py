@@ -345,6 +345,9 @@ FOURIER_VARIANTS = {
     "fourier-k7": (7, 12),
     "fourier-k31": (31, 12),
     "fourier-small": (15, 8),
+    # fourier-small with 31 harmonics (63 maps): the series' K as a knob of accuracy against
+    # time (widen.py grows a K = 15 checkpoint into it with the new harmonics at zero)
+    "fourier-small-k31": (31, 8),
     # fourier-small widened (volcap_train.widen) and trained on: more capacity, same K
     "fourier-medium": (15, 12),
     # ... and wider still (hands.md section 26, run (28): a candidate for the GPU boards, 3.5x fourier-small's MACs)

@@ -1,7 +1,13 @@
 """Widen a trained Fourier head without changing what it computes (Net2Net-style), so that a
-wider encoder starts from the narrow one's training instead of from scratch:
+wider encoder, or a series of more terms, starts from the narrow one's training instead of
+from scratch:
 
   python -m volcap_train.widen --init ../../models/checkpoints/shape-fourier-small.pt --from fourier-small --to fourier-medium --out RUNS/widened.pt
+  python -m volcap_train.widen --init ../../models/checkpoints/shape-fourier-small-seg2.pt --from fourier-small --to fourier-small-k31 --out RUNS/k31.pt
+
+More terms (K0 -> K1 >= K0): the series' channels are c0, a1, b1, ..., so the narrow head's
+2 K0 + 1 outputs are the first ones of the wide head's and the harmonics K0 + 1 .. K1 start at
+zero (weights and bias of the last 1x1 convolution): the same occupancy along every ray.
 
 Every conv keeps its old output channels' weights on its old input channels; its weights from
 the new input channels are zero (so the old channels compute exactly what they did), and the
@@ -17,7 +23,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from .nets import FourierNet, fourier_variant
+from .nets import GEOM_VARIANTS, HR_VARIANTS, FourierNet, fourier_variant
 from .runs import init_weights
 
 
@@ -41,8 +47,10 @@ def channel_map(old_len: int, new_len: int, seg: list[int] | None, c_old: int, c
 
 
 def widen(narrow: FourierNet, wide: FourierNet, c_old: int, c_new: int) -> FourierNet:
-    """Copy `narrow` into `wide` (same K and depth layout, wider c) preserving its function."""
+    """Copy `narrow` into `wide` (same depth layout, c and K not smaller) preserving its
+    function: the new harmonics' outputs (the head's last convolution past 2 K0 + 1) are zero."""
     old_mods = dict(narrow.named_modules())
+    last = wide.out[-1]
     with torch.no_grad():
         for name, m in wide.named_modules():
             o = old_mods.get(name)
@@ -53,6 +61,9 @@ def widen(narrow: FourierNet, wide: FourierNet, c_old: int, c_new: int) -> Fouri
                 m.weight[:n, in_idx] = o.weight  # ... and what they read before from the old
                 if m.bias is not None:
                     m.bias[:n] = o.bias
+                if m is last:
+                    m.weight[n:] = 0.0
+                    m.bias[n:] = 0.0
             elif isinstance(m, nn.BatchNorm2d):
                 n = o.num_features
                 m.weight[:n], m.bias[:n] = o.weight, o.bias
@@ -70,8 +81,8 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     (k0, c0, s0), (k1, c1, s1) = fourier_variant(args.src), fourier_variant(args.dst)
-    if (k0, s0) != (k1, s1) or c1 < c0:
-        raise SystemExit(f"--from {args.src} (K {k0}, c {c0}) cannot be widened into --to {args.dst} (K {k1}, c {c1}): same K and depth layout, c not smaller")
+    if s0 != s1 or c1 < c0 or k1 < k0 or (c1, k1) == (c0, k0) or args.dst in GEOM_VARIANTS or args.src in GEOM_VARIANTS or args.dst in HR_VARIANTS:
+        raise SystemExit(f"--from {args.src} (K {k0}, c {c0}) cannot be widened into --to {args.dst} (K {k1}, c {c1}): the same depth layout, c and K not smaller, one of them larger")
     narrow = FourierNet(k0, c0, s0)
     light = torch.load(args.init, weights_only=False)
     narrow.load_state_dict(init_weights(light, args.init))
@@ -79,7 +90,7 @@ def main(argv=None):
     wide = widen(narrow, FourierNet(k1, c1, s1), c0, c1)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     torch.save({"net": wide.state_dict(), "step": light.get("step", 0) if isinstance(light, dict) else 0, "widened_from": str(args.init)}, args.out)
-    print(f"{args.src} (c {c0}) -> {args.dst} (c {c1}): {sum(p.numel() for p in wide.parameters())} parameters, written to {args.out}")
+    print(f"{args.src} (K {k0}, c {c0}) -> {args.dst} (K {k1}, c {c1}): {sum(p.numel() for p in wide.parameters())} parameters, written to {args.out}")
 
 
 if __name__ == "__main__":
