@@ -30,6 +30,12 @@ def test_a_file_that_is_not_a_golden_one_is_refused_naming_it(tmp_path):
     bad.write_bytes(b"not gzip at all")
     with pytest.raises(ValueError, match="x.safetensors.gz"):
         load_golden(bad)
+    # gzip whose content is not safetensors: a header that claims more than there is
+    import gzip
+
+    bad.write_bytes(gzip.compress((10**6).to_bytes(8, "little") + b"{}"))
+    with pytest.raises(ValueError, match="x.safetensors.gz"):
+        load_golden(bad)
 
 
 def test_every_committed_golden_file_reads():

@@ -23,10 +23,10 @@ import numpy as np
 import onnx
 import torch
 import torch.nn as nn
-from .golden import golden_path, save_golden
 
 from . import crop as C
 from . import light
+from .golden import golden_path, save_golden
 from .data import Split
 from . import fourier as FO
 from .onnx_rewrite import resize_to_shifts

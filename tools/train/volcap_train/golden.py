@@ -12,6 +12,7 @@ import gzip
 import json
 from pathlib import Path
 
+from safetensors import SafetensorError
 from safetensors.numpy import load, save
 
 SUFFIX = ".safetensors.gz"
@@ -35,7 +36,7 @@ def read_golden(path: Path) -> tuple[dict, dict]:
         n = int.from_bytes(raw[:8], "little")
         meta = json.loads(raw[8 : 8 + n]).get("__metadata__") or {}
         return load(raw), meta
-    except (OSError, EOFError, ValueError, gzip.BadGzipFile) as e:
+    except (OSError, EOFError, ValueError, SafetensorError) as e:
         raise ValueError(f"{path}: not a gzipped safetensors golden file ({e})") from e
 
 
