@@ -84,3 +84,41 @@ def test_below_the_cut_image_mask_series_and_labels_are_empty():
     assert far_above.any() and far_below.any()
     assert (c0[far_above] > 0.05).all()
     assert (c0[far_below].abs() < 1e-6).all()
+
+
+def test_the_cut_images_masks_are_the_segmenters_of_the_cut_image():
+    from volcap_train.items import cut_images, cut_masks
+
+    sp = BoxSplit()
+    row = TOP + 20
+    seen = []
+
+    def segmenter(images):
+        # What a segmentation of the cut frame gives: the person down to the cut only, and
+        # a soft edge the true mask does not have.
+        seen.append(images.clone())
+        m = (images.abs().sum(1) > 0).float()
+        out = torch.zeros_like(m)
+        out[:, TOP : row + 1, LEFT : RIGHT + 1] = m[:, TOP : row + 1, LEFT : RIGHT + 1]
+        out[:, TOP : row + 1, RIGHT + 1] = 0.6
+        return out
+
+    masks = cut_masks(sp, lambda i: 0.5, segmenter)
+    # The segmenter saw the image as the cut frame shows it: unchanged down to the cut row,
+    # zero below it.
+    (img,) = seen
+    assert torch.equal(img[0, :, : row + 1], sp.rgb01(0)[:, : row + 1])
+    assert (img[0, :, row + 1 :] == 0).all()
+    assert torch.equal(cut_images(sp, lambda i: 0.5), img)
+    assert masks.dtype == torch.uint8 and masks.shape == (1, 1, S, S)
+    assert masks[0, 0, TOP, RIGHT + 1] == 153 and masks[0, 0, row + 1 :].sum() == 0
+    # The items take the crop and the mask channel from that mask, the targets from the truth.
+    seg = fourier_items(sp, 3, points=800, keep=lambda i: 0.5, masks=masks)
+    true = fourier_items(sp, 3, points=800, keep=lambda i: 0.5)
+    p = C.crop_params(masks[0, 0].float() / 255)
+    assert torch.equal(seg["mask"][0], (C.apply_crop(masks[0].float() / 255, p) * 255).round().to(torch.uint8))
+    assert torch.equal(seg["occ"], true["occ"])
+    # No person: the image goes through whole and its mask stays empty.
+    empty = BoxSplit()
+    empty.mask.zero_()
+    assert torch.equal(cut_images(empty, lambda i: 0.5)[0], empty.rgb01(0))

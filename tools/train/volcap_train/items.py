@@ -2,7 +2,8 @@
 the ground-truth coefficient maps and labelled points (`fourier_items`), cached beside a
 dataset's shards (`fourier_cached`, optionally on the product's segmentation masks), several
 datasets' training images joined as one (`fourier_union`), and the upper-body variant cut by
-the frame's lower edge (`fourier_upper_cached`)."""
+the frame's lower edge (`fourier_upper_cached`, its masks the true ones cut or the product's of the
+cut images, `cut_masks`)."""
 
 from __future__ import annotations
 
@@ -151,16 +152,55 @@ def fourier_union(roots: list[Path], split: str, k: int, seg: Path | None = None
 UPPER_KEEP = (0.3, 0.75)
 
 
-def fourier_upper_cached(root: Path, split: str, k: int, every: int = 2):
+def upper_keep(i: int) -> float:
+    """The kept fraction of image `i` of the upper-body variant: drawn in UPPER_KEEP, seeded by
+    the index, so a cache and the masks made for it agree."""
+    lo, hi = UPPER_KEEP
+    return lo + (hi - lo) * float(torch.rand(1, generator=torch.Generator().manual_seed(1000 + i)))
+
+
+def cut_images(split, keep) -> torch.Tensor:
+    """[B, 3, H, W] in [0, 1]: each image of `split` as the upper-body variant shows it, every
+    row below the cut (`cut_row` of its true mask at `keep(i)`) set to 0; an image without a
+    person unchanged."""
+    out = []
+    for i in range(len(split)):
+        image = split.rgb01(i)
+        row = cut_row(split.mask01(i)[0], keep(i))
+        out.append(truncate_below(image, row) if row is not None else image)
+    return torch.stack(out)
+
+
+def cut_masks(split, keep, segmenter) -> torch.Tensor:
+    """u8 [B, 1, H, W]: the product's masks of the cut images (`cut_images`), as the engine
+    segments a frame whose lower edge cuts the person. `segmenter`: [B, 3, H, W] in [0, 1] ->
+    [B, H, W] soft masks of the most prominent person (`seg_masks.product_masks`)."""
+    kept = segmenter(cut_images(split, keep))
+    return (kept.clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
+
+
+def fourier_upper_cached(root: Path, split: str, k: int, every: int = 2, seg: Path | None = None, passes: int = 1):
     """The upper-body variant (fourier_items `keep`) of every `every`-th image of a split, the
-    kept fraction drawn per image in UPPER_KEEP (seeded by the image index), cached."""
-    cache = root / f"fourier-{split}-k{k}-upper{every}-v1.pt"
+    kept fraction drawn per image in UPPER_KEEP (`upper_keep`), cached. With `seg` (an ONNX
+    segmentation model) the crops and mask channels come from its masks of the cut images,
+    `passes` passes (`cut_masks`), as the engine makes them on such a frame; without it, from
+    the true masks cut (what runs (77)-(82) of the close-range model trained on)."""
+    if seg is None:
+        cache = root / f"fourier-{split}-k{k}-upper{every}-v1.pt"
+    else:
+        from .seg_masks import model_tag, passes_tag
+
+        cache = root / f"fourier-{split}-k{k}-upper{every}-seg-{model_tag(seg)}{passes_tag(passes)}-v1.pt"
     if cache.exists():
         return torch.load(cache)
     sp = Split(root, split)
-    lo, hi = UPPER_KEEP
-    frac = lambda i: lo + (hi - lo) * float(torch.rand(1, generator=torch.Generator().manual_seed(1000 + i)))
-    out = fourier_items(Subset(sp, list(range(0, len(sp), every))), k, keep=frac)
+    sub = Subset(sp, list(range(0, len(sp), every)))
+    masks = None
+    if seg is not None:
+        from .seg_masks import product_masks
+
+        masks = cut_masks(sub, upper_keep, lambda images: product_masks(seg, images, passes))
+    out = fourier_items(sub, k, keep=upper_keep, masks=masks)
     torch.save(out, cache)
     return out
 

@@ -153,6 +153,17 @@ def passes_tag(passes: int) -> str:
     return "-p2" if passes > 1 else ""
 
 
+def product_masks(model: Path, images: torch.Tensor, passes: int = 1) -> torch.Tensor:
+    """Soft masks [B, H, W] of the most prominent person in RGB [B, 3, 256, 256] in [0, 1], as
+    the engine's `Models::person_mask` makes them: segmented, the largest person kept, with
+    `passes` 2 the person's crop segmented again (`second_pass`)."""
+    soft = segment(model, images)
+    kept = torch.stack([keep_most_prominent(m)[0] for m in soft])
+    if passes > 1:
+        kept = second_pass(model, images, kept)
+    return kept
+
+
 def predicted_masks(root: Path, split, split_name: str, model: Path, passes: int = 1) -> torch.Tensor:
     """u8 [B, 1, H, W] (soft mask x 255) of the engine's segmentation for every image of a
     dataset split, most prominent person only (all zero where none is found), with
@@ -164,10 +175,6 @@ def predicted_masks(root: Path, split, split_name: str, model: Path, passes: int
         if out.shape[0] == len(split):
             return out
     images = torch.stack([split.rgb01(i) for i in range(len(split))])
-    soft = segment(model, images)
-    kept = torch.stack([keep_most_prominent(m)[0] for m in soft])
-    if passes > 1:
-        kept = second_pass(model, images, kept)
-    out = (kept.clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
+    out = (product_masks(model, images, passes).clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
     torch.save(out, cache)
     return out

@@ -359,6 +359,8 @@ def train_fourier(args):
     coefficients) plus BCE on labelled 3D points through the basis (OHEM on points and images).
     The BCE uses the series' occupancy as a logit around the 0.5 level, tau (occ - 0.5), which
     is what the surface needs and stays finite for any series value."""
+    if args.upper_masks == "seg" and not args.seg:
+        raise SystemExit("--upper-masks seg: the cut images' masks come from --seg's model, and no --seg was given")
     torch.manual_seed(args.seed)
     gen = torch.Generator().manual_seed(args.seed)
     k, width, shift = fourier_variant(args.variant)
@@ -373,7 +375,9 @@ def train_fourier(args):
     if args.upper_every:
         # Upper bodies cut by the frame's lower edge (a webcam at a desk): added to the
         # training images (the validation set stays whole bodies, the product's eval).
-        up = fourier_upper_cached(args.data, "train", k, args.upper_every)
+        # With --seg their masks are the product's of the cut images (`--upper-masks seg`).
+        up_seg = args.seg if args.upper_masks == "seg" else None
+        up = fourier_upper_cached(args.data, "train", k, args.upper_every, up_seg, args.segment_passes)
         tr = {n: (torch.cat([tr[n], up[n] + (len(tr["keep"]) if n == "keep" else 0)]) if torch.is_tensor(tr[n]) else tr[n]) for n in tr}
         print(f"training on {len(tr['rgb'])} images, {len(up['rgb'])} of them upper-body crops")
     if args.depth_frame == "body":
@@ -632,6 +636,7 @@ def main(argv=None):
     ap.add_argument("--no-aug", action="store_true", help="no photometric/mask augmentation (the overfit check)")
     ap.add_argument("--mask-aug", type=float, default=0.5, help="fourier: the fraction of training images whose input mask is dilated or eroded by 1-3 pixels (perturb_mask) on top of the masks the data hold (with --seg: the product's own segmentation's); 0: none (the draws still made, so the batches match a run without it)")
     ap.add_argument("--flip", action="store_true", help="fourier: mirror half the training images left-right (their maps mirrored back before the losses): a mirrored person is a person")
+    ap.add_argument("--upper-masks", choices=["true", "seg"], default="true", help="Fourier --upper-every: the cut images' crops and mask channels from their true masks (runs (77)-(82)) or from --seg's masks of the cut images, as the engine segments such a frame")
     ap.add_argument("--upper-every", type=int, default=0, help="Fourier: add the upper-body variant (fourier_upper_cached: the person cut by the frame's lower edge) of every N-th training image; 0: none")
     ap.add_argument("--init", type=Path, default=None, help="start from a light checkpoint (weights only, e.g. models/checkpoints/*.pt) or another run's ckpt.pt (its optimizer state dropped) when --out has none")
     ap.add_argument("--segment-passes", type=int, choices=[1, 2], default=1, help="Fourier with --seg: the engine's segmentation passes (`[model] segment_passes`): 2 segments each person's crop again (seg_masks.second_pass)")
