@@ -19,7 +19,8 @@
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
 # the adapter's with a read-back per conflict round and with the rounds predicted),
 # rounds/pipeline.md (the GPU backend's pipeline with `compute.round_waits` per-round and
-# per-frame), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
+# per-frame), workers/pipeline.md (the render stage on 1, 2 and 3 threads,
+# `compute.render_workers`), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
 # series' K: the default fourier-small-seg2 against fourier-small-k31, 63 maps), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
@@ -92,6 +93,14 @@ case "$mode" in
     # through its row buckets); the camera's own view takes the input pixel's colour.
     "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
       --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
+    echo "== the render stage on 1, 2 and 3 workers (compute.render_workers)"
+    # The third H200 run's render stage on its own device took 10.6 ms a frame of which 1.6 ms
+    # were its work on the adapter: the rest waits on its own read-backs. Workers of their own
+    # (each its renderer on a device of its own) localize frame N + 1 while frame N waits;
+    # frames are published in capture order (a frame beaten by a newer one is dropped,
+    # counted in the render stage's superseded).
+    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --render-workers 1,2,3 --out "$out/workers"
     echo "== the GPU backend's pipeline: the levels' conflict rounds read per round or predicted"
     # compute.round_waits: per-round (a read-back per round and level, some ten a frame) or
     # per-frame (each level's rounds predicted from the last frame, one read-back for the

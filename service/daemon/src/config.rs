@@ -7,8 +7,8 @@ mod model;
 pub mod rtsp;
 mod temporal;
 pub use compute::{
-    ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, RenderDevice,
-    RoundWaits, THREADS,
+    ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, RENDER_WORKERS,
+    RenderDevice, RoundWaits, THREADS,
 };
 pub use live::{Live, LiveError};
 pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_PASSES, ThinParts};
@@ -436,6 +436,12 @@ impl Config {
             "compute.rounds_per_wait",
             self.compute.rounds_per_wait,
             &compute::ROUNDS_PER_WAIT,
+            "",
+        )?;
+        in_range(
+            "compute.render_workers",
+            self.compute.render_workers,
+            &compute::RENDER_WORKERS,
             "",
         )?;
         if let Err((key, msg)) = self.temporal.values().check() {

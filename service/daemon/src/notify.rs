@@ -23,7 +23,7 @@ pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>
         .name("notify".into())
         .spawn(move || {
             let mut ready = false;
-            let mut last_beats = [0u64; THREADS.len()];
+            let mut last_beats = Beats::default();
             let mut last_status = String::new();
             let mut stalled_logged = false;
             while !shared.stop.load(Ordering::Relaxed) {
@@ -33,17 +33,7 @@ pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>
                     let _ = sd_notify::notify(&[NotifyState::Ready]);
                     tracing::info!("first frame published: READY");
                 }
-                let beats = shared.beats.each_ref().map(|b| b.load(Ordering::Relaxed));
-                let stalled: Vec<&str> = THREADS
-                    .iter()
-                    .enumerate()
-                    .zip(beats.iter().zip(&last_beats))
-                    .filter(|((i, _), (now, before))| {
-                        crate::pipeline::thread_runs(*i, shared.mode) && now == before
-                    })
-                    .map(|((_, name), _)| *name)
-                    .collect();
-                last_beats = beats;
+                let stalled = stalled_threads(&shared, &mut last_beats);
                 let status = if stalled.is_empty() {
                     stalled_logged = false;
                     if watchdog.is_some() {
@@ -67,6 +57,41 @@ pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>
             }
             let _ = sd_notify::notify(&[NotifyState::Stopping]);
         })
+}
+
+/// The pipeline's heartbeats at the last check.
+#[derive(Default)]
+struct Beats {
+    threads: [u64; THREADS.len()],
+    /// The render stage's further workers (`render-2`, ...).
+    render: Vec<u64>,
+}
+
+/// The running pipeline threads whose heartbeat has not moved since `last` (which becomes
+/// now): [`THREADS`] by name, and the render stage's further workers as `render-2`, ...
+fn stalled_threads(shared: &Shared, last: &mut Beats) -> Vec<String> {
+    let beats = shared.beats.each_ref().map(|b| b.load(Ordering::Relaxed));
+    let mut stalled: Vec<String> = THREADS
+        .iter()
+        .enumerate()
+        .zip(beats.iter().zip(&last.threads))
+        .filter(|((i, _), (now, before))| {
+            crate::pipeline::thread_runs(*i, shared.mode) && now == before
+        })
+        .map(|((_, name), _)| name.to_string())
+        .collect();
+    let render = shared.render_beats();
+    last.render.resize(render.len(), 0);
+    stalled.extend(
+        render
+            .iter()
+            .zip(&last.render)
+            .filter(|((_, now), before)| now == *before)
+            .map(|((name, _), _)| name.clone()),
+    );
+    last.threads = beats;
+    last.render = render.into_iter().map(|(_, b)| b).collect();
+    stalled
 }
 
 /// Running without a published frame this long is reported as stalled.
@@ -132,5 +157,41 @@ mod tests {
         assert!(s.starts_with("stalled: no frame published for 2."), "{s}");
         shared.e2e.record(10.0);
         assert!(status_line(&shared).starts_with("running: "));
+    }
+
+    #[test]
+    fn a_stalled_render_worker_is_named_even_while_the_others_turn() {
+        let cfg = crate::config::Config::parse(
+            "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n[dbus]\nbus = \"none\"\n\
+             [compute]\nrender_workers = 3\n",
+            std::path::Path::new("t.toml"),
+        )
+        .unwrap();
+        let (tx, _) = tokio::sync::watch::channel(None);
+        let shared = Shared::new(&cfg, "test".into(), tx);
+        assert_eq!(shared.render_workers, 3);
+        let mut last = Beats::default();
+        // Nothing has beaten yet: every thread of the oracle mode, and both further workers.
+        let all = stalled_threads(&shared, &mut last);
+        assert_eq!(all, ["capture", "render", "encode", "render-2", "render-3"]);
+        // Every thread but the third render worker turns.
+        let turn = |skip: Option<&str>| {
+            for (i, b) in shared.beats.iter().enumerate() {
+                if Some(THREADS[i]) != skip {
+                    b.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            for (i, b) in shared.render_beats.iter().enumerate() {
+                if Some(format!("render-{}", i + 2).as_str()) != skip {
+                    b.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        };
+        turn(Some("render-3"));
+        assert_eq!(stalled_threads(&shared, &mut last), ["render-3"]);
+        turn(None);
+        assert!(stalled_threads(&shared, &mut last).is_empty());
+        turn(Some("render"));
+        assert_eq!(stalled_threads(&shared, &mut last), ["render"]);
     }
 }

@@ -28,7 +28,7 @@ use volcap_engine::render::{RenderOptions, Renderer};
 use volcap_sim::camera::Camera as SimView;
 
 pub use crate::config::{Live, LiveError};
-pub use slot::{Slot, StageStats};
+pub use slot::{Put, Slot, StageStats};
 
 /// What the pipeline is doing, for /state and the viewer.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -137,6 +137,14 @@ pub struct Shared {
     /// One counter per pipeline thread, bumped every loop turn (idle turns included): a
     /// counter that stops moving is a stalled thread, and the watchdog stops its pings.
     pub beats: [AtomicU64; 5],
+    /// The render stage's threads (`compute.render_workers`); the first beats `beats`'
+    /// "render", each further one its own counter here (`render-2`, ...), so the watchdog
+    /// sees any one of them stall.
+    pub render_workers: usize,
+    pub render_beats: Vec<AtomicU64>,
+    /// Frames each render worker finished (placeholders and frames a newer one beat
+    /// included): how the stage's load spreads over its workers.
+    pub render_worker_frames: Vec<AtomicU64>,
     /// People in view in the latest rendered frame (model mode: regions of the
     /// segmentation, the largest one rendered; oracle mode: the simulator's count);
     /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
@@ -213,6 +221,13 @@ impl Shared {
             latest_field: Mutex::new(None),
             camera_swap: Mutex::new(None),
             beats: Default::default(),
+            render_workers: cfg.compute.render_workers.max(1),
+            render_beats: (1..cfg.compute.render_workers.max(1))
+                .map(|_| AtomicU64::new(0))
+                .collect(),
+            render_worker_frames: (0..cfg.compute.render_workers.max(1))
+                .map(|_| AtomicU64::new(0))
+                .collect(),
             people: AtomicUsize::new(usize::MAX),
             close_range_model: cfg.field() == FieldMode::Model && cfg.model.close_range.is_some(),
             close_range: AtomicBool::new(false),
@@ -278,6 +293,28 @@ impl Shared {
 
     fn beat(&self, thread: usize) {
         self.beats[thread].fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Render worker `worker`'s heartbeat (0: the "render" thread of [`THREADS`]).
+    fn beat_render(&self, worker: usize) {
+        match worker.checked_sub(1) {
+            None => self.beat(1),
+            Some(i) => {
+                if let Some(b) = self.render_beats.get(i) {
+                    b.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+
+    /// The names and heartbeats of the render workers after the first (`render-2`, ...),
+    /// for the watchdog.
+    pub fn render_beats(&self) -> Vec<(String, u64)> {
+        self.render_beats
+            .iter()
+            .enumerate()
+            .map(|(i, b)| (format!("render-{}", i + 2), b.load(Ordering::Relaxed)))
+            .collect()
     }
 }
 
@@ -514,18 +551,25 @@ pub fn start(
     }
 
     // Render: the model's field (from the field thread), the oracle field through the
-    // engine's localization and renderer, or the camera frame itself.
-    threads.push(render_stage::spawn(
-        shared.clone(),
-        captured.clone(),
-        fielded.clone(),
-        rendered.clone(),
-        cfg.render.oracle_voxel_m,
-        cfg.field(),
-        cfg.compute.threads,
-        cfg.compute.clone(),
-        models.clone(),
-    ));
+    // engine's localization and renderer, or the camera frame itself; on
+    // `compute.render_workers` threads, each taking the latest as it comes free, their
+    // frames published in capture order.
+    for worker in 0..shared.render_workers {
+        threads.push(render_stage::spawn(
+            render_stage::Worker {
+                index: worker,
+                voxel: cfg.render.oracle_voxel_m,
+                mode: cfg.field(),
+                eval_threads: cfg.compute.threads,
+                compute: cfg.compute.clone(),
+            },
+            shared.clone(),
+            captured.clone(),
+            fielded.clone(),
+            rendered.clone(),
+            models.clone(),
+        ));
+    }
 
     // Encode + publish.
     threads.push(encode_stage::spawn(shared.clone(), rendered));

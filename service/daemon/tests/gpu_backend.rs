@@ -175,7 +175,8 @@ fn model_mode_runs_its_networks_on_the_adapter() {
 /// brings back a fraction of that: with `shared` this test fails) and written by the render
 /// stage; frames are published, rendered there, and counted with the networks' work. With
 /// `compute.round_waits = "per-frame"` the levels' conflict rounds are predicted from the
-/// frame before (counted in `adapter_work.predicted`).
+/// frame before (counted in `adapter_work.predicted`). With `compute.render_workers = 2`
+/// each of the stage's two threads opens a device and a renderer of its own there.
 #[cfg(feature = "wgpu")]
 #[test]
 fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
@@ -186,7 +187,7 @@ fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
     let dir = tmp("gpu-own-render");
     let d = start(&config(
         &dir,
-        "backend = \"wgpu\"\nrender_device = \"own\"\nround_waits = \"per-frame\"",
+        "backend = \"wgpu\"\nrender_device = \"own\"\nround_waits = \"per-frame\"\nrender_workers = 2",
     ));
     let s = wait_for(
         &d.addr,
@@ -208,11 +209,24 @@ fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
     );
     assert_eq!(s["compute"]["render_device"], "own", "{s}");
     assert_eq!(s["people"], 1, "{s}");
-    // The frames after the first of the grid are predicted (but for a frame whose
+    // Two render workers, each frame counted by the one that drew it.
+    assert_eq!(s["compute"]["render_workers"], 2, "{s}");
+    let by_worker: Vec<u64> = s["compute"]["render_worker_frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_u64().unwrap())
+        .collect();
+    assert_eq!(by_worker.len(), 2, "{s}");
+    assert!(
+        by_worker.iter().sum::<u64>() >= rendered,
+        "{by_worker:?} for {rendered} frames rendered on the adapter: {s}"
+    );
+    // The frames after each worker's first of the grid are predicted (but for a frame whose
     // prediction fell short twice, run again per round).
     let predicted = w["predicted"].as_u64().unwrap();
     assert!(
-        predicted >= 1 && 2 * predicted >= rendered,
+        predicted >= 1 && 2 * (predicted + 1) >= rendered,
         "{predicted} of {rendered} predicted: {s}"
     );
 }

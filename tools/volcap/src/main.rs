@@ -54,8 +54,8 @@ enum BenchCmd {
     Localize(LocalizeArgs),
     /// The daemon's whole pipeline in this process on a simulated scene, per resolution x
     /// model x coarse level x threads: fps, latency, ms per stage, evaluations, speed-up over
-    /// one thread. Writes a table and a plot.
-    Pipeline(PipelineArgs),
+    /// one thread. Writes a table and a plot. (Boxed: its many knobs make it the largest.)
+    Pipeline(Box<PipelineArgs>),
     /// Each network on its own (segmentation, shape and colour encoders, the colour MLP on a
     /// frame's surface points): ms per run, and with --profile where tract spends them, per op
     /// kind and node. Writes docs/bench/nets.md.
@@ -145,6 +145,11 @@ pub struct PipelineArgs {
     /// queues` measures the mechanism). Each row names the device it used.
     #[arg(long = "render-device", value_delimiter = ',', default_value = "auto")]
     pub render_devices: Vec<String>,
+    /// `compute.render_workers` values (comma-separated, 1..=4): render stage threads, each
+    /// with its own renderer (and on the GPU backend its own renderer on the adapter, on its
+    /// own device where `--render-device` gives it one), frames published in capture order.
+    #[arg(long = "render-workers", value_delimiter = ',', default_value = "1")]
+    pub render_workers: Vec<usize>,
     /// `compute.round_waits` values (comma-separated): per-round (the default: the render
     /// stage reads the levels' conflict loop after each round) and/or per-frame (each
     /// level's rounds predicted from the last frame, one read-back for the levels; a frame

@@ -75,6 +75,8 @@ pub struct Row {
     pub rounds_per_wait: usize,
     /// `compute.render_device` ("shared" or "own").
     pub render_device: &'static str,
+    /// `compute.render_workers`: the render stage's threads.
+    pub render_workers: usize,
     /// `compute.round_waits` ("per-round" or "per-frame").
     pub round_waits: &'static str,
     /// Frames whose levels' rounds were predicted, and those of them run again, per frame.
@@ -139,7 +141,7 @@ type Setup = (
     usize,
     bool,
     f32,
-    (usize, RoundWaits, RenderDevice, u8, f32),
+    (usize, RoundWaits, RenderDevice, u8, f32, usize),
 );
 
 /// A loaded model set: name, precision, runtime index, segmentation passes.
@@ -156,7 +158,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         display,
         temporal,
         yaw,
-        (rounds, waits, device, passes, apart),
+        (rounds, waits, device, passes, apart, workers),
     ) = setup;
     let device = device.name();
     let waits = waits.name();
@@ -164,7 +166,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\ndrop_apart = {apart:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\n\
-         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\n\
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\nrender_workers = {workers}\n\
          [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
         match prec {
@@ -258,6 +260,7 @@ fn measure(
         adapter_ms_per_frame: (work1[3] - work0[3]) as f64 / 1e6 / published.max(1) as f64,
         rounds_per_wait: cfg.compute.rounds_per_wait,
         render_device,
+        render_workers: cfg.compute.render_workers,
         round_waits: cfg.compute.round_waits.name(),
         predicted_per_frame: (work1[9] - work0[9]) as f64 / published.max(1) as f64,
         reruns_per_frame: (work1[10] - work0[10]) as f64 / published.max(1) as f64,
@@ -286,6 +289,16 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     }
     if let Some(r) = a.rounds_per_wait.iter().find(|r| !(1..=64).contains(*r)) {
         bail!("--rounds-per-wait {r} must be in 1..=64");
+    }
+    if let Some(w) = a
+        .render_workers
+        .iter()
+        .find(|w| !volcapd::config::RENDER_WORKERS.contains(*w))
+    {
+        bail!(
+            "--render-workers {w} must be in {:?}",
+            volcapd::config::RENDER_WORKERS
+        );
     }
     let render_devices = crate::backend::by_names(
         "--render-device",
@@ -360,10 +373,13 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                         .iter()
                                         .flat_map(|d| passes_of_model.iter().map(move |p| (d, p)))
                                     {
-                                        for (&apart, &t) in a
+                                        for ((&apart, &t), &workers) in a
                                             .drop_apart
                                             .iter()
                                             .flat_map(|p| a.threads.iter().map(move |t| (p, t)))
+                                            .flat_map(|pt| {
+                                                a.render_workers.iter().map(move |w| (pt, w))
+                                            })
                                         {
                                             configs.push((
                                                 name.clone(),
@@ -375,7 +391,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                                 d,
                                                 tf,
                                                 yaw,
-                                                (rounds, waits, dev, passes, apart),
+                                                (rounds, waits, dev, passes, apart, workers),
                                             ));
                                         }
                                     }
@@ -471,6 +487,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.yaw_deg == r.yaw_deg
                     && b.rounds_per_wait == r.rounds_per_wait
                     && b.render_device == r.render_device
+                    && b.render_workers == r.render_workers
                     && b.round_waits == r.round_waits
                     && b.segment_passes == r.segment_passes
                     && b.drop_apart == r.drop_apart

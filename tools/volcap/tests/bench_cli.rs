@@ -290,6 +290,8 @@ fn pipeline_bench_names_bad_arguments() {
         (vec!["--frames", "0"], "--frames 0"),
         (vec!["--yaw", "nan"], "--yaw NaN"),
         (vec!["--yaw", "0,200"], "--yaw 200"),
+        (vec!["--render-workers", "0"], "--render-workers 0"),
+        (vec!["--render-workers", "1,5"], "--render-workers 5"),
     ] {
         let out = volcap()
             .current_dir(repo_root())
@@ -301,6 +303,37 @@ fn pipeline_bench_names_bad_arguments() {
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
         assert!(err.contains(want), "{args:?}: {err}");
     }
+}
+
+/// `--render-workers`: a row per count of render stage threads, each publishing frames and
+/// saying how many threads rendered them.
+#[test]
+fn pipeline_bench_measures_render_workers() {
+    let dir = std::env::temp_dir().join(format!("volcap-bench-workers-{}", std::process::id()));
+    let (_, rows) = pipeline_rows(
+        &[
+            "--res",
+            "33",
+            "--threads",
+            "1",
+            "--render-workers",
+            "1,2",
+            "--seconds",
+            "1.5",
+        ],
+        &dir,
+    );
+    assert_eq!(rows.len(), 2);
+    for (r, workers) in rows.iter().zip([1, 2]) {
+        assert!(r["error"].is_null(), "{r}");
+        assert_eq!(r["render_workers"], workers, "{r}");
+        assert!(r["frames"].as_u64().unwrap() > 0, "{r}");
+        assert!(r["evaluations"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
+    assert!(md.contains("| 2 render workers |"), "{md}");
+    assert!(md.contains("(2 render workers)"), "{md}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `--yaw`: a row per view, each publishing frames (a turned view runs the colour networks

@@ -143,6 +143,23 @@ pub struct ComputeConfig {
     /// `per-frame` ([`RoundWaits`], the engine's).
     #[serde(default)]
     pub round_waits: RoundWaits,
+    /// Render stage threads, each with its own renderer (on the GPU backend, its own
+    /// renderer on the adapter and, with `render_device` `own`, its own device), each taking
+    /// the latest field as it comes free: frame N + 1 is localized while frame N waits on
+    /// its read-backs. The frames are published in capture order (a frame finished after a
+    /// newer one is dropped, counted as the render stage's superseded). Default 1
+    /// ([`RENDER_WORKERS`]); more pays only where the render stage waits more than it
+    /// computes (a GPU's read-backs), not on a CPU whose cores the other stages keep busy
+    /// (`volcap bench pipeline --render-workers` measures it).
+    #[serde(default = "d_render_workers")]
+    pub render_workers: usize,
+}
+
+/// Accepted range of `compute.render_workers`.
+pub const RENDER_WORKERS: std::ops::RangeInclusive<usize> = 1..=4;
+
+fn d_render_workers() -> usize {
+    1
 }
 
 /// Accepted range of `compute.rounds_per_wait`.
@@ -174,6 +191,7 @@ impl Default for ComputeConfig {
             rounds_per_wait: d_rounds_per_wait(),
             render_device: RenderDevice::default(),
             round_waits: RoundWaits::default(),
+            render_workers: d_render_workers(),
         }
     }
 }

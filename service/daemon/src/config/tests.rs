@@ -72,6 +72,27 @@ fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
     )
     .unwrap();
     assert_eq!(c.compute.rounds_per_wait, 8);
+    assert_eq!(c.compute.render_workers, 1);
+    for bad in [0, 5] {
+        let e = Config::parse(
+            &format!("{base}[compute]\nrender_workers = {bad}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("b.toml")
+                && e.contains("line 5")
+                && e.contains("compute.render_workers")
+                && e.contains("1..=4"),
+            "{e}"
+        );
+    }
+    let c2 = Config::parse(
+        &format!("{base}[compute]\nrender_workers = 2\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap();
+    assert_eq!(c2.compute.render_workers, 2);
     assert_eq!(c.compute.render_device, crate::config::RenderDevice::Auto);
     let c = Config::parse(
         &format!("{base}[compute]\nrender_device = \"own\"\n"),

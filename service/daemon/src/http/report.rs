@@ -11,7 +11,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 /// What `superseded` counts, said where it is shown (`/state`, `/metrics`).
-pub(super) const SUPERSEDED_NOTE: &str = "frames replaced by a newer one before the next stage needed them (latest frame wins: nothing queues, the next stage takes the newest); not lost";
+pub(super) const SUPERSEDED_NOTE: &str = "frames replaced by a newer one before the next stage needed them (latest frame wins: nothing queues, the next stage takes the newest), or, with several render workers, finished after a newer one; not lost";
 
 /// `/state`; stream clients' addresses only with the token (`details`), counts to anyone.
 pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
@@ -66,6 +66,14 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
             v
         })
         .collect();
+    let mut compute = sh.compute.to_json();
+    compute["render_workers"] = sh.render_workers.into();
+    compute["render_worker_frames"] = sh
+        .render_worker_frames
+        .iter()
+        .map(|n| n.load(Ordering::Relaxed))
+        .collect::<Vec<_>>()
+        .into();
     serde_json::json!({
         "state": state, "reason": reason, "mode": sh.mode,
         "mode_note": match sh.mode {
@@ -83,7 +91,7 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
             "name": sh.runtime,
             "note": sh.runtime_note,
         })),
-        "compute": sh.compute.to_json(),
+        "compute": compute,
         "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
         "temporal": sh.temporal.then(|| serde_json::json!({
             "resets": sh.temporal_resets.load(Ordering::Relaxed),

@@ -3,46 +3,74 @@
 
 use super::*;
 
-/// Spawn the render thread: take the latest frame (and its field), render, put latest-wins.
-#[allow(clippy::too_many_arguments)]
+/// One render thread's settings: which worker it is of `compute.render_workers`, and what it
+/// renders with.
+pub(super) struct Worker {
+    pub index: usize,
+    pub voxel: f32,
+    pub mode: FieldMode,
+    pub eval_threads: usize,
+    pub compute: crate::config::ComputeConfig,
+}
+
+/// Spawn a render thread: take the latest frame (and its field), render, put it latest-wins
+/// unless another worker already put a newer one.
 pub(super) fn spawn(
+    w: Worker,
     sh: Arc<Shared>,
     input: Arc<Slot<Frame>>,
     fielded: Arc<Slot<(Frame, FieldOutcome)>>,
     out: Arc<Slot<Rendered>>,
-    voxel: f32,
-    mode: FieldMode,
-    eval_threads: usize,
-    compute: crate::config::ComputeConfig,
     models: Option<Arc<volcap_engine::model::Models>>,
 ) -> std::thread::JoinHandle<()> {
+    let name = match w.index {
+        0 => "render".to_string(),
+        i => format!("render-{}", i + 1),
+    };
     std::thread::Builder::new()
-        .name("render".into())
+        .name(name)
         .spawn(move || {
+            let Worker {
+                index: worker,
+                voxel,
+                mode,
+                eval_threads,
+                compute,
+            } = w;
             let mut renderer = Renderer::new();
             renderer.set_threads(eval_threads);
-            // On the GPU backend the model's frames are localized and drawn on the adapter.
+            // On the GPU backend the model's frames are localized and drawn on the adapter
+            // (each worker its own renderer there, and its own device where it has one).
             let mut on_adapter = super::AdapterRenderer::open(models.as_deref(), mode, &compute);
             if let Some(r) = &on_adapter {
                 let _ = sh.compute.render_device.set(r.device_name());
             }
-            let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
-                let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
-                sh.set_state(PipelineState::Degraded(why));
-                if out.put(Rendered {
-                    index: f.seq,
-                    at: f.at,
-                    rgba,
-                    size,
-                    placeholder: true,
-                }) {
+            // Frames go out in capture order: one finished after a newer one (another
+            // worker's) is work nobody needed, as one replaced before it was taken.
+            let publish = |r: Rendered| {
+                if let Some(n) = sh.render_worker_frames.get(worker) {
+                    n.fetch_add(1, Ordering::Relaxed);
+                }
+                let at = r.at;
+                if out.put_newer(r, at) != Put::Fresh {
                     sh.stats[stage::RENDER]
                         .superseded
                         .fetch_add(1, Ordering::Relaxed);
                 }
             };
+            let degraded = |why: String, f: &Frame, size: usize, bg: [f32; 4]| {
+                let rgba = crate::placeholder::frame(size, bg, "NOT RENDERED", &why);
+                sh.set_state(PipelineState::Degraded(why));
+                publish(Rendered {
+                    index: f.seq,
+                    at: f.at,
+                    rgba,
+                    size,
+                    placeholder: true,
+                });
+            };
             while !sh.stop.load(Ordering::Relaxed) {
-                sh.beat(1);
+                sh.beat_render(worker);
                 let (f, outcome) = if mode == FieldMode::Model {
                     let Some((f, o)) = fielded.take(Duration::from_millis(200)) else {
                         continue;
@@ -139,17 +167,13 @@ pub(super) fn spawn(
                         rgba
                     }
                 };
-                if out.put(Rendered {
+                publish(Rendered {
                     index: f.seq,
                     at: f.at,
                     rgba,
                     size,
                     placeholder: false,
-                }) {
-                    sh.stats[stage::RENDER]
-                        .superseded
-                        .fetch_add(1, Ordering::Relaxed);
-                }
+                });
                 // Running only while the camera is: a frame captured before the
                 // camera was lost must not paint over the lost state.
                 let camera_running =
@@ -160,4 +184,72 @@ pub(super) fn spawn(
             }
         })
         .expect("spawning the render thread")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+
+    /// `compute.render_workers = 3`: the render stage on three threads, each taking the
+    /// latest frame as it comes free. The frames that come out are in capture order (a
+    /// frame finished after a newer one is dropped, never published after it), more than one
+    /// worker rendered, and `/state`'s counters add up to the render stage's frames.
+    #[test]
+    fn several_render_workers_publish_in_capture_order() {
+        let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/scenes/front-walk.toml");
+        let cfg = Config::parse(
+            &format!(
+                "[camera]\nbackend = \"sim\"\nscene = {:?}\n[render]\nfield = \"oracle\"\n\
+                 resolution = 65\ndisplay_size = 0\n[dbus]\nbus = \"none\"\n\
+                 [compute]\nrender_workers = 3\n",
+                scene.display().to_string()
+            ),
+            std::path::Path::new("workers.toml"),
+        )
+        .unwrap();
+        let (factory, _) = crate::capture::factory(&cfg).unwrap();
+        let (tx, mut rx) = tokio::sync::watch::channel(None);
+        let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
+        assert_eq!(shared.render_workers, 3);
+        let threads = start(&cfg, factory, shared.clone(), None);
+        let mut seen = Vec::new();
+        let t0 = Instant::now();
+        while seen.len() < 40 && t0.elapsed() < Duration::from_secs(60) {
+            if rx.has_changed().unwrap_or(false) {
+                if let Some(p) = rx.borrow_and_update().as_ref()
+                    && !p.placeholder
+                {
+                    seen.push(p.index);
+                }
+            } else {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+        shared.stop.store(true, Ordering::Relaxed);
+        for t in threads {
+            t.join().unwrap();
+        }
+        assert!(seen.len() >= 40, "{} frames published in 60 s", seen.len());
+        assert!(
+            seen.windows(2).all(|w| w[0] < w[1]),
+            "published out of capture order: {seen:?}"
+        );
+        let per_worker: Vec<u64> = shared
+            .render_worker_frames
+            .iter()
+            .map(|n| n.load(Ordering::Relaxed))
+            .collect();
+        assert_eq!(per_worker.len(), 3);
+        assert!(
+            per_worker.iter().filter(|&&n| n > 0).count() >= 2,
+            "one worker did all the work: {per_worker:?}"
+        );
+        assert_eq!(
+            per_worker.iter().sum::<u64>(),
+            shared.stats[stage::RENDER].frames.load(Ordering::Relaxed),
+            "{per_worker:?}"
+        );
+        assert!(shared.render_beats().iter().all(|(_, b)| *b > 0));
+    }
 }

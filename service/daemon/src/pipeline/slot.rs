@@ -5,16 +5,38 @@ use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 /// A one-item slot: `put` replaces what is there (and reports the overwrite), `take` waits.
+/// `put_newer` keeps the items in order when several producers fill it (the render stage's
+/// workers): an item older than the newest one put that way is refused.
 pub struct Slot<T> {
-    item: Mutex<Option<T>>,
+    item: Mutex<Held<T>>,
     ready: Condvar,
     emptied: Condvar,
+}
+
+struct Held<T> {
+    item: Option<T>,
+    /// The newest `put_newer` key so far, kept after its item is taken.
+    newest: Option<Instant>,
+}
+
+/// What `Slot::put_newer` did with an item.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Put {
+    /// Put into an empty slot.
+    Fresh,
+    /// Put over an item nobody took (a drop of the producer's, as `put`'s `true`).
+    Replaced,
+    /// Refused: an item of a later key was put already (taken or not).
+    Stale,
 }
 
 impl<T> Default for Slot<T> {
     fn default() -> Self {
         Self {
-            item: Mutex::new(None),
+            item: Mutex::new(Held {
+                item: None,
+                newest: None,
+            }),
             ready: Condvar::new(),
             emptied: Condvar::new(),
         }
@@ -25,9 +47,23 @@ impl<T> Slot<T> {
     /// Put `v`; returns true when an unconsumed item was overwritten (a drop).
     pub fn put(&self, v: T) -> bool {
         let mut g = self.item.lock().unwrap_or_else(|p| p.into_inner());
-        let dropped = g.replace(v).is_some();
+        let dropped = g.item.replace(v).is_some();
         self.ready.notify_one();
         dropped
+    }
+
+    /// Put `v`, keyed by `at` (when its frame was captured), unless an item with a later key
+    /// went in through here first: producers that finish out of order never put an older
+    /// frame after a newer one, taken or not. Equal keys go in (the same frame again).
+    pub fn put_newer(&self, v: T, at: Instant) -> Put {
+        let mut g = self.item.lock().unwrap_or_else(|p| p.into_inner());
+        if g.newest.is_some_and(|n| n > at) {
+            return Put::Stale;
+        }
+        g.newest = Some(at);
+        let dropped = g.item.replace(v).is_some();
+        self.ready.notify_one();
+        if dropped { Put::Replaced } else { Put::Fresh }
     }
 
     /// Take the latest item, waiting up to `timeout`.
@@ -35,9 +71,9 @@ impl<T> Slot<T> {
         let g = self.item.lock().unwrap_or_else(|p| p.into_inner());
         let (mut g, _) = self
             .ready
-            .wait_timeout_while(g, timeout, |v| v.is_none())
+            .wait_timeout_while(g, timeout, |v| v.item.is_none())
             .unwrap_or_else(|p| p.into_inner());
-        let v = g.take();
+        let v = g.item.take();
         if v.is_some() {
             self.emptied.notify_all();
         }
@@ -51,9 +87,9 @@ impl<T> Slot<T> {
         let g = self.item.lock().unwrap_or_else(|p| p.into_inner());
         let (g, _) = self
             .emptied
-            .wait_timeout_while(g, timeout, |v| v.is_some())
+            .wait_timeout_while(g, timeout, |v| v.item.is_some())
             .unwrap_or_else(|p| p.into_inner());
-        g.is_none()
+        g.item.is_none()
     }
 }
 
@@ -168,5 +204,72 @@ mod tests {
         slot.put(2);
         assert!(slot.put(3));
         assert_eq!(slot.take(Duration::from_millis(1)), Some(3));
+    }
+
+    #[test]
+    fn put_newer_never_puts_an_older_frame_after_a_newer_one() {
+        let slot: Slot<u32> = Slot::default();
+        let t0 = Instant::now();
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        assert_eq!(slot.put_newer(10, at(10)), Put::Fresh);
+        // Finished after frame 10 but captured before it: refused, 10 stays.
+        assert_eq!(slot.put_newer(9, at(9)), Put::Stale);
+        assert_eq!(slot.take(Duration::from_millis(1)), Some(10));
+        // Refused after the newer one was taken too: the consumer never goes back in time.
+        assert_eq!(slot.put_newer(8, at(8)), Put::Stale);
+        assert_eq!(slot.take(Duration::from_millis(1)), None);
+        assert_eq!(slot.put_newer(11, at(11)), Put::Fresh);
+        assert_eq!(slot.put_newer(12, at(12)), Put::Replaced);
+        // The same capture time goes in (a frame rendered again).
+        assert_eq!(slot.put_newer(13, at(12)), Put::Replaced);
+        // A plain put (a placeholder) goes in and does not move the key.
+        assert!(slot.put(99));
+        assert_eq!(slot.put_newer(7, at(7)), Put::Stale);
+        assert_eq!(slot.take(Duration::from_millis(1)), Some(99));
+    }
+
+    #[test]
+    fn producers_racing_through_put_newer_deliver_in_capture_order() {
+        // Four producers finish frames in shuffled order; a consumer takes as it can. What it
+        // sees only ever moves forward in capture time, and the newest frame always arrives.
+        let slot: Arc<Slot<u64>> = Arc::default();
+        let t0 = Instant::now();
+        let done = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let consumer = {
+            let (slot, done) = (slot.clone(), done.clone());
+            std::thread::spawn(move || {
+                let mut seen = Vec::new();
+                while !done.load(std::sync::atomic::Ordering::SeqCst) {
+                    if let Some(v) = slot.take(Duration::from_millis(1)) {
+                        seen.push(v);
+                    }
+                }
+                seen.extend(slot.take(Duration::from_millis(1)));
+                seen
+            })
+        };
+        let producers: Vec<_> = (0..4u64)
+            .map(|w| {
+                let slot = slot.clone();
+                std::thread::spawn(move || {
+                    for i in 0..500u64 {
+                        // Each producer's frames in order, the producers' interleaving not.
+                        let frame = i * 4 + w;
+                        slot.put_newer(frame, t0 + Duration::from_micros(frame));
+                        if (i + w) % 7 == 0 {
+                            std::thread::yield_now();
+                        }
+                    }
+                })
+            })
+            .collect();
+        for p in producers {
+            p.join().unwrap();
+        }
+        done.store(true, std::sync::atomic::Ordering::SeqCst);
+        let seen = consumer.join().unwrap();
+        assert!(!seen.is_empty());
+        assert!(seen.windows(2).all(|w| w[0] < w[1]), "{seen:?}");
+        assert_eq!(*seen.last().unwrap(), 1999, "the newest frame arrives");
     }
 }

@@ -62,46 +62,59 @@ pub(super) fn table(rows: &[Row]) -> String {
             r.stage_p50_ms[3],
             r.stage_p50_ms[4],
             r.evaluations,
-            match (&r.error, r.dispatches_per_frame > 0.0) {
-                (Some(e), _) => e.clone(),
-                // The GPU backend's traffic: what crosses between host and adapter per frame.
-                (None, true) => format!(
-                    "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for ({}){}; {} networks planned while measured{}",
-                    r.bytes_up_per_frame / 1e6,
-                    r.bytes_down_per_frame / 1e6,
-                    r.dispatches_per_frame,
-                    r.waits_per_frame,
-                    if r.predicted_per_frame > 0.0 {
-                        format!(
-                            "the levels' rounds predicted, one read-back for them; {:.1} % of frames run again",
-                            100.0 * r.reruns_per_frame / r.predicted_per_frame
-                        )
-                    } else {
-                        format!("up to {} conflict rounds each", r.rounds_per_wait)
-                    },
-                    if r.render_device == RenderDevice::Own.name() {
-                        "; the render stage on a device of its own"
-                    } else {
-                        ""
-                    },
-                    r.net_plans,
-                    if r.adapter_ms_per_frame > 0.0 {
-                        format!(
-                            "; on the adapter's clock: networks {:.1} ms, maps {:.1} ms, localization and render {:.1} ms, display {:.1} ms",
-                            r.adapter_ms_per_frame,
-                            r.maps_ms_per_frame,
-                            r.localize_ms_per_frame,
-                            r.display_ms_per_frame
-                        )
-                    } else {
-                        String::new()
-                    }
-                ),
-                (None, false) => String::new(),
-            },
+            with_workers(
+                r.render_workers,
+                match (&r.error, r.dispatches_per_frame > 0.0) {
+                    (Some(e), _) => e.clone(),
+                    // The GPU backend's traffic: what crosses between host and adapter per frame.
+                    (None, true) => format!(
+                        "adapter per frame: {:.2} MB up, {:.2} MB down, {:.0} dispatches, {:.0} read-backs waited for ({}){}; {} networks planned while measured{}",
+                        r.bytes_up_per_frame / 1e6,
+                        r.bytes_down_per_frame / 1e6,
+                        r.dispatches_per_frame,
+                        r.waits_per_frame,
+                        if r.predicted_per_frame > 0.0 {
+                            format!(
+                                "the levels' rounds predicted, one read-back for them; {:.1} % of frames run again",
+                                100.0 * r.reruns_per_frame / r.predicted_per_frame
+                            )
+                        } else {
+                            format!("up to {} conflict rounds each", r.rounds_per_wait)
+                        },
+                        if r.render_device == RenderDevice::Own.name() {
+                            "; the render stage on a device of its own"
+                        } else {
+                            ""
+                        },
+                        r.net_plans,
+                        if r.adapter_ms_per_frame > 0.0 {
+                            format!(
+                                "; on the adapter's clock: networks {:.1} ms, maps {:.1} ms, localization and render {:.1} ms, display {:.1} ms",
+                                r.adapter_ms_per_frame,
+                                r.maps_ms_per_frame,
+                                r.localize_ms_per_frame,
+                                r.display_ms_per_frame
+                            )
+                        } else {
+                            String::new()
+                        }
+                    ),
+                    (None, false) => String::new(),
+                }
+            ),
         );
     }
     s
+}
+
+/// A row's note with the render stage's threads first where there are several
+/// (`compute.render_workers`).
+fn with_workers(workers: usize, note: String) -> String {
+    match (workers, note.is_empty()) {
+        (0 | 1, _) => note,
+        (w, true) => format!("{w} render workers"),
+        (w, false) => format!("{w} render workers; {note}"),
+    }
 }
 
 /// Model-mode rows: where the field and render stages' time goes, each part's mean ms beside
@@ -133,8 +146,17 @@ pub(super) fn parts_table(rows: &[Row]) -> String {
     for r in rows {
         let _ = write!(
             s,
-            "| {} | {} | {} | {} | {:.2} |",
-            r.model, r.runtime, r.resolution, r.yaw_deg, r.field_mean_ms
+            "| {}{} | {} | {} | {} | {:.2} |",
+            r.model,
+            if r.render_workers > 1 {
+                format!(" ({} render workers)", r.render_workers)
+            } else {
+                String::new()
+            },
+            r.runtime,
+            r.resolution,
+            r.yaw_deg,
+            r.field_mean_ms
         );
         for (i, ms) in r.part_mean_ms.iter().enumerate() {
             if i == volcapd::pipeline::part::LOCALIZE {
@@ -162,7 +184,7 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             // The GPU backend's knobs, where a row sets them: without them in the key the
             // rows of `--render-device shared,own` or `--rounds-per-wait 1,8` drew one line.
             format!(
-                "{}{} {}{}{}{}",
+                "{}{} {}{}{}{}{}",
                 r.model,
                 apart_note(r.drop_apart),
                 r.runtime,
@@ -178,6 +200,11 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 },
                 if r.rounds_per_wait > 1 && r.dispatches_per_frame > 0.0 {
                     format!(" rounds<={}", r.rounds_per_wait)
+                } else {
+                    String::new()
+                },
+                if r.render_workers > 1 {
+                    format!(" {} render workers", r.render_workers)
                 } else {
                     String::new()
                 }
