@@ -19,8 +19,8 @@
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
 # the adapter's with a read-back per conflict round and with the rounds predicted),
 # rounds/pipeline.md (the GPU backend's pipeline with `compute.round_waits` per-round and
-# per-frame), workers/pipeline.md (the render stage on 1, 2 and 3 threads,
-# `compute.render_workers`), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
+# per-frame), workers/pipeline.md (the segmentation on the field thread or its
+# own, x the render stage on 1 or 2 threads, `compute.render_workers`), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
 # series' K: the default fourier-small-seg2 against fourier-small-k31, 63 maps), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
@@ -93,14 +93,18 @@ case "$mode" in
     # through its row buckets); the camera's own view takes the input pixel's colour.
     "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
       --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
-    echo "== the render stage on 1, 2 and 3 workers (compute.render_workers)"
-    # The third H200 run's render stage on its own device took 10.6 ms a frame of which 1.6 ms
-    # were its work on the adapter: the rest waits on its own read-backs. Workers of their own
-    # (each its renderer on a device of its own) localize frame N + 1 while frame N waits;
-    # frames are published in capture order (a frame beaten by a newer one is dropped,
-    # counted in the render stage's superseded).
+    echo "== the segmentation on a thread of its own, and the render stage on 1 or 2 workers"
+    # The third H200 run (devices/pipeline.md there, fourier-small at 257^3, the render stage
+    # on its own device, 78.6 fps = 12.7 ms a frame) had two threads at about 10 ms a frame:
+    # the field thread segmented too (segment 4.6 + field 5.3 ms: compute.segment_thread_up_to
+    # is 129 by default, set for two CPU cores) and the render stage took 10.6 ms, of which
+    # 1.6 ms was its work on the adapter, the rest waiting on its own read-backs. 120 fps needs
+    # every thread under 8.3 ms: the segmentation on its own thread (--segment-thread-up-to
+    # 513) and a second render worker (compute.render_workers: each its renderer and device,
+    # frame N + 1 localized while N waits; frames published in capture order).
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
-      --seconds "$secs" --warmup "$warm" --fps 1000 --render-workers 1,2,3 --out "$out/workers"
+      --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 129,513 \
+      --render-workers 1,2 --out "$out/workers"
     echo "== the GPU backend's pipeline: the levels' conflict rounds read per round or predicted"
     # compute.round_waits: per-round (a read-back per round and level, some ten a frame) or
     # per-frame (each level's rounds predicted from the last frame, one read-back for the
