@@ -19,8 +19,9 @@
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
 # the adapter's with a read-back per conflict round and with the rounds predicted),
 # rounds/pipeline.md (the GPU backend's pipeline with `compute.round_waits` per-round and
-# per-frame), workers/pipeline.md (the segmentation on the field thread or its
-# own, x the render stage on 1 or 2 threads, `compute.render_workers`), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
+# per-frame), workers/split/pipeline.md (the segmentation on the field thread or
+# its own), workers/pipeline.md (on its own thread, x 1 or 2 render and segment workers,
+# `compute.render_workers`, `compute.segment_workers`), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
 # series' K: the default fourier-small-seg2 against fourier-small-k31, 63 maps), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
@@ -93,7 +94,7 @@ case "$mode" in
     # through its row buckets); the camera's own view takes the input pixel's colour.
     "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
       --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
-    echo "== the segmentation on a thread of its own, and the render stage on 1 or 2 workers"
+    echo "== the segmentation on a thread of its own, and the render and segment stages on 1 or 2 workers"
     # The third H200 run (devices/pipeline.md there, fourier-small at 257^3, the render stage
     # on its own device, 78.6 fps = 12.7 ms a frame) had two threads at about 10 ms a frame:
     # the field thread segmented too (segment 4.6 + field 5.3 ms: compute.segment_thread_up_to
@@ -102,9 +103,14 @@ case "$mode" in
     # every thread under 8.3 ms: the segmentation on its own thread (--segment-thread-up-to
     # 513) and a second render worker (compute.render_workers: each its renderer and device,
     # frame N + 1 localized while N waits; frames published in capture order).
+    # fourier-medium segments twice (10 ms a frame there): a second segment worker
+    # (compute.segment_workers) segments frame N + 1 while N waits on its read-backs.
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 129,513 \
-      --render-workers 1,2 --out "$out/workers"
+      --out "$out/workers/split"
+    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
+      --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
     echo "== the GPU backend's pipeline: the levels' conflict rounds read per round or predicted"
     # compute.round_waits: per-round (a read-back per round and level, some ten a frame) or
     # per-frame (each level's rounds predicted from the last frame, one read-back for the

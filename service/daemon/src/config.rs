@@ -8,7 +8,7 @@ pub mod rtsp;
 mod temporal;
 pub use compute::{
     ComputeBackend, ComputeConfig, ComputeFallback, DEFAULT_SEGMENT_THREAD_UP_TO, RENDER_WORKERS,
-    RenderDevice, RoundWaits, THREADS,
+    RenderDevice, RoundWaits, SEGMENT_WORKERS, THREADS,
 };
 pub use live::{Live, LiveError};
 pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_PASSES, ThinParts};
@@ -442,6 +442,12 @@ impl Config {
             "compute.render_workers",
             self.compute.render_workers,
             &compute::RENDER_WORKERS,
+            "",
+        )?;
+        in_range(
+            "compute.segment_workers",
+            self.compute.segment_workers,
+            &compute::SEGMENT_WORKERS,
             "",
         )?;
         if let Err((key, msg)) = self.temporal.values().check() {

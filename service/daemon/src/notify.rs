@@ -63,12 +63,13 @@ pub fn spawn(shared: Arc<Shared>) -> std::io::Result<std::thread::JoinHandle<()>
 #[derive(Default)]
 struct Beats {
     threads: [u64; THREADS.len()],
-    /// The render stage's further workers (`render-2`, ...).
-    render: Vec<u64>,
+    /// The stages' further workers (`render-2`, ..., `segment-2`, ...).
+    workers: Vec<u64>,
 }
 
 /// The running pipeline threads whose heartbeat has not moved since `last` (which becomes
-/// now): [`THREADS`] by name, and the render stage's further workers as `render-2`, ...
+/// now): [`THREADS`] by name, and the stages' further workers as `render-2`, ...,
+/// `segment-2`, ...
 fn stalled_threads(shared: &Shared, last: &mut Beats) -> Vec<String> {
     let beats = shared.beats.each_ref().map(|b| b.load(Ordering::Relaxed));
     let mut stalled: Vec<String> = THREADS
@@ -80,17 +81,17 @@ fn stalled_threads(shared: &Shared, last: &mut Beats) -> Vec<String> {
         })
         .map(|((_, name), _)| name.to_string())
         .collect();
-    let render = shared.render_beats();
-    last.render.resize(render.len(), 0);
+    let workers = shared.worker_beats();
+    last.workers.resize(workers.len(), 0);
     stalled.extend(
-        render
+        workers
             .iter()
-            .zip(&last.render)
+            .zip(&last.workers)
             .filter(|((_, now), before)| now == *before)
             .map(|((name, _), _)| name.clone()),
     );
     last.threads = beats;
-    last.render = render.into_iter().map(|(_, b)| b).collect();
+    last.workers = workers.into_iter().map(|(_, b)| b).collect();
     stalled
 }
 
@@ -193,5 +194,38 @@ mod tests {
         assert!(stalled_threads(&shared, &mut last).is_empty());
         turn(Some("render"));
         assert_eq!(stalled_threads(&shared, &mut last), ["render"]);
+    }
+
+    #[test]
+    fn a_stalled_segment_worker_is_named_in_model_mode() {
+        let cfg = crate::config::Config::parse(
+            "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n[dbus]\nbus = \"none\"\n\
+             [render]\nfield = \"model\"\n[compute]\nsegment_workers = 2\n",
+            std::path::Path::new("t.toml"),
+        )
+        .unwrap();
+        let (tx, _) = tokio::sync::watch::channel(None);
+        let shared = Shared::new(&cfg, "test".into(), tx);
+        let mut last = Beats::default();
+        assert_eq!(
+            stalled_threads(&shared, &mut last),
+            [
+                "capture",
+                "render",
+                "encode",
+                "field",
+                "segment",
+                "segment-2"
+            ]
+        );
+        for b in &shared.beats {
+            b.fetch_add(1, Ordering::Relaxed);
+        }
+        assert_eq!(stalled_threads(&shared, &mut last), ["segment-2"]);
+        shared.segment_beats[0].fetch_add(1, Ordering::Relaxed);
+        for b in &shared.beats {
+            b.fetch_add(1, Ordering::Relaxed);
+        }
+        assert!(stalled_threads(&shared, &mut last).is_empty());
     }
 }

@@ -145,6 +145,11 @@ pub struct Shared {
     /// Frames each render worker finished (placeholders and frames a newer one beat
     /// included): how the stage's load spreads over its workers.
     pub render_worker_frames: Vec<AtomicU64>,
+    /// The same for the segment stage's threads (`compute.segment_workers`, model mode):
+    /// `segment-2`, ... beat here; frames each worker segmented (a person or none).
+    pub segment_workers: usize,
+    pub segment_beats: Vec<AtomicU64>,
+    pub segment_worker_frames: Vec<AtomicU64>,
     /// People in view in the latest rendered frame (model mode: regions of the
     /// segmentation, the largest one rendered; oracle mode: the simulator's count);
     /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
@@ -228,6 +233,13 @@ impl Shared {
             render_worker_frames: (0..cfg.compute.render_workers.max(1))
                 .map(|_| AtomicU64::new(0))
                 .collect(),
+            segment_workers: cfg.compute.segment_workers.max(1),
+            segment_beats: (1..cfg.compute.segment_workers.max(1))
+                .map(|_| AtomicU64::new(0))
+                .collect(),
+            segment_worker_frames: (0..cfg.compute.segment_workers.max(1))
+                .map(|_| AtomicU64::new(0))
+                .collect(),
             people: AtomicUsize::new(usize::MAX),
             close_range_model: cfg.field() == FieldMode::Model && cfg.model.close_range.is_some(),
             close_range: AtomicBool::new(false),
@@ -299,22 +311,40 @@ impl Shared {
     fn beat_render(&self, worker: usize) {
         match worker.checked_sub(1) {
             None => self.beat(1),
-            Some(i) => {
-                if let Some(b) = self.render_beats.get(i) {
-                    b.fetch_add(1, Ordering::Relaxed);
-                }
-            }
+            Some(i) => bump(&self.render_beats, i),
         }
     }
 
-    /// The names and heartbeats of the render workers after the first (`render-2`, ...),
-    /// for the watchdog.
-    pub fn render_beats(&self) -> Vec<(String, u64)> {
-        self.render_beats
-            .iter()
-            .enumerate()
-            .map(|(i, b)| (format!("render-{}", i + 2), b.load(Ordering::Relaxed)))
-            .collect()
+    /// Segment worker `worker`'s heartbeat (0: the "segment" thread of [`THREADS`]).
+    fn beat_segment(&self, worker: usize) {
+        match worker.checked_sub(1) {
+            None => self.beat(4),
+            Some(i) => bump(&self.segment_beats, i),
+        }
+    }
+
+    /// The names and heartbeats of the stages' further workers (`render-2`, ...,
+    /// `segment-2`, ...), for the watchdog; the segment workers only in model mode.
+    pub fn worker_beats(&self) -> Vec<(String, u64)> {
+        let named = |stage: &str, beats: &[AtomicU64]| -> Vec<(String, u64)> {
+            beats
+                .iter()
+                .enumerate()
+                .map(|(i, b)| (format!("{stage}-{}", i + 2), b.load(Ordering::Relaxed)))
+                .collect()
+        };
+        let mut out = named("render", &self.render_beats);
+        if self.mode == "model" {
+            out.extend(named("segment", &self.segment_beats));
+        }
+        out
+    }
+}
+
+/// Add one to counter `i` of `counters` (none there: nothing).
+fn bump(counters: &[AtomicU64], i: usize) {
+    if let Some(c) = counters.get(i) {
+        c.fetch_add(1, Ordering::Relaxed);
     }
 }
 
@@ -526,14 +556,18 @@ pub fn start(
     let render_on = render_device(cfg, models.as_deref());
     if let (FieldMode::Model, Some(models)) = (cfg.field(), models.clone()) {
         let segmented: Arc<Slot<(Frame, field_stage::Segmented)>> = Arc::default();
-        threads.push(field_stage::spawn_segment(
-            shared.clone(),
-            models.clone(),
-            captured.clone(),
-            segmented.clone(),
-            cfg.compute.threads,
-            cfg.compute.segment_thread_up_to,
-        ));
+        // `compute.segment_workers` threads, their people handed on in capture order.
+        for worker in 0..shared.segment_workers {
+            threads.push(field_stage::spawn_segment(
+                worker,
+                shared.clone(),
+                models.clone(),
+                captured.clone(),
+                segmented.clone(),
+                cfg.compute.threads,
+                cfg.compute.segment_thread_up_to,
+            ));
+        }
         threads.push(field_stage::spawn(
             shared.clone(),
             models,

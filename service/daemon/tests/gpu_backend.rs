@@ -187,7 +187,7 @@ fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
     let dir = tmp("gpu-own-render");
     let d = start(&config(
         &dir,
-        "backend = \"wgpu\"\nrender_device = \"own\"\nround_waits = \"per-frame\"\nrender_workers = 2",
+        "backend = \"wgpu\"\nrender_device = \"own\"\nround_waits = \"per-frame\"\nrender_workers = 2\nsegment_workers = 2",
     ));
     let s = wait_for(
         &d.addr,
@@ -222,6 +222,15 @@ fn the_render_stage_runs_on_a_device_of_its_own_when_asked() {
         by_worker.iter().sum::<u64>() >= rendered,
         "{by_worker:?} for {rendered} frames rendered on the adapter: {s}"
     );
+    // Two segment workers, their networks on the adapter from two threads.
+    assert_eq!(s["compute"]["segment_workers"], 2, "{s}");
+    let segmented: u64 = s["compute"]["segment_worker_frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_u64().unwrap())
+        .sum();
+    assert!(segmented >= rendered, "{segmented} segmented: {s}");
     // The frames after each worker's first of the grid are predicted (but for a frame whose
     // prediction fell short twice, run again per round).
     let predicted = w["predicted"].as_u64().unwrap();

@@ -150,6 +150,11 @@ pub struct PipelineArgs {
     /// own device where `--render-device` gives it one), frames published in capture order.
     #[arg(long = "render-workers", value_delimiter = ',', default_value = "1")]
     pub render_workers: Vec<usize>,
+    /// `compute.segment_workers` values (comma-separated, 1..=4): segment stage threads
+    /// (where the segmentation has one: `--segment-thread-up-to`), their people handed on
+    /// in capture order.
+    #[arg(long = "segment-workers", value_delimiter = ',', default_value = "1")]
+    pub segment_workers: Vec<usize>,
     /// `compute.round_waits` values (comma-separated): per-round (the default: the render
     /// stage reads the levels' conflict loop after each round) and/or per-frame (each
     /// level's rounds predicted from the last frame, one read-back for the levels; a frame

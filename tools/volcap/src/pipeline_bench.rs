@@ -77,6 +77,8 @@ pub struct Row {
     pub render_device: &'static str,
     /// `compute.render_workers`: the render stage's threads.
     pub render_workers: usize,
+    /// `compute.segment_workers`: the segment stage's threads.
+    pub segment_workers: usize,
     /// `compute.round_waits` ("per-round" or "per-frame").
     pub round_waits: &'static str,
     /// Frames whose levels' rounds were predicted, and those of them run again, per frame.
@@ -141,7 +143,7 @@ type Setup = (
     usize,
     bool,
     f32,
-    (usize, RoundWaits, RenderDevice, u8, f32, usize),
+    (usize, RoundWaits, RenderDevice, u8, f32, (usize, usize)),
 );
 
 /// A loaded model set: name, precision, runtime index, segmentation passes.
@@ -158,7 +160,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         display,
         temporal,
         yaw,
-        (rounds, waits, device, passes, apart, workers),
+        (rounds, waits, device, passes, apart, (workers, seg_workers)),
     ) = setup;
     let device = device.name();
     let waits = waits.name();
@@ -166,7 +168,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\ndrop_apart = {apart:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\n\
-         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\nrender_workers = {workers}\n\
+         [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\nrender_workers = {workers}\nsegment_workers = {seg_workers}\n\
          [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
         match prec {
@@ -261,6 +263,7 @@ fn measure(
         rounds_per_wait: cfg.compute.rounds_per_wait,
         render_device,
         render_workers: cfg.compute.render_workers,
+        segment_workers: cfg.compute.segment_workers,
         round_waits: cfg.compute.round_waits.name(),
         predicted_per_frame: (work1[9] - work0[9]) as f64 / published.max(1) as f64,
         reruns_per_frame: (work1[10] - work0[10]) as f64 / published.max(1) as f64,
@@ -298,6 +301,16 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         bail!(
             "--render-workers {w} must be in {:?}",
             volcapd::config::RENDER_WORKERS
+        );
+    }
+    if let Some(w) = a
+        .segment_workers
+        .iter()
+        .find(|w| !volcapd::config::SEGMENT_WORKERS.contains(*w))
+    {
+        bail!(
+            "--segment-workers {w} must be in {:?}",
+            volcapd::config::SEGMENT_WORKERS
         );
     }
     let render_devices = crate::backend::by_names(
@@ -373,12 +386,16 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                                         .iter()
                                         .flat_map(|d| passes_of_model.iter().map(move |p| (d, p)))
                                     {
-                                        for ((&apart, &t), &workers) in a
+                                        for ((&apart, &t), workers) in a
                                             .drop_apart
                                             .iter()
                                             .flat_map(|p| a.threads.iter().map(move |t| (p, t)))
                                             .flat_map(|pt| {
-                                                a.render_workers.iter().map(move |w| (pt, w))
+                                                a.render_workers.iter().flat_map(move |w| {
+                                                    a.segment_workers
+                                                        .iter()
+                                                        .map(move |sw| (pt, (*w, *sw)))
+                                                })
                                             })
                                         {
                                             configs.push((
@@ -488,6 +505,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.rounds_per_wait == r.rounds_per_wait
                     && b.render_device == r.render_device
                     && b.render_workers == r.render_workers
+                    && b.segment_workers == r.segment_workers
                     && b.round_waits == r.round_waits
                     && b.segment_passes == r.segment_passes
                     && b.drop_apart == r.drop_apart

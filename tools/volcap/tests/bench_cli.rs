@@ -292,6 +292,7 @@ fn pipeline_bench_names_bad_arguments() {
         (vec!["--yaw", "0,200"], "--yaw 200"),
         (vec!["--render-workers", "0"], "--render-workers 0"),
         (vec!["--render-workers", "1,5"], "--render-workers 5"),
+        (vec!["--segment-workers", "0"], "--segment-workers 0"),
     ] {
         let out = volcap()
             .current_dir(repo_root())
@@ -305,10 +306,10 @@ fn pipeline_bench_names_bad_arguments() {
     }
 }
 
-/// `--render-workers`: a row per count of render stage threads, each publishing frames and
-/// saying how many threads rendered them.
+/// `--render-workers` x `--segment-workers`: a row per count of render and segment stage
+/// threads, each publishing frames and saying how many threads rendered and segmented them.
 #[test]
-fn pipeline_bench_measures_render_workers() {
+fn pipeline_bench_measures_render_and_segment_workers() {
     let dir = std::env::temp_dir().join(format!("volcap-bench-workers-{}", std::process::id()));
     let (_, rows) = pipeline_rows(
         &[
@@ -318,21 +319,25 @@ fn pipeline_bench_measures_render_workers() {
             "1",
             "--render-workers",
             "1,2",
+            "--segment-workers",
+            "1,2",
             "--seconds",
             "1.5",
         ],
         &dir,
     );
-    assert_eq!(rows.len(), 2);
-    for (r, workers) in rows.iter().zip([1, 2]) {
+    assert_eq!(rows.len(), 4);
+    for (r, (render, segment)) in rows.iter().zip([(1, 1), (1, 2), (2, 1), (2, 2)]) {
         assert!(r["error"].is_null(), "{r}");
-        assert_eq!(r["render_workers"], workers, "{r}");
+        assert_eq!(r["render_workers"], render, "{r}");
+        assert_eq!(r["segment_workers"], segment, "{r}");
         assert!(r["frames"].as_u64().unwrap() > 0, "{r}");
         assert!(r["evaluations"].as_f64().unwrap() > 0.0, "{r}");
     }
     let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
     assert!(md.contains("| 2 render workers |"), "{md}");
-    assert!(md.contains("(2 render workers)"), "{md}");
+    assert!(md.contains("| 2 segment workers |"), "{md}");
+    assert!(md.contains("(2 render workers, 2 segment workers)"), "{md}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -153,6 +153,22 @@ pub struct ComputeConfig {
     /// (`volcap bench pipeline --render-workers` measures it).
     #[serde(default = "d_render_workers")]
     pub render_workers: usize,
+    /// Model mode, where the segmentation has a thread of its own (`segment_thread_up_to`):
+    /// that many segment threads, each taking the newest frame as it comes free, their
+    /// people handed to the field thread in capture order (its temporal filter sees time
+    /// go forward; a person segmented after a newer one is dropped, counted as the segment
+    /// stage's superseded). Default 1 ([`SEGMENT_WORKERS`]); more pays where a frame's
+    /// segmentation mostly waits (on a GPU its network's read-backs: two passes took 10 ms
+    /// a frame on an H200, 1.2 ms of each on the adapter), not on two CPU cores.
+    #[serde(default = "d_segment_workers")]
+    pub segment_workers: usize,
+}
+
+/// Accepted range of `compute.segment_workers`.
+pub const SEGMENT_WORKERS: std::ops::RangeInclusive<usize> = 1..=4;
+
+fn d_segment_workers() -> usize {
+    1
 }
 
 /// Accepted range of `compute.render_workers`.
@@ -192,6 +208,7 @@ impl Default for ComputeConfig {
             render_device: RenderDevice::default(),
             round_waits: RoundWaits::default(),
             render_workers: d_render_workers(),
+            segment_workers: d_segment_workers(),
         }
     }
 }

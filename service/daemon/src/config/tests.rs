@@ -93,6 +93,16 @@ fn out_of_range_and_unhonoured_keys_are_refused_at_load() {
     )
     .unwrap();
     assert_eq!(c2.compute.render_workers, 2);
+    assert_eq!(c.compute.segment_workers, 1);
+    let e = Config::parse(
+        &format!("{base}[compute]\nsegment_workers = 9\n"),
+        Path::new("b.toml"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("line 5") && e.contains("compute.segment_workers") && e.contains("1..=4"),
+        "{e}"
+    );
     assert_eq!(c.compute.render_device, crate::config::RenderDevice::Auto);
     let c = Config::parse(
         &format!("{base}[compute]\nrender_device = \"own\"\n"),

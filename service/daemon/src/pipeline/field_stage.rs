@@ -75,9 +75,12 @@ fn segment(sh: &Shared, models: &Models, f: &Frame, threads: usize) -> Segmented
     }
 }
 
-/// Start the segment thread: frames from `input`, the person (or why none) into `out`; idle
-/// while the live resolution is above `split_up_to` (`compute.segment_thread_up_to`).
+/// Start segment thread `worker` (of `compute.segment_workers`): frames from `input`, the
+/// person (or why none) into `out`, in capture order (a person segmented after a newer one
+/// is dropped, so the field thread's temporal filter never sees time go back); idle while
+/// the live resolution is above `split_up_to` (`compute.segment_thread_up_to`).
 pub(super) fn spawn_segment(
+    worker: usize,
     sh: Arc<Shared>,
     models: Arc<Models>,
     input: Arc<Slot<Frame>>,
@@ -85,11 +88,15 @@ pub(super) fn spawn_segment(
     threads: usize,
     split_up_to: usize,
 ) -> std::thread::JoinHandle<()> {
+    let name = match worker {
+        0 => "segment".to_string(),
+        i => format!("segment-{}", i + 1),
+    };
     std::thread::Builder::new()
-        .name("segment".into())
+        .name(name)
         .spawn(move || {
             while !sh.stop.load(Ordering::Relaxed) {
-                sh.beat(4);
+                sh.beat_segment(worker);
                 if sh.live().resolution > split_up_to {
                     std::thread::sleep(Duration::from_millis(20));
                     continue;
@@ -108,7 +115,11 @@ pub(super) fn spawn_segment(
                     continue;
                 }
                 let seg = segment(&sh, &models, &f, threads);
-                if out.put((f, seg)) {
+                if let Some(n) = sh.segment_worker_frames.get(worker) {
+                    n.fetch_add(1, Ordering::Relaxed);
+                }
+                let at = f.at;
+                if out.put_newer((f, seg), at) != super::Put::Fresh {
                     sh.stats[stage::SEGMENT]
                         .superseded
                         .fetch_add(1, Ordering::Relaxed);
@@ -279,4 +290,78 @@ pub(super) fn spawn(
             }
         })
         .expect("spawning the field thread")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+
+    /// `compute.segment_workers = 2` in model mode: two segment threads, each taking the
+    /// newest frame as it comes free, both segmenting; the people reach the field thread (and
+    /// its temporal filter) in capture order, so the published frames go forward only.
+    #[test]
+    fn two_segment_workers_hand_on_people_in_capture_order() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let cfg = Config::parse(
+            &format!(
+                "[camera]\nbackend = \"sim\"\nscene = {:?}\n[render]\nfield = \"model\"\n\
+                 resolution = 33\ndisplay_size = 0\n[model]\ndir = {:?}\n[dbus]\nbus = \"none\"\n\
+                 [compute]\nsegment_workers = 2\nruntime = \"tract\"\n",
+                root.join("tests/scenes/front-walk.toml")
+                    .display()
+                    .to_string(),
+                root.join("models").display().to_string()
+            ),
+            std::path::Path::new("segment-workers.toml"),
+        )
+        .unwrap();
+        let runtime = volcap_engine::model::Runtime::open(
+            volcap_engine::model::runtime::RuntimeChoice::Tract,
+            None,
+        )
+        .unwrap()
+        .runtime;
+        let models = volcap_engine::model::Models::load_on(
+            &root.join("models"),
+            &cfg.model.name,
+            volcap_engine::model::Precision::F32,
+            &runtime,
+        )
+        .unwrap();
+        let (factory, _) = crate::capture::factory(&cfg).unwrap();
+        let (tx, mut rx) = tokio::sync::watch::channel(None);
+        let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
+        let threads = start(&cfg, factory, shared.clone(), Some(Arc::new(models)));
+        let mut seen = Vec::new();
+        let t0 = Instant::now();
+        while seen.len() < 15 && t0.elapsed() < Duration::from_secs(120) {
+            if rx.has_changed().unwrap_or(false) {
+                if let Some(p) = rx.borrow_and_update().as_ref()
+                    && !p.placeholder
+                {
+                    seen.push(p.index);
+                }
+            } else {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+        shared.stop.store(true, Ordering::Relaxed);
+        for t in threads {
+            t.join().unwrap();
+        }
+        assert!(seen.len() >= 15, "{} frames published", seen.len());
+        assert!(seen.windows(2).all(|w| w[0] < w[1]), "{seen:?}");
+        let per_worker: Vec<u64> = shared
+            .segment_worker_frames
+            .iter()
+            .map(|n| n.load(Ordering::Relaxed))
+            .collect();
+        assert!(per_worker.iter().all(|&n| n > 0), "{per_worker:?}");
+        assert!(
+            shared
+                .worker_beats()
+                .iter()
+                .any(|(n, b)| n == "segment-2" && *b > 0)
+        );
+    }
 }

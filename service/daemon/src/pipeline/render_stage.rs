@@ -250,6 +250,6 @@ mod tests {
             shared.stats[stage::RENDER].frames.load(Ordering::Relaxed),
             "{per_worker:?}"
         );
-        assert!(shared.render_beats().iter().all(|(_, b)| *b > 0));
+        assert!(shared.worker_beats().iter().all(|(_, b)| *b > 0));
     }
 }

@@ -63,7 +63,7 @@ pub(super) fn table(rows: &[Row]) -> String {
             r.stage_p50_ms[4],
             r.evaluations,
             with_workers(
-                r.render_workers,
+                r,
                 match (&r.error, r.dispatches_per_frame > 0.0) {
                     (Some(e), _) => e.clone(),
                     // The GPU backend's traffic: what crosses between host and adapter per frame.
@@ -107,14 +107,27 @@ pub(super) fn table(rows: &[Row]) -> String {
     s
 }
 
-/// A row's note with the render stage's threads first where there are several
-/// (`compute.render_workers`).
-fn with_workers(workers: usize, note: String) -> String {
-    match (workers, note.is_empty()) {
-        (0 | 1, _) => note,
-        (w, true) => format!("{w} render workers"),
-        (w, false) => format!("{w} render workers; {note}"),
+/// A row's note with the stages' threads first where there are several
+/// (`compute.render_workers`, `compute.segment_workers`).
+fn with_workers(r: &Row, note: String) -> String {
+    let workers = workers_label(r);
+    match (workers.is_empty(), note.is_empty()) {
+        (true, _) => note,
+        (false, true) => workers,
+        (false, false) => format!("{workers}; {note}"),
     }
+}
+
+/// "2 render workers, 2 segment workers" (each where more than one; empty otherwise).
+fn workers_label(r: &Row) -> String {
+    let mut parts = Vec::new();
+    if r.render_workers > 1 {
+        parts.push(format!("{} render workers", r.render_workers));
+    }
+    if r.segment_workers > 1 {
+        parts.push(format!("{} segment workers", r.segment_workers));
+    }
+    parts.join(", ")
 }
 
 /// Model-mode rows: where the field and render stages' time goes, each part's mean ms beside
@@ -148,10 +161,9 @@ pub(super) fn parts_table(rows: &[Row]) -> String {
             s,
             "| {}{} | {} | {} | {} | {:.2} |",
             r.model,
-            if r.render_workers > 1 {
-                format!(" ({} render workers)", r.render_workers)
-            } else {
-                String::new()
+            match workers_label(r) {
+                w if w.is_empty() => w,
+                w => format!(" ({w})"),
             },
             r.runtime,
             r.resolution,
@@ -203,10 +215,9 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 } else {
                     String::new()
                 },
-                if r.render_workers > 1 {
-                    format!(" {} render workers", r.render_workers)
-                } else {
-                    String::new()
+                match workers_label(r) {
+                    w if w.is_empty() => w,
+                    w => format!(" {w}"),
                 }
             ),
             r.coarse_level,
