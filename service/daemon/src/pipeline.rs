@@ -227,19 +227,11 @@ impl Shared {
             camera_swap: Mutex::new(None),
             beats: Default::default(),
             render_workers: cfg.compute.render_workers.max(1),
-            render_beats: (1..cfg.compute.render_workers.max(1))
-                .map(|_| AtomicU64::new(0))
-                .collect(),
-            render_worker_frames: (0..cfg.compute.render_workers.max(1))
-                .map(|_| AtomicU64::new(0))
-                .collect(),
+            render_beats: counters(cfg.compute.render_workers.max(1) - 1),
+            render_worker_frames: counters(cfg.compute.render_workers.max(1)),
             segment_workers: cfg.compute.segment_workers.max(1),
-            segment_beats: (1..cfg.compute.segment_workers.max(1))
-                .map(|_| AtomicU64::new(0))
-                .collect(),
-            segment_worker_frames: (0..cfg.compute.segment_workers.max(1))
-                .map(|_| AtomicU64::new(0))
-                .collect(),
+            segment_beats: counters(cfg.compute.segment_workers.max(1) - 1),
+            segment_worker_frames: counters(cfg.compute.segment_workers.max(1)),
             people: AtomicUsize::new(usize::MAX),
             close_range_model: cfg.field() == FieldMode::Model && cfg.model.close_range.is_some(),
             close_range: AtomicBool::new(false),
@@ -339,6 +331,11 @@ impl Shared {
         }
         out
     }
+}
+
+/// `n` counters at zero.
+fn counters(n: usize) -> Vec<AtomicU64> {
+    (0..n).map(|_| AtomicU64::new(0)).collect()
 }
 
 /// Add one to counter `i` of `counters` (none there: nothing).
@@ -608,4 +605,28 @@ pub fn start(
     // Encode + publish.
     threads.push(encode_stage::spawn(shared.clone(), rendered));
     threads
+}
+
+/// The indices of the first `n` frames (not placeholders) published to `rx`, as a client
+/// sees them, within `timeout` (fewer if it runs out): for the stages' worker tests.
+#[cfg(test)]
+fn published_indices(
+    rx: &mut tokio::sync::watch::Receiver<Option<Arc<Published>>>,
+    n: usize,
+    timeout: Duration,
+) -> Vec<u64> {
+    let mut seen = Vec::new();
+    let t0 = Instant::now();
+    while seen.len() < n && t0.elapsed() < timeout {
+        if rx.has_changed().unwrap_or(false) {
+            if let Some(p) = rx.borrow_and_update().as_ref()
+                && !p.placeholder
+            {
+                seen.push(p.index);
+            }
+        } else {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    seen
 }

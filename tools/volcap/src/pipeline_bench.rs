@@ -293,25 +293,21 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     if let Some(r) = a.rounds_per_wait.iter().find(|r| !(1..=64).contains(*r)) {
         bail!("--rounds-per-wait {r} must be in 1..=64");
     }
-    if let Some(w) = a
-        .render_workers
-        .iter()
-        .find(|w| !volcapd::config::RENDER_WORKERS.contains(*w))
-    {
-        bail!(
-            "--render-workers {w} must be in {:?}",
-            volcapd::config::RENDER_WORKERS
-        );
-    }
-    if let Some(w) = a
-        .segment_workers
-        .iter()
-        .find(|w| !volcapd::config::SEGMENT_WORKERS.contains(*w))
-    {
-        bail!(
-            "--segment-workers {w} must be in {:?}",
-            volcapd::config::SEGMENT_WORKERS
-        );
+    for (flag, values, range) in [
+        (
+            "--render-workers",
+            &a.render_workers,
+            volcapd::config::RENDER_WORKERS,
+        ),
+        (
+            "--segment-workers",
+            &a.segment_workers,
+            volcapd::config::SEGMENT_WORKERS,
+        ),
+    ] {
+        if let Some(w) = values.iter().find(|w| !range.contains(*w)) {
+            bail!("{flag} {w} must be in {range:?}");
+        }
     }
     let render_devices = crate::backend::by_names(
         "--render-device",

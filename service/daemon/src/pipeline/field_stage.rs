@@ -332,19 +332,7 @@ mod tests {
         let (tx, mut rx) = tokio::sync::watch::channel(None);
         let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
         let threads = start(&cfg, factory, shared.clone(), Some(Arc::new(models)));
-        let mut seen = Vec::new();
-        let t0 = Instant::now();
-        while seen.len() < 15 && t0.elapsed() < Duration::from_secs(120) {
-            if rx.has_changed().unwrap_or(false) {
-                if let Some(p) = rx.borrow_and_update().as_ref()
-                    && !p.placeholder
-                {
-                    seen.push(p.index);
-                }
-            } else {
-                std::thread::sleep(Duration::from_millis(1));
-            }
-        }
+        let seen = published_indices(&mut rx, 15, Duration::from_secs(120));
         shared.stop.store(true, Ordering::Relaxed);
         for t in threads {
             t.join().unwrap();

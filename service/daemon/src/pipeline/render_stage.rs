@@ -213,19 +213,7 @@ mod tests {
         let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
         assert_eq!(shared.render_workers, 3);
         let threads = start(&cfg, factory, shared.clone(), None);
-        let mut seen = Vec::new();
-        let t0 = Instant::now();
-        while seen.len() < 40 && t0.elapsed() < Duration::from_secs(60) {
-            if rx.has_changed().unwrap_or(false) {
-                if let Some(p) = rx.borrow_and_update().as_ref()
-                    && !p.placeholder
-                {
-                    seen.push(p.index);
-                }
-            } else {
-                std::thread::sleep(Duration::from_millis(1));
-            }
-        }
+        let seen = published_indices(&mut rx, 40, Duration::from_secs(60));
         shared.stop.store(true, Ordering::Relaxed);
         for t in threads {
             t.join().unwrap();
