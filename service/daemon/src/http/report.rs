@@ -11,7 +11,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 /// What `superseded` counts, said where it is shown (`/state`, `/metrics`).
-pub(super) const SUPERSEDED_NOTE: &str = "frames replaced by a newer one before the next stage needed them (latest frame wins: nothing queues, the next stage takes the newest), or, with several render workers, finished after a newer one; not lost";
+pub(super) const SUPERSEDED_NOTE: &str = "frames replaced by a newer one before the next stage needed them (latest frame wins: nothing queues, the next stage takes the newest), or, with several workers in a stage (render, segment), finished after a newer one; not lost";
 
 /// `/state`; stream clients' addresses only with the token (`details`), counts to anyone.
 pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {

@@ -99,8 +99,9 @@ pub struct StageStats {
     samples: Mutex<std::collections::VecDeque<(Instant, f64)>>,
     pub frames: AtomicU64,
     /// Items this stage put into its latest-wins slot that were replaced by a newer one
-    /// before the next stage took them: work nobody needed (latest frame wins, nothing
-    /// queues), not frames lost.
+    /// before the next stage took them, or (a stage of several workers) that `put_newer`
+    /// refused because a newer one went in first: work nobody needed (latest frame wins,
+    /// nothing queues), not frames lost.
     pub superseded: AtomicU64,
     /// Frames this stage failed on (an error, not "no person in view"): frames lost.
     pub lost: AtomicU64,
