@@ -19,9 +19,9 @@
 # the rate), localize.md/.png (the localization alone, on the model's field, CPU and adapter,
 # the adapter's with a read-back per conflict round and with the rounds predicted),
 # rounds/pipeline.md (the GPU backend's pipeline with `compute.round_waits` per-round and
-# per-frame), workers/split/pipeline.md (the segmentation on the field thread or
-# its own), workers/pipeline.md (on its own thread, x 1 or 2 render and segment workers,
-# `compute.render_workers`, `compute.segment_workers`), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
+# per-frame), workers/pipeline.md (the segmentation on a thread of its own, x 1
+# or 2 render and segment workers, `compute.render_workers`, `compute.segment_workers`;
+# pipeline.md's GPU rows at yaw 0 are the baseline, the default split and one worker each), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
 # series' K: the default fourier-small-seg2 against fourier-small-k31, 63 maps), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
@@ -105,9 +105,8 @@ case "$mode" in
     # frame N + 1 localized while N waits; frames published in capture order).
     # fourier-medium segments twice (10 ms a frame there): a second segment worker
     # (compute.segment_workers) segments frame N + 1 while N waits on its read-backs.
-    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
-      --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 129,513 \
-      --out "$out/workers/split"
+    # (The first matrix's camera-view GPU rows are the default split, 129, with one worker
+    # each: the baseline of these rows, in the same run.)
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
       --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
