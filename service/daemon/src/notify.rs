@@ -170,7 +170,7 @@ mod tests {
         .unwrap();
         let (tx, _) = tokio::sync::watch::channel(None);
         let shared = Shared::new(&cfg, "test".into(), tx);
-        assert_eq!(shared.render_workers, 3);
+        assert_eq!(shared.render.count(), 3);
         let mut last = Beats::default();
         // Nothing has beaten yet: every thread of the oracle mode, and both further workers.
         let all = stalled_threads(&shared, &mut last);
@@ -182,7 +182,7 @@ mod tests {
                     b.fetch_add(1, Ordering::Relaxed);
                 }
             }
-            for (i, b) in shared.render_beats.iter().enumerate() {
+            for (i, b) in shared.render.beats.iter().enumerate() {
                 if Some(format!("render-{}", i + 2).as_str()) != skip {
                     b.fetch_add(1, Ordering::Relaxed);
                 }
@@ -222,7 +222,7 @@ mod tests {
             b.fetch_add(1, Ordering::Relaxed);
         }
         assert_eq!(stalled_threads(&shared, &mut last), ["segment-2"]);
-        shared.segment_beats[0].fetch_add(1, Ordering::Relaxed);
+        shared.segment.beats[0].fetch_add(1, Ordering::Relaxed);
         for b in &shared.beats {
             b.fetch_add(1, Ordering::Relaxed);
         }

@@ -137,19 +137,10 @@ pub struct Shared {
     /// One counter per pipeline thread, bumped every loop turn (idle turns included): a
     /// counter that stops moving is a stalled thread, and the watchdog stops its pings.
     pub beats: [AtomicU64; 5],
-    /// The render stage's threads (`compute.render_workers`); the first beats `beats`'
-    /// "render", each further one its own counter here (`render-2`, ...), so the watchdog
-    /// sees any one of them stall.
-    pub render_workers: usize,
-    pub render_beats: Vec<AtomicU64>,
-    /// Frames each render worker finished (placeholders and frames a newer one beat
-    /// included): how the stage's load spreads over its workers.
-    pub render_worker_frames: Vec<AtomicU64>,
-    /// The same for the segment stage's threads (`compute.segment_workers`, model mode):
-    /// `segment-2`, ... beat here; frames each worker segmented (a person or none).
-    pub segment_workers: usize,
-    pub segment_beats: Vec<AtomicU64>,
-    pub segment_worker_frames: Vec<AtomicU64>,
+    /// The render stage's threads (`compute.render_workers`) and the segment stage's
+    /// (`compute.segment_workers`, model mode).
+    pub render: Workers,
+    pub segment: Workers,
     /// People in view in the latest rendered frame (model mode: regions of the
     /// segmentation, the largest one rendered; oracle mode: the simulator's count);
     /// `usize::MAX` while unknown (camera mode, nothing rendered yet).
@@ -226,12 +217,8 @@ impl Shared {
             latest_field: Mutex::new(None),
             camera_swap: Mutex::new(None),
             beats: Default::default(),
-            render_workers: cfg.compute.render_workers.max(1),
-            render_beats: counters(cfg.compute.render_workers.max(1) - 1),
-            render_worker_frames: counters(cfg.compute.render_workers.max(1)),
-            segment_workers: cfg.compute.segment_workers.max(1),
-            segment_beats: counters(cfg.compute.segment_workers.max(1) - 1),
-            segment_worker_frames: counters(cfg.compute.segment_workers.max(1)),
+            render: Workers::new(1, cfg.compute.render_workers),
+            segment: Workers::new(4, cfg.compute.segment_workers),
             people: AtomicUsize::new(usize::MAX),
             close_range_model: cfg.field() == FieldMode::Model && cfg.model.close_range.is_some(),
             close_range: AtomicBool::new(false),
@@ -299,43 +286,80 @@ impl Shared {
         self.beats[thread].fetch_add(1, Ordering::Relaxed);
     }
 
-    /// Render worker `worker`'s heartbeat (0: the "render" thread of [`THREADS`]).
-    fn beat_render(&self, worker: usize) {
+    /// Worker `worker`'s heartbeat of a stage's `workers` (0: the stage's thread of
+    /// [`THREADS`]).
+    fn beat_worker(&self, workers: &Workers, worker: usize) {
         match worker.checked_sub(1) {
-            None => self.beat(1),
-            Some(i) => bump(&self.render_beats, i),
-        }
-    }
-
-    /// Segment worker `worker`'s heartbeat (0: the "segment" thread of [`THREADS`]).
-    fn beat_segment(&self, worker: usize) {
-        match worker.checked_sub(1) {
-            None => self.beat(4),
-            Some(i) => bump(&self.segment_beats, i),
+            None => self.beat(workers.thread),
+            Some(i) => bump(&workers.beats, i),
         }
     }
 
     /// The names and heartbeats of the stages' further workers (`render-2`, ...,
     /// `segment-2`, ...), for the watchdog; the segment workers only in model mode.
     pub fn worker_beats(&self) -> Vec<(String, u64)> {
-        let named = |stage: &str, beats: &[AtomicU64]| -> Vec<(String, u64)> {
-            beats
-                .iter()
-                .enumerate()
-                .map(|(i, b)| (format!("{stage}-{}", i + 2), b.load(Ordering::Relaxed)))
-                .collect()
-        };
-        let mut out = named("render", &self.render_beats);
+        let mut out = self.render.named_beats();
         if self.mode == "model" {
-            out.extend(named("segment", &self.segment_beats));
+            out.extend(self.segment.named_beats());
         }
         out
     }
 }
 
-/// `n` counters at zero.
-fn counters(n: usize) -> Vec<AtomicU64> {
-    (0..n).map(|_| AtomicU64::new(0)).collect()
+/// A stage's threads (`compute.render_workers`, `compute.segment_workers`): the first is the
+/// stage's thread of [`THREADS`] and beats there; each further one (`render-2`, ...) beats
+/// its own counter here, so the watchdog sees any one of them stall. `frames` counts what
+/// each worker finished (placeholders and frames a newer one beat included): how the stage's
+/// load spreads over its workers.
+pub struct Workers {
+    /// The stage's index in [`THREADS`].
+    thread: usize,
+    pub beats: Vec<AtomicU64>,
+    pub frames: Vec<AtomicU64>,
+}
+
+impl Workers {
+    fn new(thread: usize, count: usize) -> Self {
+        let counters = |n: usize| (0..n).map(|_| AtomicU64::new(0)).collect();
+        let count = count.max(1);
+        Workers {
+            thread,
+            beats: counters(count - 1),
+            frames: counters(count),
+        }
+    }
+
+    /// How many threads the stage runs.
+    pub fn count(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Worker `worker` finished a frame.
+    fn finished(&self, worker: usize) {
+        bump(&self.frames, worker);
+    }
+
+    /// Each worker's frames so far, in worker order.
+    pub fn frame_counts(&self) -> Vec<u64> {
+        self.frames
+            .iter()
+            .map(|n| n.load(Ordering::Relaxed))
+            .collect()
+    }
+
+    /// The further workers' names (`STAGE-2`, ...) and heartbeats.
+    fn named_beats(&self) -> Vec<(String, u64)> {
+        self.beats
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                (
+                    format!("{}-{}", THREADS[self.thread], i + 2),
+                    b.load(Ordering::Relaxed),
+                )
+            })
+            .collect()
+    }
 }
 
 /// Add one to counter `i` of `counters` (none there: nothing).
@@ -554,7 +578,7 @@ pub fn start(
     if let (FieldMode::Model, Some(models)) = (cfg.field(), models.clone()) {
         let segmented: Arc<Slot<(Frame, field_stage::Segmented)>> = Arc::default();
         // `compute.segment_workers` threads, their people handed on in capture order.
-        for worker in 0..shared.segment_workers {
+        for worker in 0..shared.segment.count() {
             threads.push(field_stage::spawn_segment(
                 worker,
                 shared.clone(),
@@ -585,7 +609,7 @@ pub fn start(
     // engine's localization and renderer, or the camera frame itself; on
     // `compute.render_workers` threads, each taking the latest as it comes free, their
     // frames published in capture order.
-    for worker in 0..shared.render_workers {
+    for worker in 0..shared.render.count() {
         threads.push(render_stage::spawn(
             render_stage::Worker {
                 index: worker,

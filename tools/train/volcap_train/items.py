@@ -175,8 +175,9 @@ def cut_masks(split, keep, segmenter) -> torch.Tensor:
     """u8 [B, 1, H, W]: the product's masks of the cut images (`cut_images`), as the engine
     segments a frame whose lower edge cuts the person. `segmenter`: [B, 3, H, W] in [0, 1] ->
     [B, H, W] soft masks of the most prominent person (`seg_masks.product_masks`)."""
-    kept = segmenter(cut_images(split, keep))
-    return (kept.clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
+    from .seg_masks import as_u8
+
+    return as_u8(segmenter(cut_images(split, keep)))
 
 
 def fourier_upper_cached(root: Path, split: str, k: int, every: int = 2, seg: Path | None = None, passes: int = 1):

@@ -153,6 +153,11 @@ def passes_tag(passes: int) -> str:
     return "-p2" if passes > 1 else ""
 
 
+def as_u8(soft: torch.Tensor) -> torch.Tensor:
+    """u8 [B, 1, H, W] (soft mask x 255, the caches' form) of soft masks [B, H, W]."""
+    return (soft.clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
+
+
 def product_masks(model: Path, images: torch.Tensor, passes: int = 1) -> torch.Tensor:
     """Soft masks [B, H, W] of the most prominent person in RGB [B, 3, 256, 256] in [0, 1], as
     the engine's `Models::person_mask` makes them: segmented, the largest person kept, with
@@ -175,6 +180,6 @@ def predicted_masks(root: Path, split, split_name: str, model: Path, passes: int
         if out.shape[0] == len(split):
             return out
     images = torch.stack([split.rgb01(i) for i in range(len(split))])
-    out = (product_masks(model, images, passes).clamp(0, 1) * 255).round().to(torch.uint8)[:, None]
+    out = as_u8(product_masks(model, images, passes))
     torch.save(out, cache)
     return out

@@ -67,17 +67,11 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         })
         .collect();
     let mut compute = sh.compute.to_json();
-    compute["render_workers"] = sh.render_workers.into();
-    let counts = |v: &[std::sync::atomic::AtomicU64]| -> serde_json::Value {
-        v.iter()
-            .map(|n| n.load(Ordering::Relaxed))
-            .collect::<Vec<_>>()
-            .into()
-    };
-    compute["render_worker_frames"] = counts(&sh.render_worker_frames);
+    compute["render_workers"] = sh.render.count().into();
+    compute["render_worker_frames"] = sh.render.frame_counts().into();
     if sh.mode == "model" {
-        compute["segment_workers"] = sh.segment_workers.into();
-        compute["segment_worker_frames"] = counts(&sh.segment_worker_frames);
+        compute["segment_workers"] = sh.segment.count().into();
+        compute["segment_worker_frames"] = sh.segment.frame_counts().into();
     }
     serde_json::json!({
         "state": state, "reason": reason, "mode": sh.mode,

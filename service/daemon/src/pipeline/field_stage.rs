@@ -97,7 +97,7 @@ pub(super) fn spawn_segment(
         .name(name)
         .spawn(move || {
             while !sh.stop.load(Ordering::Relaxed) {
-                sh.beat_segment(worker);
+                sh.beat_worker(&sh.segment, worker);
                 if sh.live().resolution > split_up_to {
                     std::thread::sleep(Duration::from_millis(20));
                     continue;
@@ -116,9 +116,7 @@ pub(super) fn spawn_segment(
                     continue;
                 }
                 let seg = segment(&sh, &models, &f, threads);
-                if let Some(n) = sh.segment_worker_frames.get(worker) {
-                    n.fetch_add(1, Ordering::Relaxed);
-                }
+                sh.segment.finished(worker);
                 let at = f.at;
                 if out.put_newer((f, seg), at) != super::Put::Fresh {
                     sh.stats[stage::SEGMENT]
@@ -340,11 +338,7 @@ mod tests {
         }
         assert!(seen.len() >= 15, "{} frames published", seen.len());
         assert!(seen.windows(2).all(|w| w[0] < w[1]), "{seen:?}");
-        let per_worker: Vec<u64> = shared
-            .segment_worker_frames
-            .iter()
-            .map(|n| n.load(Ordering::Relaxed))
-            .collect();
+        let per_worker = shared.segment.frame_counts();
         assert!(per_worker.iter().all(|&n| n > 0), "{per_worker:?}");
         assert!(
             shared

@@ -48,9 +48,7 @@ pub(super) fn spawn(
             // Frames go out in capture order: one finished after a newer one (another
             // worker's) is work nobody needed, as one replaced before it was taken.
             let publish = |r: Rendered| {
-                if let Some(n) = sh.render_worker_frames.get(worker) {
-                    n.fetch_add(1, Ordering::Relaxed);
-                }
+                sh.render.finished(worker);
                 let at = r.at;
                 if out.put_newer(r, at) != Put::Fresh {
                     sh.stats[stage::RENDER]
@@ -70,7 +68,7 @@ pub(super) fn spawn(
                 });
             };
             while !sh.stop.load(Ordering::Relaxed) {
-                sh.beat_render(worker);
+                sh.beat_worker(&sh.render, worker);
                 let (f, outcome) = if mode == FieldMode::Model {
                     let Some((f, o)) = fielded.take(Duration::from_millis(200)) else {
                         continue;
@@ -211,7 +209,7 @@ mod tests {
         let (factory, _) = crate::capture::factory(&cfg).unwrap();
         let (tx, mut rx) = tokio::sync::watch::channel(None);
         let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
-        assert_eq!(shared.render_workers, 3);
+        assert_eq!(shared.render.count(), 3);
         let threads = start(&cfg, factory, shared.clone(), None);
         let seen = published_indices(&mut rx, 40, Duration::from_secs(60));
         shared.stop.store(true, Ordering::Relaxed);
@@ -223,11 +221,7 @@ mod tests {
             seen.windows(2).all(|w| w[0] < w[1]),
             "published out of capture order: {seen:?}"
         );
-        let per_worker: Vec<u64> = shared
-            .render_worker_frames
-            .iter()
-            .map(|n| n.load(Ordering::Relaxed))
-            .collect();
+        let per_worker = shared.render.frame_counts();
         assert_eq!(per_worker.len(), 3);
         assert!(
             per_worker.iter().filter(|&&n| n > 0).count() >= 2,
