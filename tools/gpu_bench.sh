@@ -25,7 +25,8 @@
 # series' K: the default fourier-small-seg2 against fourier-small-k31, 63 maps), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
-# nets.md (the networks, tract and the GPU kernels, each profiled per node or step), with
+# nets.md (the networks, tract and the GPU kernels, each profiled per node or step; the
+# kernels with and without row convolutions, wgpu-conv4 their baseline in the same run), with
 # run.log. The device is named in every table; the CPU rows are that machine's cores, not the
 # appliance's two.
 set -euo pipefail
@@ -146,7 +147,8 @@ case "$mode" in
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --render-device shared,own --out "$out/devices"
     echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
-    "$bin" bench nets --runtime tract,wgpu --runs "$((runs * 4))" --profile --top 12 --out "$out"
+    "$bin" bench nets --model fourier-small-seg2,fourier-medium --runtime tract,wgpu,wgpu-conv4 \
+      --runs "$((runs * 4))" --profile --top 12 --out "$out"
     ls -la "$out"
     ;;
   *)

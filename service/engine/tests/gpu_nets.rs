@@ -278,3 +278,391 @@ fn an_op_without_a_kernel_is_refused_at_load_naming_op_and_node() {
     };
     assert!(e.contains("int8.onnx") && e.contains("GPU backend"), "{e}");
 }
+
+/// One convolution's settings for [`convolutions_match_an_f64_reference_on_every_kernel`].
+struct ConvCase {
+    c: usize,
+    hw: [usize; 2],
+    m: usize,
+    k: [usize; 2],
+    stride: [usize; 2],
+    /// Top, left, bottom, right.
+    pads: [usize; 4],
+    dilation: [usize; 2],
+    group: usize,
+    bias: bool,
+    relu: bool,
+}
+
+/// A graph of one Conv (and a Relu after it, which the plan fuses), its weights and bias.
+fn conv_graph(t: &ConvCase, w: &[f32], b: &[f32]) -> tract_onnx::pb::GraphProto {
+    use tract_onnx::pb::{AttributeProto, GraphProto, NodeProto, TensorProto, ValueInfoProto};
+    let ints = |name: &str, v: Vec<i64>| AttributeProto {
+        name: name.into(),
+        r#type: 7,
+        ints: v,
+        ..Default::default()
+    };
+    let tensor = |name: &str, dims: Vec<i64>, data: &[f32]| TensorProto {
+        name: name.into(),
+        dims,
+        data_type: 1,
+        float_data: data.to_vec(),
+        ..Default::default()
+    };
+    let i64s = |v: &[usize]| v.iter().map(|&x| x as i64).collect::<Vec<_>>();
+    let mut inputs = vec!["x".to_string(), "w".to_string()];
+    let mut init = vec![tensor("w", i64s(&[t.m, t.c / t.group, t.k[0], t.k[1]]), w)];
+    if t.bias {
+        inputs.push("b".into());
+        init.push(tensor("b", vec![t.m as i64], b));
+    }
+    let conv_out = if t.relu { "c" } else { "y" };
+    let mut node = vec![NodeProto {
+        input: inputs,
+        output: vec![conv_out.into()],
+        name: "conv".into(),
+        op_type: "Conv".into(),
+        attribute: vec![
+            ints("kernel_shape", i64s(&t.k)),
+            ints("strides", i64s(&t.stride)),
+            ints("pads", i64s(&t.pads)),
+            ints("dilations", i64s(&t.dilation)),
+            AttributeProto {
+                name: "group".into(),
+                r#type: 2,
+                i: t.group as i64,
+                ..Default::default()
+            },
+        ],
+        ..Default::default()
+    }];
+    if t.relu {
+        node.push(NodeProto {
+            input: vec!["c".into()],
+            output: vec!["y".into()],
+            name: "relu".into(),
+            op_type: "Relu".into(),
+            ..Default::default()
+        });
+    }
+    let value = |name: &str| ValueInfoProto {
+        name: name.into(),
+        ..Default::default()
+    };
+    GraphProto {
+        node,
+        initializer: init,
+        input: vec![value("x")],
+        output: vec![value("y")],
+        ..Default::default()
+    }
+}
+
+/// The convolution in f64, NCHW (batch 1), zero padding.
+fn conv_reference(t: &ConvCase, x: &[f32], w: &[f32], b: &[f32]) -> (Vec<usize>, Vec<f64>) {
+    let [h, wd] = t.hw;
+    let span = |i: usize| t.dilation[i] * (t.k[i] - 1) + 1;
+    let oh = (h + t.pads[0] + t.pads[2] - span(0)) / t.stride[0] + 1;
+    let ow = (wd + t.pads[1] + t.pads[3] - span(1)) / t.stride[1] + 1;
+    let (cpg, mpg) = (t.c / t.group, t.m / t.group);
+    let mut y = vec![0.0f64; t.m * oh * ow];
+    for m in 0..t.m {
+        let g = m / mpg;
+        for oy in 0..oh {
+            for ox in 0..ow {
+                let mut acc = if t.bias { b[m] as f64 } else { 0.0 };
+                for c in 0..cpg {
+                    for ky in 0..t.k[0] {
+                        for kx in 0..t.k[1] {
+                            let iy =
+                                (oy * t.stride[0] + ky * t.dilation[0]) as i64 - t.pads[0] as i64;
+                            let ix =
+                                (ox * t.stride[1] + kx * t.dilation[1]) as i64 - t.pads[1] as i64;
+                            if iy < 0 || ix < 0 || iy >= h as i64 || ix >= wd as i64 {
+                                continue;
+                            }
+                            let xv = x[((g * cpg + c) * h + iy as usize) * wd + ix as usize];
+                            let wv = w[((m * cpg + c) * t.k[0] + ky) * t.k[1] + kx];
+                            acc += xv as f64 * wv as f64;
+                        }
+                    }
+                }
+                y[(m * oh + oy) * ow + ox] = if t.relu { acc.max(0.0) } else { acc };
+            }
+        }
+    }
+    (vec![1, t.m, oh, ow], y)
+}
+
+/// Values in [-1, 1) from a hash of their index (no period an index error could hide in).
+fn hashed(n: usize, seed: u64) -> Vec<f32> {
+    (0..n as u64)
+        .map(|i| {
+            let mut z = (i + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ seed;
+            z = (z ^ (z >> 31)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            ((z >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}
+
+/// Every convolution kernel (`conv`: grouped or under four outputs; `conv4`: narrow planes;
+/// `conv_row`: four columns per invocation) against an f64 reference, over strides,
+/// dilations, asymmetric padding, widths that are not a multiple of four, output counts
+/// that are not (the zero channels the plan pads with never written), windows that reach
+/// past every border, with and without bias and a fused ReLU.
+#[test]
+fn convolutions_match_an_f64_reference_on_every_kernel() {
+    use volcap_engine::gpu::net::{GpuNet, plan::Kernel};
+    let Some(gpu) = gpu() else { return };
+    let case = |c, hw, m, k, stride, pads, dilation, group, bias, relu| ConvCase {
+        c,
+        hw,
+        m,
+        k,
+        stride,
+        pads,
+        dilation,
+        group,
+        bias,
+        relu,
+    };
+    let cases = [
+        // conv_row: 3x3 same padding, width 13 (a partial last block), 5 outputs.
+        case(
+            3,
+            [11, 13],
+            5,
+            [3, 3],
+            [1, 1],
+            [1, 1, 1, 1],
+            [1, 1],
+            1,
+            true,
+            true,
+        ),
+        // conv_row: stride 2, asymmetric padding, 31 outputs (the Fourier head's count).
+        case(
+            4,
+            [17, 20],
+            31,
+            [3, 3],
+            [2, 2],
+            [0, 1, 2, 0],
+            [1, 1],
+            1,
+            true,
+            false,
+        ),
+        // conv_row: dilation 2, a 5x3 window, no bias, no padding.
+        case(
+            6,
+            [12, 19],
+            8,
+            [5, 3],
+            [1, 1],
+            [0, 0, 0, 0],
+            [2, 2],
+            1,
+            false,
+            true,
+        ),
+        // conv_row: pointwise over 16 columns, 12 outputs.
+        case(
+            9,
+            [4, 16],
+            12,
+            [1, 1],
+            [1, 1],
+            [0, 0, 0, 0],
+            [1, 1],
+            1,
+            true,
+            false,
+        ),
+        // conv_row: padding wider than the window reaches (every block at a border).
+        case(
+            2,
+            [5, 9],
+            4,
+            [3, 3],
+            [1, 2],
+            [3, 3, 3, 3],
+            [1, 1],
+            1,
+            true,
+            false,
+        ),
+        // conv4: 7 output columns, 6 outputs.
+        case(
+            5,
+            [7, 7],
+            6,
+            [3, 3],
+            [1, 1],
+            [1, 1, 1, 1],
+            [1, 1],
+            1,
+            true,
+            true,
+        ),
+        // conv: depthwise 5x5, stride 2.
+        case(
+            8,
+            [15, 18],
+            8,
+            [5, 5],
+            [2, 2],
+            [2, 2, 2, 2],
+            [1, 1],
+            8,
+            true,
+            false,
+        ),
+        // conv: grouped (2 groups), and under four outputs.
+        case(
+            4,
+            [9, 10],
+            2,
+            [3, 3],
+            [1, 1],
+            [1, 1, 1, 1],
+            [1, 1],
+            2,
+            true,
+            true,
+        ),
+        case(
+            3,
+            [9, 12],
+            1,
+            [3, 3],
+            [1, 1],
+            [1, 1, 1, 1],
+            [1, 1],
+            1,
+            true,
+            false,
+        ),
+    ];
+    let mut kernels = std::collections::HashSet::new();
+    for (i, t) in cases.iter().enumerate() {
+        let x = hashed(t.c * t.hw[0] * t.hw[1], 1 + i as u64);
+        let w = hashed(t.m * (t.c / t.group) * t.k[0] * t.k[1], 100 + i as u64);
+        let b = hashed(t.m, 200 + i as u64);
+        let graph = conv_graph(t, &w, &b);
+        let shape = vec![1, t.c, t.hw[0], t.hw[1]];
+        let plan = volcap_engine::gpu::net::plan::plan(
+            &graph,
+            std::slice::from_ref(&shape),
+            Default::default(),
+        )
+        .unwrap();
+        assert_eq!(plan.steps.len(), 1, "case {i}: one fused step");
+        kernels.insert(plan.steps[0].kernel);
+        let (want_shape, want) = conv_reference(t, &x, &w, &b);
+        assert_eq!(plan.output.1, want_shape, "case {i}: output shape");
+        let net = GpuNet::from_graph(gpu.clone(), graph).unwrap();
+        let got = net.run(&[(&shape, &x)]).unwrap();
+        assert_eq!(got.len(), want.len(), "case {i}");
+        let scale = want.iter().fold(1e-3f64, |a, v| a.max(v.abs()));
+        let (at, worst) = got
+            .iter()
+            .zip(&want)
+            .map(|(g, w)| (*g as f64 - w).abs())
+            .enumerate()
+            .fold((0, 0.0f64), |a, (j, d)| if d > a.1 { (j, d) } else { a });
+        assert!(
+            worst / scale <= 1e-5,
+            "case {i} ({:?}): value {at} off by {worst:.3e} (scale {scale:.3})",
+            plan.steps[0].kernel
+        );
+    }
+    for k in [Kernel::Conv, Kernel::Conv4, Kernel::ConvRow] {
+        assert!(kernels.contains(&k), "{k:?} not exercised: {kernels:?}");
+    }
+}
+
+/// Pooling whose window is the whole plane (`pool_plane`: global average and max, and the
+/// squeeze-excitation's AveragePool with kernel = stride = the plane) against an f64
+/// reference, on planes smaller than a workgroup, between one and four of its strides, and
+/// as large as the segmentation's 128 x 128.
+#[test]
+fn pooling_over_the_whole_plane_matches_an_f64_reference() {
+    use tract_onnx::pb::{AttributeProto, GraphProto, NodeProto, ValueInfoProto};
+    use volcap_engine::gpu::net::{GpuNet, plan::Kernel};
+    let Some(gpu) = gpu() else { return };
+    let value = |name: &str| ValueInfoProto {
+        name: name.into(),
+        ..Default::default()
+    };
+    let ints = |name: &str, v: Vec<i64>| AttributeProto {
+        name: name.into(),
+        r#type: 7,
+        ints: v,
+        ..Default::default()
+    };
+    for (i, (op, c, h, w)) in [
+        ("GlobalAveragePool", 3, 1, 1),
+        ("GlobalMaxPool", 5, 7, 9),
+        ("GlobalAveragePool", 4, 10, 20),
+        ("GlobalMaxPool", 2, 16, 17),
+        ("AveragePool", 16, 128, 128),
+        ("GlobalMaxPool", 3, 128, 128),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let attribute = if op == "AveragePool" {
+            vec![
+                ints("kernel_shape", vec![h as i64, w as i64]),
+                ints("strides", vec![h as i64, w as i64]),
+            ]
+        } else {
+            vec![]
+        };
+        let graph = GraphProto {
+            node: vec![NodeProto {
+                input: vec!["x".into()],
+                output: vec!["y".into()],
+                name: "pool".into(),
+                op_type: op.into(),
+                attribute,
+                ..Default::default()
+            }],
+            input: vec![value("x")],
+            output: vec![value("y")],
+            ..Default::default()
+        };
+        let shape = vec![1, c, h, w];
+        // Values around 10 with a spread, so that a sum's rounding would show.
+        let x: Vec<f32> = hashed(c * h * w, 300 + i as u64)
+            .iter()
+            .map(|v| 10.0 + 3.0 * v)
+            .collect();
+        let plan = volcap_engine::gpu::net::plan::plan(
+            &graph,
+            std::slice::from_ref(&shape),
+            Default::default(),
+        )
+        .unwrap();
+        assert_eq!(plan.steps[0].kernel, Kernel::PoolPlane, "{op} {shape:?}");
+        let got = GpuNet::from_graph(gpu.clone(), graph)
+            .unwrap()
+            .run(&[(&shape, &x)])
+            .unwrap();
+        assert_eq!(got.len(), c);
+        for (k, g) in got.iter().enumerate() {
+            let p = &x[k * h * w..(k + 1) * h * w];
+            let want = if op.contains("Max") {
+                p.iter().fold(f64::MIN, |m, &v| m.max(v as f64))
+            } else {
+                p.iter().map(|&v| v as f64).sum::<f64>() / p.len() as f64
+            };
+            assert!(
+                (*g as f64 - want).abs() <= 1e-6 * want.abs(),
+                "{op} {shape:?} plane {k}: {g} against {want}"
+            );
+        }
+    }
+}

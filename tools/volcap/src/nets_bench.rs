@@ -20,7 +20,8 @@ pub struct NetsArgs {
     pub models: Vec<String>,
     /// Runtimes (comma-separated): tract, onnxruntime (its library as the daemon finds it:
     /// $VOLCAP_ONNXRUNTIME, /usr/lib/volcap/onnxruntime/, target/onnxruntime/), wgpu (the
-    /// GPU backend's kernels; build with `--features wgpu`).
+    /// GPU backend's kernels; build with `--features wgpu`), wgpu-conv4 (the same without
+    /// the row convolutions: every ungrouped convolution four channels per invocation).
     #[arg(
         long = "runtime",
         value_delimiter = ',',
@@ -67,9 +68,16 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
     let filter = temporal_cost(a.runs)?;
     let mut runtimes = Vec::new();
     for r in &a.runtimes {
-        if r.trim() == "wgpu" {
-            // The GPU backend's kernels on the first adapter `auto` picks.
-            runtimes.push(crate::backend::open("wgpu", "tract", "auto")?.0);
+        if r.trim() == "wgpu" || r.trim() == "wgpu-conv4" {
+            // The GPU backend's kernels on the first adapter `auto` picks; wgpu-conv4 on a
+            // device of its own without row convolutions (the baseline they are measured
+            // against in the same run).
+            let rt = crate::backend::open("wgpu", "tract", "auto")?.0;
+            #[cfg(feature = "wgpu")]
+            if let Runtime::Wgpu(g) = &rt {
+                g.set_row_convolutions(r.trim() == "wgpu");
+            }
+            runtimes.push(rt);
             continue;
         }
         let choice = RuntimeChoice::parse(r.trim()).map_err(|e| anyhow!("--runtime: {e}"))?;

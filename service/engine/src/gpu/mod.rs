@@ -26,7 +26,7 @@ pub mod net;
 pub mod render;
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// One adapter as wgpu reports it.
@@ -189,6 +189,9 @@ pub struct Gpu {
     pub(crate) field_pool: Mutex<Vec<fourier::FieldBuffers>>,
     /// Frames' coefficient-map buffers kept for the next frames ([`maps::GpuMaps`]).
     pub(crate) maps_pool: Mutex<Vec<maps::FrameBufs>>,
+    /// Whether networks planned from now on run their wide convolutions four columns per
+    /// invocation ([`net::plan::Options::row_convolutions`]; on unless set off).
+    row_convolutions: AtomicBool,
 }
 
 impl std::fmt::Debug for Gpu {
@@ -253,7 +256,9 @@ impl Gpu {
             .into_iter()
             .find(|a| AdapterSummary::of(&a.get_info()) == self.adapter)
             .ok_or_else(|| format!("{}: not listed again", self.adapter.label()))?;
-        Self::on(picked, self.counters.clone())
+        let g = Self::on(picked, self.counters.clone())?;
+        g.set_row_convolutions(self.row_convolutions());
+        Ok(g)
     }
 
     fn on(picked: wgpu::Adapter, counters: Arc<Counters>) -> Result<Arc<Gpu>, String> {
@@ -280,7 +285,20 @@ impl Gpu {
             pipelines: Mutex::new(HashMap::new()),
             field_pool: Mutex::new(Vec::new()),
             maps_pool: Mutex::new(Vec::new()),
+            row_convolutions: AtomicBool::new(true),
         }))
+    }
+
+    /// Plan the networks of this device from now on with ([`net::plan::Kernel::ConvRow`],
+    /// the default) or without row convolutions (`conv4` only: the bench's baseline). Plans
+    /// already made keep theirs.
+    pub fn set_row_convolutions(&self, on: bool) {
+        self.row_convolutions.store(on, Ordering::Relaxed);
+    }
+
+    /// Whether networks are planned with row convolutions ([`Gpu::set_row_convolutions`]).
+    pub fn row_convolutions(&self) -> bool {
+        self.row_convolutions.load(Ordering::Relaxed)
     }
 
     /// The compute pipeline of a kernel (compiled on first use, then shared).

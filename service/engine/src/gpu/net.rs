@@ -25,6 +25,7 @@ fn source(k: Kernel) -> (&'static str, &'static str) {
         Kernel::Unary => ("unary", include_str!("net/unary.wgsl")),
         Kernel::Conv => ("conv", include_str!("net/conv.wgsl")),
         Kernel::Conv4 => ("conv4", include_str!("net/conv4.wgsl")),
+        Kernel::ConvRow => ("conv_row", include_str!("net/conv_row.wgsl")),
         Kernel::ConvTranspose => ("conv_transpose", include_str!("net/conv_transpose.wgsl")),
         Kernel::Pool => ("pool", include_str!("net/pool.wgsl")),
         Kernel::PoolPlane => ("pool_plane", include_str!("net/pool_plane.wgsl")),
@@ -90,7 +91,12 @@ impl GpuNet {
         let proto = tract_onnx::onnx()
             .proto_model_for_path(path)
             .map_err(|e| format!("not a readable ONNX model: {e}"))?;
-        let graph = proto.graph.ok_or("no graph")?;
+        Self::from_graph(gpu, proto.graph.ok_or("no graph")?)
+    }
+
+    /// A network from a graph already read (the tests' hand-made graphs); its ops checked as
+    /// [`GpuNet::load`] checks them.
+    pub fn from_graph(gpu: Arc<Gpu>, graph: GraphProto) -> Result<GpuNet, String> {
         plan::check_ops(&graph)?;
         Ok(GpuNet {
             gpu,
@@ -105,7 +111,11 @@ impl GpuNet {
     }
 
     fn realize(&self, shapes: &[Vec<usize>], keep_all: bool) -> Result<Realized, String> {
-        let plan = plan::plan(&self.graph, shapes, keep_all)?;
+        let opts = plan::Options {
+            keep_all,
+            row_convolutions: self.gpu.row_convolutions(),
+        };
+        let plan = plan::plan(&self.graph, shapes, opts)?;
         let dev = &self.gpu.device;
         let usage = wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_DST
@@ -479,6 +489,10 @@ impl GpuNet {
 
     /// The number of dispatches of the plan for `shapes` (planning only).
     pub fn dispatches(&self, shapes: &[Vec<usize>]) -> Result<usize, String> {
-        Ok(plan::plan(&self.graph, shapes, false)?.steps.len())
+        let opts = plan::Options {
+            row_convolutions: self.gpu.row_convolutions(),
+            ..Default::default()
+        };
+        Ok(plan::plan(&self.graph, shapes, opts)?.steps.len())
     }
 }

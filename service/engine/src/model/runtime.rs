@@ -149,7 +149,15 @@ impl Runtime {
             #[cfg(feature = "onnxruntime")]
             Runtime::OnnxRuntime(o) => format!("onnxruntime {}", o.version),
             #[cfg(feature = "wgpu")]
-            Runtime::Wgpu(g) => format!("wgpu {}", g.adapter.name),
+            Runtime::Wgpu(g) => format!(
+                "wgpu {}{}",
+                g.adapter.name,
+                if g.row_convolutions() {
+                    ""
+                } else {
+                    " (conv4 only)"
+                }
+            ),
         }
     }
 

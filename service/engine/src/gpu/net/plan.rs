@@ -24,6 +24,9 @@ pub enum Kernel {
     Conv,
     /// Four output channels per invocation (ungrouped convolutions of 4 outputs or more).
     Conv4,
+    /// Four output channels by four output columns per invocation (the same convolutions
+    /// over rows of at least 8 columns: `ops/layers.rs`).
+    ConvRow,
     ConvTranspose,
     Pool,
     /// A window over the whole plane: a workgroup per plane, reduced in workgroup memory.
@@ -212,6 +215,7 @@ struct Planner {
     buf_uses: Vec<usize>,
     free: Vec<usize>,
     keep_all: bool,
+    row_convolutions: bool,
     /// Constants uploaded, by value name.
     uploaded: HashMap<String, usize>,
     tensors: Vec<(String, usize, Vec<usize>)>,
@@ -420,12 +424,33 @@ pub fn check_ops(graph: &GraphProto) -> Result<(), String> {
     Ok(())
 }
 
+/// How a graph is planned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Options {
+    /// No buffer reuse, so that every tensor can be read after a run (the per-layer parity
+    /// test).
+    pub keep_all: bool,
+    /// Ungrouped convolutions over rows of 8 columns or more with four columns per
+    /// invocation ([`Kernel::ConvRow`]); off, [`Kernel::Conv4`] (the bench's baseline:
+    /// [`super::super::Gpu::set_row_convolutions`]).
+    pub row_convolutions: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            keep_all: false,
+            row_convolutions: true,
+        }
+    }
+}
+
 /// Plan `graph` for inputs of `shapes` (the graph's non-initializer inputs, in order).
-/// `keep_all`: no buffer reuse, so that every tensor can be read after a run (the
-/// per-layer parity test).
-pub fn plan(graph: &GraphProto, shapes: &[Vec<usize>], keep_all: bool) -> Result<Plan, String> {
+pub fn plan(graph: &GraphProto, shapes: &[Vec<usize>], opts: Options) -> Result<Plan, String> {
     check_ops(graph)?;
+    let keep_all = opts.keep_all;
     let mut pl = Planner {
+        row_convolutions: opts.row_convolutions,
         buffers: Vec::new(),
         steps: Vec::new(),
         vals: HashMap::new(),

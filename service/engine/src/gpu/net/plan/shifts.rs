@@ -245,7 +245,7 @@ mod tests {
     }
 
     fn resizes(g: &GraphProto, shapes: &[Vec<usize>]) -> (usize, usize) {
-        let p = plan(g, shapes, false).unwrap();
+        let p = plan(g, shapes, Default::default()).unwrap();
         let r = p
             .steps
             .iter()

@@ -143,6 +143,12 @@ pub(super) fn conv(
         w.resize(padded * (w.len() / m), 0.0);
         bias.resize(padded, 0.0);
     }
+    // Rows of at least 8 columns: four channels by four columns per invocation, the weights
+    // regrouped so that each tap's four channels are one vector (`conv_row.wgsl`).
+    let rows = blocked && pl.row_convolutions && o[1] >= ROW_MIN_COLUMNS;
+    if rows {
+        w = row_weights(&w, m.div_ceil(4) * 4);
+    }
     let wb = pl.upload(w);
     let bb = pl.upload(bias);
     let oshape = vec![nb, m, o[0], o[1]];
@@ -150,12 +156,15 @@ pub(super) fn conv(
     let dims = [
         nb, c, h, wd, m, o[0], o[1], k[0], k[1], s[0], s[1], pt[0], pt[1], d[0], d[1], group,
     ];
-    let kernel = match (transpose, blocked) {
-        (true, _) => Kernel::ConvTranspose,
-        (false, true) => Kernel::Conv4,
-        (false, false) => Kernel::Conv,
+    let kernel = match (transpose, blocked, rows) {
+        (true, _, _) => Kernel::ConvTranspose,
+        (false, true, true) => Kernel::ConvRow,
+        (false, true, false) => Kernel::Conv4,
+        (false, false, _) => Kernel::Conv,
     };
-    let count = if blocked {
+    let count = if rows {
+        nb * m.div_ceil(4) * o[0] * o[1].div_ceil(4)
+    } else if blocked {
         nb * m.div_ceil(4) * o[0] * o[1]
     } else {
         numel(&oshape)
@@ -166,6 +175,22 @@ pub(super) fn conv(
     pl.step(kernel, p, vec![b, wb, bb, ob]);
     pl.define_dev(out, ob, oshape);
     Ok(())
+}
+
+/// Output columns from which an ungrouped convolution runs four columns per invocation
+/// (`conv_row.wgsl`); narrower planes (the squeeze-excitation's 1 x 1) keep `conv4`.
+const ROW_MIN_COLUMNS: usize = 8;
+
+/// Weights `[M4, C, KH, KW]` (M4 a multiple of 4) regrouped as `[M4 / 4, C, KH, KW, 4]`:
+/// a block's four output channels side by side at each input channel and tap.
+fn row_weights(w: &[f32], m4: usize) -> Vec<f32> {
+    let per = w.len() / m4;
+    let mut out = vec![0.0; w.len()];
+    for (i, &v) in w.iter().enumerate() {
+        let (m, t) = (i / per, i % per);
+        out[((m / 4) * per + t) * 4 + m % 4] = v;
+    }
+    out
 }
 
 pub(super) fn pool(pl: &mut Planner, n: &NodeProto, out: &str) -> Result<(), String> {
