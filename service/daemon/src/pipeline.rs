@@ -385,26 +385,39 @@ pub mod stage {
 /// The parts of the field and render stages in model mode (`Shared::parts`, by these
 /// indices): where each stage's time goes, for the pipeline bench.
 pub mod part {
+    /// Segment: the frame letterboxed into the networks' square input.
+    pub const LETTERBOX: usize = 0;
+    /// Segment: the segmentation network, once per pass (on the GPU backend each run with
+    /// its upload and read-back).
+    pub const SEG_NETS: usize = 1;
+    /// Segment: the rest on the host (the most prominent person, the second pass's crop and
+    /// paste, the person's crop).
+    pub const PERSON: usize = 2;
     /// Field: the image and mask cropped to the networks' input.
-    pub const INPUT: usize = 0;
+    pub const INPUT: usize = 3;
     /// Field: the shape network (on the GPU backend's Fourier frames, with its maps'
     /// temporal filter on the adapter, in the network's submission).
-    pub const SHAPE: usize = 1;
+    pub const SHAPE: usize = 4;
     /// Field: the colour encoder.
-    pub const COLOR: usize = 2;
+    pub const COLOR: usize = 5;
     /// Field: the temporal filter of the maps (on the GPU backend's Fourier frames, what stays
     /// on the host: the mask, the crop and the colour features).
-    pub const TEMPORAL: usize = 3;
+    pub const TEMPORAL: usize = 6;
     /// Field: the field made (on the GPU backend, the maps' buffers on the adapter).
-    pub const FIELD: usize = 4;
+    pub const FIELD: usize = 7;
     /// Render: localization and the surface depths (on the GPU backend, the adapter's frame).
-    pub const LOCALIZE: usize = 5;
+    pub const LOCALIZE: usize = 8;
     /// Render: the surface points' colour (and shading), the grid-size image.
-    pub const SURFACE: usize = 6;
+    pub const SURFACE: usize = 9;
     /// Render: the rest of the stage (the image at display size).
-    pub const DISPLAY: usize = 7;
-    pub const COUNT: usize = 8;
+    pub const DISPLAY: usize = 10;
+    pub const COUNT: usize = 11;
+    /// The first part of each stage split into parts (segment, field, render), and the end.
+    pub const STAGE_STARTS: [usize; 4] = [LETTERBOX, INPUT, LOCALIZE, COUNT];
     pub const NAMES: [&str; COUNT] = [
+        "segment: letterbox",
+        "segment: networks",
+        "segment: person and crop",
         "field: input",
         "field: shape net",
         "field: colour encoder",

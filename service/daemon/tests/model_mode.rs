@@ -37,10 +37,15 @@ fn model_mode_renders_network_output() {
             .unwrap()
             .contains("trained networks")
     );
-    // Where the field and render stages' time goes, in /state and /metrics: the shape
-    // network and the localization timed; the camera's view runs no colour encoder.
+    // Where the segment, field and render stages' time goes, in /state and /metrics: the
+    // segmentation network, the shape network and the localization timed; the camera's view
+    // runs no colour encoder.
     let parts = &s["stage_parts"];
-    assert_eq!(parts.as_object().map(|o| o.len()), Some(8), "{s}");
+    assert_eq!(parts.as_object().map(|o| o.len()), Some(11), "{s}");
+    assert!(
+        parts["segment: networks"]["p50_ms"].as_f64() > Some(0.0),
+        "{s}"
+    );
     assert!(
         parts["field: shape net"]["p50_ms"].as_f64() > Some(0.0),
         "{s}"

@@ -48,9 +48,10 @@ pub struct Row {
     /// p50 ms per stage, in `volcapd::pipeline::STAGES` order (capture, segment, field,
     /// render, encode).
     pub stage_p50_ms: [f64; 5],
-    /// Model mode: the mean ms of each part of the field and render stages
-    /// (`volcapd::pipeline::part::NAMES` order), with the two stages' means; empty otherwise.
+    /// Model mode: the mean ms of each part of the segment, field and render stages
+    /// (`volcapd::pipeline::part::NAMES` order), with the three stages' means; empty otherwise.
     pub part_mean_ms: Vec<f64>,
+    pub segment_mean_ms: f64,
     pub field_mean_ms: f64,
     pub render_mean_ms: f64,
     /// Occupancy evaluations per rendered frame.
@@ -217,6 +218,7 @@ fn measure(
     } else {
         Vec::new()
     };
+    let segment_mean_ms = shared.stats[stage::SEGMENT].mean(t0);
     let field_mean_ms = shared.stats[stage::FIELD].mean(t0);
     let render_mean_ms = shared.stats[stage::RENDER].mean(t0);
     let error = match &*shared.state.lock().unwrap_or_else(|p| p.into_inner()) {
@@ -248,6 +250,7 @@ fn measure(
         latency_p99_ms: l99,
         stage_p50_ms,
         part_mean_ms,
+        segment_mean_ms,
         field_mean_ms,
         render_mean_ms,
         evaluations: evals as f64 / rendered.max(1) as f64,

@@ -217,24 +217,32 @@ fn pipeline_bench_measures_every_configuration() {
             p50 > 0.0 && p50 <= r["latency_p99_ms"].as_f64().unwrap(),
             "{r}"
         );
-        // The field and render stages' parts (model mode): each timed, adding up to about
-        // their stage's mean (the render's exactly per frame; the field's less the thread's
-        // bookkeeping; a frame at the window's edge may count on one side only).
+        // The segment, field and render stages' parts (model mode): each timed, adding up to
+        // about their stage's mean (the segment's and the render's exactly per frame; the
+        // field's less the thread's bookkeeping; a frame at the window's edge may count on
+        // one side only).
         let parts: Vec<f64> = r["part_mean_ms"]
             .as_array()
             .unwrap()
             .iter()
             .map(|v| v.as_f64().unwrap())
             .collect();
-        assert_eq!(parts.len(), 8, "{r}");
+        assert_eq!(parts.len(), 11, "{r}");
         assert!(parts.iter().all(|v| v.is_finite() && *v >= 0.0), "{r}");
-        // The shape network, the localization and the surface take time.
-        assert!(parts[1] > 0.0 && parts[5] > 0.0 && parts[6] > 0.0, "{r}");
-        let (field, render) = (
+        // The segmentation network, the shape network, the localization and the surface
+        // take time.
+        assert!(
+            parts[1] > 0.0 && parts[4] > 0.0 && parts[8] > 0.0 && parts[9] > 0.0,
+            "{r}"
+        );
+        let (segment, field, render) = (
+            r["segment_mean_ms"].as_f64().unwrap(),
             r["field_mean_ms"].as_f64().unwrap(),
             r["render_mean_ms"].as_f64().unwrap(),
         );
-        let (f_sum, r_sum): (f64, f64) = (parts[..5].iter().sum(), parts[5..].iter().sum());
+        let s_sum: f64 = parts[..3].iter().sum();
+        let (f_sum, r_sum): (f64, f64) = (parts[3..8].iter().sum(), parts[8..].iter().sum());
+        assert!(s_sum > 0.75 * segment && s_sum < 1.25 * segment, "{r}");
         assert!(f_sum > 0.5 * field && f_sum < 1.25 * field, "{r}");
         assert!(r_sum > 0.75 * render && r_sum < 1.25 * render, "{r}");
         let x1 = r["speedup_vs_1_thread"].as_f64().unwrap();
@@ -253,7 +261,7 @@ fn pipeline_bench_measures_every_configuration() {
     let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
     // The default model: one row per configuration in the stages' table and in the parts'.
     let (stages, parts) = md
-        .split_once("Where the field and render stages' time goes")
+        .split_once("Where the segment, field and render stages' time goes")
         .expect("the parts' table");
     for table in [stages, parts] {
         assert_eq!(

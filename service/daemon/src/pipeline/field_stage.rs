@@ -61,6 +61,14 @@ fn segment(sh: &Shared, models: &Models, f: &Frame, threads: usize) -> Segmented
         Ok((img, mask, crop)) => {
             sh.people.store(info.people, Ordering::Relaxed);
             sh.stats[stage::SEGMENT].record(t.elapsed().as_secs_f64() * 1e3);
+            let tm = info.segment_parts;
+            for (i, ms) in [
+                (part::LETTERBOX, tm.letterbox_ms),
+                (part::SEG_NETS, tm.nets_ms),
+                (part::PERSON, tm.person_ms),
+            ] {
+                sh.parts[i].record(ms);
+            }
             Ok(Person {
                 img,
                 mask,

@@ -130,36 +130,36 @@ fn workers_label(r: &Row) -> String {
     parts.join(", ")
 }
 
-/// Model-mode rows: where the field and render stages' time goes, each part's mean ms beside
-/// its stage's mean (the parts of a stage add up to about its mean; what is left of the field
-/// stage is the thread's bookkeeping). Empty without such rows.
+/// Model-mode rows: where the segment, field and render stages' time goes, each part's mean
+/// ms after its stage's mean (the parts of a stage add up to about its mean; what is left is
+/// the thread's bookkeeping). Empty without such rows.
 pub(super) fn parts_table(rows: &[Row]) -> String {
-    let names = volcapd::pipeline::part::NAMES;
+    use volcapd::pipeline::part::{NAMES, STAGE_STARTS};
     let rows: Vec<&Row> = rows
         .iter()
-        .filter(|r| r.part_mean_ms.len() == names.len() && r.error.is_none())
+        .filter(|r| r.part_mean_ms.len() == NAMES.len() && r.error.is_none())
         .collect();
     if rows.is_empty() {
         return String::new();
     }
     let mut s = String::from(
-        "\nWhere the field and render stages' time goes (mean ms per frame; each stage's mean beside its parts):\n\n\
-         | model | runtime | res | yaw | field |",
+        "\nWhere the segment, field and render stages' time goes (mean ms per frame; each stage's mean, then its parts):\n\n\
+         | model | runtime | res | yaw |",
     );
-    for n in &names[..volcapd::pipeline::part::LOCALIZE] {
-        let _ = write!(s, " {} |", n.trim_start_matches("field: "));
-    }
-    s.push_str(" render |");
-    for n in &names[volcapd::pipeline::part::LOCALIZE..] {
-        let _ = write!(s, " {} |", n.trim_start_matches("render: "));
+    for w in STAGE_STARTS.windows(2) {
+        let stage = NAMES[w[0]].split(':').next().unwrap_or_default();
+        let _ = write!(s, " {stage} |");
+        for n in &NAMES[w[0]..w[1]] {
+            let _ = write!(s, " {} |", n.split_once(": ").map_or(*n, |(_, p)| p));
+        }
     }
     s.push('\n');
-    s.push_str(&"|---".repeat(6 + names.len()));
+    s.push_str(&"|---".repeat(4 + STAGE_STARTS.len() - 1 + NAMES.len()));
     s.push_str("|\n");
     for r in rows {
         let _ = write!(
             s,
-            "| {}{} | {} | {} | {} | {:.2} |",
+            "| {}{} | {} | {} | {} |",
             r.model,
             match workers_label(r) {
                 w if w.is_empty() => w,
@@ -168,13 +168,13 @@ pub(super) fn parts_table(rows: &[Row]) -> String {
             r.runtime,
             r.resolution,
             r.yaw_deg,
-            r.field_mean_ms
         );
-        for (i, ms) in r.part_mean_ms.iter().enumerate() {
-            if i == volcapd::pipeline::part::LOCALIZE {
-                let _ = write!(s, " {:.2} |", r.render_mean_ms);
+        let means = [r.segment_mean_ms, r.field_mean_ms, r.render_mean_ms];
+        for (w, mean) in STAGE_STARTS.windows(2).zip(means) {
+            let _ = write!(s, " {mean:.2} |");
+            for ms in &r.part_mean_ms[w[0]..w[1]] {
+                let _ = write!(s, " {ms:.2} |");
             }
-            let _ = write!(s, " {ms:.2} |");
         }
         s.push('\n');
     }
