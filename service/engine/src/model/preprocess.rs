@@ -558,6 +558,27 @@ mod tests {
         assert!((c.tx - (-1.0 + 6.0 / 15.0)).abs() < 1e-6);
     }
 
+    /// Crops inside, across and outside the square, and a degenerate one (scale 0).
+    fn test_crops() -> Vec<Crop> {
+        [
+            (1.0, 0.0, 0.0),
+            (0.31, 0.12, -0.27),
+            (0.5, 0.9, 0.9),
+            (1.7, -0.4, 0.2),
+            (0.05, -1.3, 1.1),
+            (2.5, 3.0, -3.0),
+            (0.0, 0.0, 0.0),
+        ]
+        .into_iter()
+        .map(|(s, tx, ty)| Crop {
+            s,
+            tx,
+            ty,
+            cut_by_frame: false,
+        })
+        .collect()
+    }
+
     /// The separable resampling gives, value for value, what taking the taps per pixel
     /// gives (the rule as it was first written), for crops inside, across and outside the
     /// frame, and for a degenerate one.
@@ -597,21 +618,8 @@ mod tests {
         let img: Vec<f32> = (0..3 * size * size)
             .map(|i| ((i * 7919) % 1000) as f32 / 999.0)
             .collect();
-        for (s, tx, ty) in [
-            (1.0, 0.0, 0.0),
-            (0.31, 0.12, -0.27),
-            (0.5, 0.9, 0.9),
-            (1.7, -0.4, 0.2),
-            (0.05, -1.3, 1.1),
-            (2.5, 3.0, -3.0),
-            (0.0, 0.0, 0.0),
-        ] {
-            let c = Crop {
-                s,
-                tx,
-                ty,
-                cut_by_frame: false,
-            };
+        for c in test_crops() {
+            let (s, tx, ty) = (c.s, c.tx, c.ty);
             let got = c.apply(&img, 3, size);
             let want = per_pixel(&c, &img, 3, size);
             assert!(
@@ -649,21 +657,8 @@ mod tests {
             let base: Vec<f32> = (0..size * size)
                 .map(|i| ((i * 104729) % 997) as f32 / 996.0 * 0.6)
                 .collect();
-            for (s, tx, ty) in [
-                (1.0, 0.0, 0.0),
-                (0.31, 0.12, -0.27),
-                (0.5, 0.9, 0.9),
-                (1.7, -0.4, 0.2),
-                (0.05, -1.3, 1.1),
-                (2.5, 3.0, -3.0),
-                (0.0, 0.0, 0.0),
-            ] {
-                let c = Crop {
-                    s,
-                    tx,
-                    ty,
-                    cut_by_frame: false,
-                };
+            for c in test_crops() {
+                let (s, tx, ty) = (c.s, c.tx, c.ty);
                 let (mut got, mut want) = (base.clone(), base.clone());
                 c.paste_max(&m, size, &mut got);
                 per_pixel(&c, &m, size, &mut want);

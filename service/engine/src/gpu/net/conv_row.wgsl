@@ -2,7 +2,7 @@
 // invocation (ungrouped): each tap's four weights are one vector read once for the four
 // columns, each input value read once for the four channels (16 products per five reads,
 // against 4 per five in conv4). Blocks whose windows lie inside the input (most of a plane)
-// run without bounds checks; the others check each column.
+// skip the padding tests; the others test each column's tap.
 // p: [count, N, C, H, W, M, OH, OW, KH, KW, sh, sw, pt, pl, dh, dw, group, act, a, b]
 // (count = N ceil(M / 4) OH ceil(OW / 4)); w: [M4 / 4, C, KH, KW] of vec4 (the block's four
 // channels at a tap) and bias: [M4 / 4] of vec4, M4 = 4 ceil(M / 4), the channels from M on
