@@ -90,11 +90,12 @@ case "$mode" in
       res=257,513 models=fourier-small,fourier-medium secs=10 warm=5 runs=5
       threads="1,$(nproc)" loc_backends=cpu,wgpu qres=257
     fi
-    echo "== pipeline ($res; $models; threads $threads; the camera's view and a turned one)"
-    # A turned view (yaw 30) runs the colour networks on the surface points (the colour MLP
-    # through its row buckets); the camera's own view takes the input pixel's colour.
-    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
-      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
+    # Most telling first: a call that runs past its limit still brings back what the
+    # finished steps wrote under $OUT (the networks' kernels, then the split that the
+    # goals need, then the main matrix those rows are measured against, then the rest).
+    echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
+    "$bin" bench nets --model fourier-small-seg2,fourier-medium --runtime tract,wgpu,wgpu-conv4 \
+      --runs "$((runs * 4))" --profile --top 12 --out "$out"
     echo "== the segmentation on a thread of its own, and the render and segment stages on 1 or 2 workers"
     # The third H200 run (devices/pipeline.md there, fourier-small at 257^3, the render stage
     # on its own device, 78.6 fps = 12.7 ms a frame) had two threads at about 10 ms a frame:
@@ -106,11 +107,16 @@ case "$mode" in
     # frame N + 1 localized while N waits; frames published in capture order).
     # fourier-medium segments twice (10 ms a frame there): a second segment worker
     # (compute.segment_workers) segments frame N + 1 while N waits on its read-backs.
-    # (The first matrix's camera-view GPU rows are the default split, 129, with one worker
-    # each: the baseline of these rows, in the same run.)
+    # (The main matrix's camera-view GPU rows, the next step, are the default split, 129,
+    # with one worker each: the baseline of these rows, in the same run.)
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
       --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
+    echo "== pipeline ($res; $models; threads $threads; the camera's view and a turned one)"
+    # A turned view (yaw 30) runs the colour networks on the surface points (the colour MLP
+    # through its row buckets); the camera's own view takes the input pixel's colour.
+    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
+      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
     echo "== the GPU backend's pipeline: the levels' conflict rounds read per round or predicted"
     # compute.round_waits: per-round (a read-back per round and level, some ten a frame) or
     # per-frame (each level's rounds predicted from the last frame, one read-back for the
@@ -120,22 +126,6 @@ case "$mode" in
     # 1,8) were measured three times and stay at one.
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --round-waits per-round,per-frame --out "$out/rounds"
-    echo "== the GPU backend's pipeline from other coarse levels (issue 33 item 4: 'coarse levels')"
-    # The default starts the levels at 9^3 (3); 5^3 (2) has fewer points a level and more
-    # levels (more waits), 17^3 (4) more points and fewer levels.
-    "$bin" bench pipeline --backend wgpu --model fourier-small --res "${res%%,*}" --threads "$threads" \
-      --seconds "$secs" --warmup "$warm" --fps 1000 --coarse-level 2,3,4 --out "$out/coarse"
-    echo "== the series' K: 15 harmonics (fourier-small-seg2, the default) against 31 (fourier-small-k31, the issue's 'K = 31')"
-    # The same encoder but for its last convolution (63 maps instead of 31): the maps' traffic,
-    # the temporal filter and every field evaluation twice the terms.
-    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model fourier-small-seg2,fourier-small-k31 --res "$res" \
-      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --out "$out/k31"
-    echo "== localization on the model's field"
-    # The adapter's rows twice: a read-back per conflict round, and the rounds predicted.
-    "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \
-      --methods hierarchical,hierarchical-tight --runs "$runs" --round-waits per-round,per-frame --out "$out"
-    mv "$out/accuracy-vs-time.md" "$out/localize.md"
-    mv "$out/accuracy-vs-time.png" "$out/localize.png"
     echo "== two stages on one device or two (item 4: does a wait queue behind a network?)"
     # The localization timed alone, beside the shape network on its device, and on a second
     # device of the same adapter (a few seconds a row).
@@ -146,9 +136,22 @@ case "$mode" in
     # third H200 run measured fourier-small at 257^3 only: 49.8 -> 78.6 fps).
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --render-device shared,own --out "$out/devices"
-    echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
-    "$bin" bench nets --model fourier-small-seg2,fourier-medium --runtime tract,wgpu,wgpu-conv4 \
-      --runs "$((runs * 4))" --profile --top 12 --out "$out"
+    echo "== the series' K: 15 harmonics (fourier-small-seg2, the default) against 31 (fourier-small-k31, the issue's 'K = 31')"
+    # The same encoder but for its last convolution (63 maps instead of 31): the maps' traffic,
+    # the temporal filter and every field evaluation twice the terms.
+    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model fourier-small-seg2,fourier-small-k31 --res "$res" \
+      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --out "$out/k31"
+    echo "== the GPU backend's pipeline from other coarse levels (issue 33 item 4: 'coarse levels')"
+    # The default starts the levels at 9^3 (3); 5^3 (2) has fewer points a level and more
+    # levels (more waits), 17^3 (4) more points and fewer levels.
+    "$bin" bench pipeline --backend wgpu --model fourier-small --res "${res%%,*}" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --coarse-level 2,3,4 --out "$out/coarse"
+    echo "== localization on the model's field"
+    # The adapter's rows twice: a read-back per conflict round, and the rounds predicted.
+    "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \
+      --methods hierarchical,hierarchical-tight --runs "$runs" --round-waits per-round,per-frame --out "$out"
+    mv "$out/accuracy-vs-time.md" "$out/localize.md"
+    mv "$out/accuracy-vs-time.png" "$out/localize.png"
     ls -la "$out"
     ;;
   *)
