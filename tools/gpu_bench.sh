@@ -26,7 +26,8 @@
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
 # nets.md (the networks, tract and the GPU kernels, each profiled per node or step; the
-# kernels with and without row convolutions, wgpu-conv4 their baseline in the same run), with
+# convolutions as a GPU plans them, with the split ones, without them (wgpu-rows) and with
+# conv4 only (wgpu-conv4), the baselines in the same run), with
 # run.log. The device is named in every table; the CPU rows are that machine's cores, not the
 # appliance's two.
 set -euo pipefail
@@ -94,7 +95,7 @@ case "$mode" in
     # finished steps wrote under $OUT (the networks' kernels, then the split that the
     # goals need, then the main matrix those rows are measured against, then the rest).
     echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
-    "$bin" bench nets --model fourier-small-seg2,fourier-medium --runtime tract,wgpu,wgpu-conv4 \
+    "$bin" bench nets --model fourier-small-seg2,fourier-medium --runtime tract,wgpu,wgpu-rows,wgpu-conv4 \
       --runs "$((runs * 4))" --profile --top 12 --out "$out"
     echo "== the segmentation on a thread of its own, and the render and segment stages on 1 or 2 workers"
     # The third H200 run (devices/pipeline.md there, fourier-small at 257^3, the render stage

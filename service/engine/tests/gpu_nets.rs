@@ -99,6 +99,7 @@ fn f32_networks() -> Vec<std::path::PathBuf> {
 
 #[test]
 fn every_layer_of_every_committed_network_matches_tract() {
+    use volcap_engine::gpu::net::plan::ConvKernels;
     let Some(gpu) = gpu() else { return };
     let nets = f32_networks();
     assert!(nets.len() >= 10, "the committed networks: {nets:?}");
@@ -139,22 +140,44 @@ fn every_layer_of_every_committed_network_matches_tract() {
             .map(|(s, d)| Tensor::from_shape(s, d).unwrap().into_tvalue())
             .collect();
         let want = model.run(tv).unwrap();
-        let mut worst = (0.0f32, String::new());
-        for ((lname, shape, got), w) in layers.iter().zip(want.iter()) {
-            let w = flat(w);
-            assert_eq!(w.len(), got.len(), "{name} {lname}: shape {shape:?}");
-            assert!(
-                got.iter().all(|v| v.is_finite()),
-                "{name} {lname}: non-finite on the GPU"
-            );
-            let d = scale_diff(&w, got);
-            if d > worst.0 {
-                worst = (d, lname.clone());
+        // Every layer within the tolerance; the worst (relative difference, layer).
+        let compare = |layers: &[(String, Vec<usize>, Vec<f32>)], kernels: &str| {
+            let mut worst = (0.0f32, String::new());
+            for ((lname, shape, got), w) in layers.iter().zip(want.iter()) {
+                let w = flat(w);
+                assert_eq!(w.len(), got.len(), "{name} {lname}: shape {shape:?}");
+                assert!(
+                    got.iter().all(|v| v.is_finite()),
+                    "{name} {lname} ({kernels}): non-finite on the GPU"
+                );
+                let d = scale_diff(&w, got);
+                if d > worst.0 {
+                    worst = (d, lname.clone());
+                }
+                assert!(
+                    d <= LAYER_TOLERANCE,
+                    "{name} {lname} {shape:?} ({kernels}): GPU vs tract {d:.2e} relative, over {LAYER_TOLERANCE:.0e}"
+                );
             }
-            assert!(
-                d <= LAYER_TOLERANCE,
-                "{name} {lname} {shape:?}: GPU vs tract {d:.2e} relative, over {LAYER_TOLERANCE:.0e}"
-            );
+            worst
+        };
+        let worst = compare(&layers, "the adapter's convolution kernels");
+        // The convolution kernels the adapter does not plan with by default (a GPU's split
+        // ones on lavapipe, the rows-only and conv4-only baselines), every layer again.
+        let default = gpu.conv_kernels();
+        for k in [ConvKernels::Split, ConvKernels::Rows, ConvKernels::Conv4] {
+            if k == default {
+                continue;
+            }
+            gpu.set_conv_kernels(k);
+            let other = volcap_engine::gpu::net::GpuNet::load(gpu.clone(), &path).unwrap();
+            let all = other.run_all(&args).unwrap();
+            gpu.set_conv_kernels(default);
+            let all: Vec<_> = all
+                .into_iter()
+                .filter(|(n, _, _)| !n.contains('#') && !inputs.contains(&n.as_str()))
+                .collect();
+            compare(&all, &format!("{k:?}"));
         }
         // The network's output through the planned (buffer-reusing) path.
         let out = net.run(&args).unwrap();
@@ -407,13 +430,14 @@ fn hashed(n: usize, seed: u64) -> Vec<f32> {
 }
 
 /// Every convolution kernel (`conv`: grouped or under four outputs; `conv4`: narrow planes;
-/// `conv_row`: four columns per invocation) against an f64 reference, over strides,
-/// dilations, asymmetric padding, widths that are not a multiple of four, output counts
-/// that are not (the zero channels the plan pads with never written), windows that reach
-/// past every border, with and without bias and a fused ReLU.
+/// `conv_row`: four columns per invocation; `conv_split`: a workgroup per block) against an
+/// f64 reference, over strides, dilations, asymmetric padding, widths that are not a
+/// multiple of four, output counts that are not (the zero channels the plan pads with never
+/// written), windows that reach past every border, with and without bias and a fused ReLU.
 #[test]
 fn convolutions_match_an_f64_reference_on_every_kernel() {
-    use volcap_engine::gpu::net::{GpuNet, plan::Kernel};
+    use volcap_engine::gpu::net::GpuNet;
+    use volcap_engine::gpu::net::plan::{ConvKernels, Kernel, Options, plan};
     let Some(gpu) = gpu() else { return };
     let case = |c, hw, m, k, stride, pads, dilation, group, bias, relu| ConvCase {
         c,
@@ -440,6 +464,10 @@ fn convolutions_match_an_f64_reference_on_every_kernel() {
         case(9, [4, 16], 12, [1, 1], [1, 1], [0, 0, 0, 0], [1, 1], 1, true, false),
         // conv_row: padding wider than the window reaches (every block at a border).
         case(2, [5, 9], 4, [3, 3], [1, 2], [3, 3, 3, 3], [1, 1], 1, true, false),
+        // A bottleneck's few blocks and long sums: stride 2, asymmetric padding, 31 outputs;
+        // and a squeeze-excitation's 1 x 1 plane.
+        case(20, [6, 9], 31, [3, 3], [2, 2], [1, 0, 0, 2], [1, 1], 1, true, true),
+        case(96, [1, 1], 24, [1, 1], [1, 1], [0, 0, 0, 0], [1, 1], 1, true, false),
         // conv4: 7 output columns, 6 outputs.
         case(5, [7, 7], 6, [3, 3], [1, 1], [1, 1, 1, 1], [1, 1], 1, true, true),
         // conv: depthwise 5x5, stride 2.
@@ -448,23 +476,30 @@ fn convolutions_match_an_f64_reference_on_every_kernel() {
         case(4, [9, 10], 2, [3, 3], [1, 1], [1, 1, 1, 1], [1, 1], 2, true, true),
         case(3, [9, 12], 1, [3, 3], [1, 1], [1, 1, 1, 1], [1, 1], 1, true, false),
     ];
+    // Each case planned with each set of kernels, so that every kernel meets strides,
+    // dilations, padding and odd counts whichever the plan's thresholds would pick.
     let mut kernels = std::collections::HashSet::new();
-    for (i, t) in cases.iter().enumerate() {
+    for ((i, t), ck) in cases
+        .iter()
+        .enumerate()
+        .flat_map(|c| [ConvKernels::Conv4, ConvKernels::Rows, ConvKernels::Split].map(|k| (c, k)))
+    {
         let x = hashed(t.c * t.hw[0] * t.hw[1], 1 + i as u64);
         let w = hashed(t.m * (t.c / t.group) * t.k[0] * t.k[1], 100 + i as u64);
         let b = hashed(t.m, 200 + i as u64);
         let graph = conv_graph(t, &w, &b);
         let shape = vec![1, t.c, t.hw[0], t.hw[1]];
-        let plan = volcap_engine::gpu::net::plan::plan(
-            &graph,
-            std::slice::from_ref(&shape),
-            Default::default(),
-        )
-        .unwrap();
+        let opts = Options {
+            conv_kernels: ck,
+            ..Default::default()
+        };
+        let plan = plan(&graph, std::slice::from_ref(&shape), opts).unwrap();
         assert_eq!(plan.steps.len(), 1, "case {i}: one fused step");
-        kernels.insert(plan.steps[0].kernel);
+        let kernel = plan.steps[0].kernel;
+        kernels.insert(kernel);
         let (want_shape, want) = conv_reference(t, &x, &w, &b);
         assert_eq!(plan.output.1, want_shape, "case {i}: output shape");
+        gpu.set_conv_kernels(ck);
         let net = GpuNet::from_graph(gpu.clone(), graph).unwrap();
         let got = net.run(&[(&shape, &x)]).unwrap();
         assert_eq!(got.len(), want.len(), "case {i}");
@@ -477,11 +512,16 @@ fn convolutions_match_an_f64_reference_on_every_kernel() {
             .fold((0, 0.0f64), |a, (j, d)| if d > a.1 { (j, d) } else { a });
         assert!(
             worst / scale <= 1e-5,
-            "case {i} ({:?}): value {at} off by {worst:.3e} (scale {scale:.3})",
-            plan.steps[0].kernel
+            "case {i} ({kernel:?}): value {at} off by {worst:.3e} (scale {scale:.3})"
         );
     }
-    for k in [Kernel::Conv, Kernel::Conv4, Kernel::ConvRow] {
+    gpu.set_conv_kernels(ConvKernels::for_device_type(&gpu.adapter.device_type));
+    for k in [
+        Kernel::Conv,
+        Kernel::Conv4,
+        Kernel::ConvRow,
+        Kernel::ConvSplit,
+    ] {
         assert!(kernels.contains(&k), "{k:?} not exercised: {kernels:?}");
     }
 }

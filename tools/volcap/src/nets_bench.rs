@@ -20,8 +20,10 @@ pub struct NetsArgs {
     pub models: Vec<String>,
     /// Runtimes (comma-separated): tract, onnxruntime (its library as the daemon finds it:
     /// $VOLCAP_ONNXRUNTIME, /usr/lib/volcap/onnxruntime/, target/onnxruntime/), wgpu (the
-    /// GPU backend's kernels; build with `--features wgpu`), wgpu-conv4 (the same without
-    /// the row convolutions: every ungrouped convolution four channels per invocation).
+    /// GPU backend's kernels; build with `--features wgpu`), wgpu-split, wgpu-rows,
+    /// wgpu-conv4 (the same with the split convolutions, without them (a CPU adapter's
+    /// default), or with conv4 only: every ungrouped convolution four channels per
+    /// invocation).
     #[arg(
         long = "runtime",
         value_delimiter = ',',
@@ -68,15 +70,33 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
     let filter = temporal_cost(a.runs)?;
     let mut runtimes = Vec::new();
     for r in &a.runtimes {
-        if r.trim() == "wgpu" || r.trim() == "wgpu-conv4" {
-            // The GPU backend's kernels on the first adapter `auto` picks; wgpu-conv4 on a
-            // device of its own without row convolutions (the baseline they are measured
-            // against in the same run).
+        if let Some(kernels) = r.trim().strip_prefix("wgpu") {
+            // The GPU backend's kernels on the first adapter `auto` picks (the convolution
+            // kernels the adapter plans with); wgpu-split, wgpu-rows and wgpu-conv4 each on a
+            // device of its own with those kernels (the baselines they are measured against
+            // in the same run).
+            #[cfg(feature = "wgpu")]
+            let kernels = {
+                use volcap_engine::gpu::net::plan::ConvKernels as K;
+                match kernels {
+                    "" => None,
+                    "-split" => Some(K::Split),
+                    "-rows" => Some(K::Rows),
+                    "-conv4" => Some(K::Conv4),
+                    other => {
+                        return Err(anyhow!(
+                            "--runtime wgpu{other}: wgpu, wgpu-split, wgpu-rows or wgpu-conv4"
+                        ));
+                    }
+                }
+            };
             let rt = crate::backend::open("wgpu", "tract", "auto")?.0;
             #[cfg(feature = "wgpu")]
-            if let Runtime::Wgpu(g) = &rt {
-                g.set_row_convolutions(r.trim() == "wgpu");
+            if let (Runtime::Wgpu(g), Some(k)) = (&rt, kernels) {
+                g.set_conv_kernels(k);
             }
+            #[cfg(not(feature = "wgpu"))]
+            let _ = kernels;
             runtimes.push(rt);
             continue;
         }

@@ -26,7 +26,7 @@ pub mod net;
 pub mod render;
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// One adapter as wgpu reports it.
@@ -189,9 +189,9 @@ pub struct Gpu {
     pub(crate) field_pool: Mutex<Vec<fourier::FieldBuffers>>,
     /// Frames' coefficient-map buffers kept for the next frames ([`maps::GpuMaps`]).
     pub(crate) maps_pool: Mutex<Vec<maps::FrameBufs>>,
-    /// Whether networks planned from now on run their wide convolutions four columns per
-    /// invocation ([`net::plan::Options::row_convolutions`]; on unless set off).
-    row_convolutions: AtomicBool,
+    /// The convolution kernels networks are planned with from now on
+    /// ([`net::plan::ConvKernels`] as a number: [`Gpu::set_conv_kernels`]).
+    conv_kernels: AtomicU8,
 }
 
 impl std::fmt::Debug for Gpu {
@@ -257,7 +257,7 @@ impl Gpu {
             .find(|a| AdapterSummary::of(&a.get_info()) == self.adapter)
             .ok_or_else(|| format!("{}: not listed again", self.adapter.label()))?;
         let g = Self::on(picked, self.counters.clone())?;
-        g.set_row_convolutions(self.row_convolutions());
+        g.set_conv_kernels(self.conv_kernels());
         Ok(g)
     }
 
@@ -276,6 +276,7 @@ impl Gpu {
         }))
         .map_err(|e| format!("{}: cannot open the device: {e}", adapter.label()))?;
         let timestamp_period = (!timestamps.is_empty()).then(|| queue.get_timestamp_period());
+        let default_kernels = net::plan::ConvKernels::for_device_type(&adapter.device_type);
         Ok(Arc::new(Gpu {
             device,
             queue,
@@ -285,20 +286,25 @@ impl Gpu {
             pipelines: Mutex::new(HashMap::new()),
             field_pool: Mutex::new(Vec::new()),
             maps_pool: Mutex::new(Vec::new()),
-            row_convolutions: AtomicBool::new(true),
+            conv_kernels: AtomicU8::new(default_kernels as u8),
         }))
     }
 
-    /// Plan the networks of this device from now on with ([`net::plan::Kernel::ConvRow`],
-    /// the default) or without row convolutions (`conv4` only: the bench's baseline). Plans
-    /// already made keep theirs.
-    pub fn set_row_convolutions(&self, on: bool) {
-        self.row_convolutions.store(on, Ordering::Relaxed);
+    /// Plan the networks of this device from now on with these convolution kernels (the
+    /// default: the adapter's, [`net::plan::ConvKernels::for_device_type`]; the bench's
+    /// baselines set others). Plans already made keep theirs.
+    pub fn set_conv_kernels(&self, k: net::plan::ConvKernels) {
+        self.conv_kernels.store(k as u8, Ordering::Relaxed);
     }
 
-    /// Whether networks are planned with row convolutions ([`Gpu::set_row_convolutions`]).
-    pub fn row_convolutions(&self) -> bool {
-        self.row_convolutions.load(Ordering::Relaxed)
+    /// The convolution kernels networks are planned with ([`Gpu::set_conv_kernels`]).
+    pub fn conv_kernels(&self) -> net::plan::ConvKernels {
+        use net::plan::ConvKernels as K;
+        match self.conv_kernels.load(Ordering::Relaxed) {
+            v if v == K::Conv4 as u8 => K::Conv4,
+            v if v == K::Rows as u8 => K::Rows,
+            _ => K::Split,
+        }
     }
 
     /// The compute pipeline of a kernel (compiled on first use, then shared).

@@ -26,6 +26,7 @@ fn source(k: Kernel) -> (&'static str, &'static str) {
         Kernel::Conv => ("conv", include_str!("net/conv.wgsl")),
         Kernel::Conv4 => ("conv4", include_str!("net/conv4.wgsl")),
         Kernel::ConvRow => ("conv_row", include_str!("net/conv_row.wgsl")),
+        Kernel::ConvSplit => ("conv_split", include_str!("net/conv_split.wgsl")),
         Kernel::ConvTranspose => ("conv_transpose", include_str!("net/conv_transpose.wgsl")),
         Kernel::Pool => ("pool", include_str!("net/pool.wgsl")),
         Kernel::PoolPlane => ("pool_plane", include_str!("net/pool_plane.wgsl")),
@@ -113,7 +114,7 @@ impl GpuNet {
     fn realize(&self, shapes: &[Vec<usize>], keep_all: bool) -> Result<Realized, String> {
         let opts = plan::Options {
             keep_all,
-            row_convolutions: self.gpu.row_convolutions(),
+            conv_kernels: self.gpu.conv_kernels(),
         };
         let plan = plan::plan(&self.graph, shapes, opts)?;
         let dev = &self.gpu.device;
@@ -490,7 +491,7 @@ impl GpuNet {
     /// The number of dispatches of the plan for `shapes` (planning only).
     pub fn dispatches(&self, shapes: &[Vec<usize>]) -> Result<usize, String> {
         let opts = plan::Options {
-            row_convolutions: self.gpu.row_convolutions(),
+            conv_kernels: self.gpu.conv_kernels(),
             ..Default::default()
         };
         Ok(plan::plan(&self.graph, shapes, opts)?.steps.len())

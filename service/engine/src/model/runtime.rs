@@ -149,15 +149,15 @@ impl Runtime {
             #[cfg(feature = "onnxruntime")]
             Runtime::OnnxRuntime(o) => format!("onnxruntime {}", o.version),
             #[cfg(feature = "wgpu")]
-            Runtime::Wgpu(g) => format!(
-                "wgpu {}{}",
-                g.adapter.name,
-                if g.row_convolutions() {
-                    ""
-                } else {
-                    " (conv4 only)"
+            Runtime::Wgpu(g) => format!("wgpu {}{}", g.adapter.name, {
+                use crate::gpu::net::plan::ConvKernels as K;
+                match g.conv_kernels() {
+                    k if k == K::for_device_type(&g.adapter.device_type) => "",
+                    K::Split => " (split convolutions)",
+                    K::Rows => " (no split convolutions)",
+                    K::Conv4 => " (conv4 only)",
                 }
-            ),
+            }),
         }
     }
 

@@ -27,6 +27,9 @@ pub enum Kernel {
     /// Four output channels by four output columns per invocation (the same convolutions
     /// over rows of at least 8 columns: `ops/layers.rs`).
     ConvRow,
+    /// A workgroup per block of four channels at one pixel, the sum split over its
+    /// invocations (the same convolutions where few blocks have long sums).
+    ConvSplit,
     ConvTranspose,
     Pool,
     /// A window over the whole plane: a workgroup per plane, reduced in workgroup memory.
@@ -215,7 +218,7 @@ struct Planner {
     buf_uses: Vec<usize>,
     free: Vec<usize>,
     keep_all: bool,
-    row_convolutions: bool,
+    conv_kernels: ConvKernels,
     /// Constants uploaded, by value name.
     uploaded: HashMap<String, usize>,
     tensors: Vec<(String, usize, Vec<usize>)>,
@@ -425,22 +428,40 @@ pub fn check_ops(graph: &GraphProto) -> Result<(), String> {
 }
 
 /// How a graph is planned.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Options {
     /// No buffer reuse, so that every tensor can be read after a run (the per-layer parity
     /// test).
     pub keep_all: bool,
-    /// Ungrouped convolutions over rows of 8 columns or more with four columns per
-    /// invocation ([`Kernel::ConvRow`]); off, [`Kernel::Conv4`] (the bench's baseline:
-    /// [`super::super::Gpu::set_row_convolutions`]).
-    pub row_convolutions: bool,
+    /// The kernels of ungrouped convolutions ([`super::super::Gpu::set_conv_kernels`]).
+    pub conv_kernels: ConvKernels,
 }
 
-impl Default for Options {
-    fn default() -> Self {
-        Options {
-            keep_all: false,
-            row_convolutions: true,
+/// Which kernels the ungrouped convolutions of four outputs or more are planned with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ConvKernels {
+    /// [`Kernel::Conv4`] only: one pixel and four channels an invocation (the bench's
+    /// baseline, `wgpu-conv4`).
+    Conv4,
+    /// [`Kernel::ConvRow`] over rows of 8 columns or more, else [`Kernel::Conv4`]
+    /// (`wgpu-rows`).
+    Rows,
+    /// As `Rows`, and [`Kernel::ConvSplit`] where a layer has few blocks and long sums.
+    #[default]
+    Split,
+}
+
+impl ConvKernels {
+    /// What an adapter of `device_type` ([`super::super::AdapterSummary::device_type`])
+    /// plans with unless told otherwise: a GPU splits the long sums of layers with few
+    /// blocks over workgroups (its multiprocessors would idle while each invocation adds
+    /// hundreds of terms); a CPU adapter (lavapipe) does not, where the split costs 2.3x on
+    /// fourier-medium's encoder (docs/bench/conv-rows/nets.md).
+    pub fn for_device_type(device_type: &str) -> Self {
+        if device_type == "cpu" {
+            ConvKernels::Rows
+        } else {
+            ConvKernels::Split
         }
     }
 }
@@ -450,7 +471,7 @@ pub fn plan(graph: &GraphProto, shapes: &[Vec<usize>], opts: Options) -> Result<
     check_ops(graph)?;
     let keep_all = opts.keep_all;
     let mut pl = Planner {
-        row_convolutions: opts.row_convolutions,
+        conv_kernels: opts.conv_kernels,
         buffers: Vec::new(),
         steps: Vec::new(),
         vals: HashMap::new(),

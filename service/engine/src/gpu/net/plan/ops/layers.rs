@@ -2,7 +2,7 @@
 //! MatMul, resize; and batch-norm's per-channel affine.
 
 use super::{Act, broadcast, input};
-use crate::gpu::net::plan::{Attrs, Kernel, Planner, Val, numel};
+use crate::gpu::net::plan::{Attrs, ConvKernels, Kernel, Planner, Val, numel};
 use tract_onnx::pb::NodeProto;
 
 /// Batch-norm's per-channel (scale, shift): y = x scale + shift.
@@ -143,10 +143,26 @@ pub(super) fn conv(
         w.resize(padded * (w.len() / m), 0.0);
         bias.resize(padded, 0.0);
     }
-    // Rows of at least 8 columns: four channels by four columns per invocation, the weights
-    // regrouped so that each tap's four channels are one vector (`conv_row.wgsl`).
-    let rows = blocked && pl.row_convolutions && o[1] >= ROW_MIN_COLUMNS;
-    if rows {
+    // Rows of at least 8 columns: four channels by four columns per invocation
+    // (`conv_row.wgsl`). Layers with few blocks of work and long sums: a workgroup per block
+    // of four channels at a pixel (`conv_split.wgsl`). Both take the weights regrouped so that
+    // each tap's four channels are one vector.
+    let row_blocks = nb * m.div_ceil(4) * o[0] * o[1].div_ceil(4);
+    let pixel_blocks = nb * m.div_ceil(4) * o[0] * o[1];
+    let rows = o[1] >= ROW_MIN_COLUMNS;
+    let kind = match pl.conv_kernels {
+        _ if !blocked => Kernel::Conv,
+        ConvKernels::Conv4 => Kernel::Conv4,
+        ConvKernels::Split
+            if (if rows { row_blocks } else { pixel_blocks }) < SPLIT_BELOW_BLOCKS
+                && c * k[0] * k[1] >= SPLIT_MIN_TERMS =>
+        {
+            Kernel::ConvSplit
+        }
+        _ if rows => Kernel::ConvRow,
+        _ => Kernel::Conv4,
+    };
+    if matches!(kind, Kernel::ConvRow | Kernel::ConvSplit) {
         w = row_weights(&w, m.div_ceil(4) * 4);
     }
     let wb = pl.upload(w);
@@ -156,18 +172,16 @@ pub(super) fn conv(
     let dims = [
         nb, c, h, wd, m, o[0], o[1], k[0], k[1], s[0], s[1], pt[0], pt[1], d[0], d[1], group,
     ];
-    let kernel = match (transpose, blocked, rows) {
-        (true, _, _) => Kernel::ConvTranspose,
-        (false, true, true) => Kernel::ConvRow,
-        (false, true, false) => Kernel::Conv4,
-        (false, false, _) => Kernel::Conv,
-    };
-    let count = if rows {
-        nb * m.div_ceil(4) * o[0] * o[1].div_ceil(4)
-    } else if blocked {
-        nb * m.div_ceil(4) * o[0] * o[1]
+    let kernel = if transpose {
+        Kernel::ConvTranspose
     } else {
-        numel(&oshape)
+        kind
+    };
+    let count = match kernel {
+        Kernel::ConvRow => row_blocks,
+        Kernel::ConvSplit => pixel_blocks * 64,
+        Kernel::Conv4 => pixel_blocks,
+        _ => numel(&oshape),
     };
     let mut p = vec![count as u32];
     p.extend(dims.iter().map(|&v| v as u32));
@@ -180,6 +194,15 @@ pub(super) fn conv(
 /// Output columns from which an ungrouped convolution runs four columns per invocation
 /// (`conv_row.wgsl`); narrower planes (the squeeze-excitation's 1 x 1) keep `conv4`.
 const ROW_MIN_COLUMNS: usize = 8;
+
+/// Blocks (invocations of `conv_row` or `conv4`) under which a convolution whose sums have
+/// [`SPLIT_MIN_TERMS`] terms or more splits each block's sum over a workgroup
+/// (`conv_split.wgsl`): 4,096 invocations are 64 workgroups, half the multiprocessors of a
+/// large GPU (an H200 has 132), each invocation adding its terms one after another.
+const SPLIT_BELOW_BLOCKS: usize = 4096;
+/// Terms of a block's sum (input channels x taps) from which the split pays: a workgroup's
+/// 64 invocations each one term or more.
+const SPLIT_MIN_TERMS: usize = 64;
 
 /// Weights `[M4, C, KH, KW]` (M4 a multiple of 4) regrouped as `[M4 / 4, C, KH, KW, 4]`:
 /// a block's four output channels side by side at each input channel and tap.
