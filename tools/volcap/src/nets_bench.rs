@@ -104,6 +104,19 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
         let opened = Runtime::open(choice, None).map_err(|e| anyhow!("--runtime {r}: {e}"))?;
         runtimes.push(opened.runtime);
     }
+    // A runtime that is another one over again (wgpu-rows where rows are the adapter's
+    // default, as on lavapipe) is measured once.
+    let mut seen = std::collections::HashSet::new();
+    runtimes.retain(|rt| {
+        let fresh = seen.insert(rt.label());
+        if !fresh {
+            eprintln!(
+                "--runtime: {} once (listed twice: the adapter's own kernels)",
+                rt.label()
+            );
+        }
+        fresh
+    });
     // (network, file) -> ms per runtime, in first-seen order.
     let mut rows: Vec<(String, String, Vec<Option<f64>>)> = Vec::new();
     let mut profile = String::new();

@@ -474,3 +474,77 @@ fn bench_queues_times_the_localization_on_one_device_and_on_two() {
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `volcap bench nets` with the GPU backend's kernel sets side by side: each runtime a column
+/// of positive times for every network, the adapter's own set measured once however often
+/// it is listed (on lavapipe `wgpu` and `wgpu-rows` are one set), the baselines labelled; an
+/// unknown set named.
+#[cfg(feature = "wgpu")]
+#[test]
+fn bench_nets_puts_the_convolution_kernel_sets_side_by_side() {
+    let gpu = match volcap_engine::gpu::Gpu::open("auto") {
+        Ok(g) => g,
+        Err(e) if std::env::var_os("CI").is_some() => panic!("no GPU adapter under CI: {e}"),
+        Err(e) => return println!("skipped: {e}"),
+    };
+    let out = std::env::temp_dir().join(format!("volcap-nets-{}", std::process::id()));
+    let o = volcap()
+        .current_dir(repo_root())
+        .args([
+            "bench",
+            "nets",
+            "--model",
+            "fourier-small-seg2",
+            "--runtime",
+            "wgpu,wgpu-split,wgpu-rows,wgpu-conv4",
+            "--runs",
+            "1",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(out.join("nets.md")).unwrap();
+    let header = md
+        .lines()
+        .find(|l| l.starts_with("| network |"))
+        .unwrap_or_else(|| panic!("{md}"));
+    let columns: Vec<&str> = header.split('|').map(str::trim).collect();
+    // (the empty cells before and after the row) network, file, then one column per
+    // distinct set: the adapter's own (split or rows) and the two others.
+    assert_eq!(columns.len(), 2 + 2 + 3, "{header}");
+    assert!(header.contains("(conv4 only)"), "{header}");
+    let other = if gpu.adapter.device_type == "cpu" {
+        "(split convolutions)"
+    } else {
+        "(no split convolutions)"
+    };
+    assert!(header.contains(other), "{header}");
+    let rows: Vec<Vec<&str>> = md
+        .lines()
+        .skip_while(|l| !l.starts_with("| network |"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| l.split('|').map(str::trim).collect())
+        .collect();
+    assert_eq!(rows.len(), 4, "{md}");
+    for r in &rows {
+        for ms in &r[3..r.len() - 1] {
+            assert!(ms.parse::<f64>().unwrap() > 0.0, "{r:?}");
+        }
+    }
+    let o = volcap()
+        .current_dir(repo_root())
+        .args(["bench", "nets", "--runtime", "wgpu-bogus", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("wgpu-bogus"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

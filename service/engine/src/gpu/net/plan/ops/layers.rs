@@ -163,7 +163,7 @@ pub(super) fn conv(
         _ => Kernel::Conv4,
     };
     if matches!(kind, Kernel::ConvRow | Kernel::ConvSplit) {
-        w = row_weights(&w, m.div_ceil(4) * 4);
+        w = block_weights(&w, m.div_ceil(4) * 4);
     }
     let wb = pl.upload(w);
     let bb = pl.upload(bias);
@@ -206,7 +206,7 @@ const SPLIT_MIN_TERMS: usize = 64;
 
 /// Weights `[M4, C, KH, KW]` (M4 a multiple of 4) regrouped as `[M4 / 4, C, KH, KW, 4]`:
 /// a block's four output channels side by side at each input channel and tap.
-fn row_weights(w: &[f32], m4: usize) -> Vec<f32> {
+fn block_weights(w: &[f32], m4: usize) -> Vec<f32> {
     let per = w.len() / m4;
     let mut out = vec![0.0; w.len()];
     for (i, &v) in w.iter().enumerate() {
