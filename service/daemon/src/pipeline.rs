@@ -382,8 +382,8 @@ pub mod stage {
     pub const ENCODE: usize = 4;
 }
 
-/// The parts of the field and render stages in model mode (`Shared::parts`, by these
-/// indices): where each stage's time goes, for the pipeline bench.
+/// The parts of the segment, field and render stages in model mode (`Shared::parts`, by
+/// these indices): where each stage's time goes, for the pipeline bench.
 pub mod part {
     /// Segment: the frame letterboxed into the networks' square input.
     pub const LETTERBOX: usize = 0;

@@ -5,9 +5,9 @@
 //! is segmented while N + 1 is encoded and N is localized and rendered; above
 //! `compute.segment_thread_up_to` (default 129) the field thread segments too (two compute
 //! stages for two cores). With `compute.segment_workers` > 1 the segment stage has that many
-//! threads (each with one frame in flight, their people handed on in capture order). With `compute.threads` > 1 the networks' matrix
-//! products use that many threads (tract's pool), so the field stage can take the core the
-//! render stage leaves idle at lower resolutions. The field thread also holds the temporal
+//! threads (each with one frame in flight, their people handed on in capture order). With
+//! `compute.threads` > 1 the networks' matrix products use that many threads (tract's pool),
+//! so the field stage can take the core the render stage leaves idle at lower resolutions. The field thread also holds the temporal
 //! filter (`[temporal]`, `volcap_engine::model::temporal`): the person's mask and crop are
 //! steadied before the encoders run and their maps blended with the last frame's after;
 //! a frame without a person resets it.
