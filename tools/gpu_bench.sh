@@ -21,7 +21,8 @@
 # rounds/pipeline.md (the GPU backend's pipeline with `compute.round_waits` per-round and
 # per-frame), workers/pipeline.md (the segmentation on a thread of its own, x 1
 # or 2 render and segment workers, `compute.render_workers`, `compute.segment_workers`;
-# pipeline.md's GPU rows at yaw 0 are the baseline, the default split and one worker each), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
+# pipeline.md's GPU rows at yaw 0 are the baseline, the default split and one worker each),
+# track/pipeline.md (`model.segment_full_every` 1 and 8: the segmentation's track), coarse/pipeline.md (from coarse levels 2, 3 and 4), k31/pipeline.md (the
 # series' K: the default fourier-small-seg2 against fourier-small-k31, 63 maps), queues.md (the
 # localization alone, beside the shape network on one device, and on a second device),
 # devices/pipeline.md (the pipeline with `compute.render_device` shared and own) and
@@ -127,6 +128,13 @@ case "$mode" in
     # 1,8) were measured three times and stay at one.
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --round-waits per-round,per-frame --out "$out/rounds"
+    echo "== the segmentation's track: the whole frame every 8th frame, the person's crop alone between"
+    # model.segment_full_every: one segmentation a frame instead of two (fourier-medium segments
+    # twice: 10 ms a frame of the segment stage on the H200, 1.2 ms each run on the adapter);
+    # its accuracy is docs/bench/segment-track/temporal.md (CPU, the same networks).
+    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
+      --segment-passes 2 --segment-full-every 1,8 --out "$out/track"
     echo "== two stages on one device or two (item 4: does a wait queue behind a network?)"
     # The localization timed alone, beside the shape network on its device, and on a second
     # device of the same adapter (a few seconds a row).

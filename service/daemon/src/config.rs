@@ -11,7 +11,9 @@ pub use compute::{
     RenderDevice, RoundWaits, SEGMENT_WORKERS, THREADS,
 };
 pub use live::{Live, LiveError};
-pub use model::{CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_PASSES, ThinParts};
+pub use model::{
+    CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_FULL_EVERY, SEGMENT_PASSES, ThinParts,
+};
 pub use rtsp::RtspConfig;
 pub use temporal::TemporalConfig;
 
@@ -480,6 +482,12 @@ impl Config {
         if let Some(passes) = self.model.segment_passes {
             in_range("model.segment_passes", passes, &SEGMENT_PASSES, "")?;
         }
+        in_range(
+            "model.segment_full_every",
+            self.model.segment_full_every,
+            &SEGMENT_FULL_EVERY,
+            " (frames)",
+        )?;
         let split = self.compute.segment_thread_up_to;
         if split != 0 && !GRID_RESOLUTIONS.contains(&split) {
             return bad(

@@ -162,6 +162,12 @@ pub struct Shared {
     /// ...and how often it started again (a new person, a people count change, a gap, a
     /// close-range switch, a frame without a person).
     pub temporal_resets: AtomicU64,
+    /// Model mode: the segmentation's track between frames (`[model] segment_full_every`),
+    /// shared by the segment threads (each takes a copy, segments, and puts it back)...
+    pub segment_track: Mutex<volcap_engine::model::SegmentTrack>,
+    /// ...and the frames segmented whole, in the last crop alone, and those where the track
+    /// lost the person (both passes followed).
+    pub segment_tracked: [AtomicU64; 3],
 }
 
 pub const THREADS: [&str; 5] = ["capture", "render", "encode", "field", "segment"];
@@ -227,6 +233,10 @@ impl Shared {
             apart_points: AtomicU64::new(0),
             temporal: cfg.field() == FieldMode::Model && cfg.temporal.enabled,
             temporal_resets: AtomicU64::new(0),
+            segment_track: Mutex::new(volcap_engine::model::SegmentTrack::new(
+                cfg.model.segment_full_every,
+            )),
+            segment_tracked: Default::default(),
         }
     }
 

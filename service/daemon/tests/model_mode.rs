@@ -7,6 +7,54 @@ use std::time::Duration;
 mod common;
 use common::{check_config, request, root, serial, start, wait_for};
 
+/// `[model] segment_full_every = 4`: the segment stage segments the walking person's crop
+/// alone between whole frames, says so in `/state` and `/metrics`, and still counts one
+/// person and renders them.
+#[test]
+fn the_segmentation_tracks_the_crop_between_whole_frames() {
+    let _serial = serial();
+    let dir = std::env::temp_dir().join(format!("volcapd-track-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = root().join("tests/scenes/front-walk.toml");
+    std::fs::write(
+        dir.join("b.toml"),
+        format!(
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\ndisplay_size = 0\n[model]\ndir = \"{}\"\nsegment_passes = 2\nsegment_full_every = 4\n",
+            scene.display(),
+            root().join("models").display()
+        ),
+    )
+    .unwrap();
+    let d = start(&dir.join("b.toml"));
+    let s = wait_for(&d.addr, "tracked frames", Duration::from_secs(60), |s| {
+        s["segment_track"]["crop_frames"].as_u64() > Some(4)
+            && s["frames_published"].as_u64() > Some(4)
+    });
+    let t = &s["segment_track"];
+    assert_eq!(t["full_every"], 4, "{s}");
+    let whole = t["whole_frames"].as_u64().unwrap();
+    let crop = t["crop_frames"].as_u64().unwrap();
+    // One whole frame in four at most (a lost track adds whole frames, never crop ones).
+    assert!(whole >= 1 && crop <= 3 * whole + 3, "{t}");
+    assert_eq!(s["people"], 1, "{s}");
+    assert!(
+        s["field"].as_str().unwrap().contains("segmented twice"),
+        "{s}"
+    );
+    let (st, _, metrics) = request(&d.addr, "GET", "/metrics", "");
+    assert_eq!(st, 200);
+    let metrics = String::from_utf8_lossy(&metrics);
+    assert!(
+        metrics.contains("volcap_segment_track_frames_total{kind=\"crop\"}"),
+        "{metrics}"
+    );
+    let (st, _, png) = request(&d.addr, "GET", "/snapshot.png", "");
+    assert_eq!(st, 200);
+    let png = image::load_from_memory(&png).unwrap().to_rgba8();
+    let opaque = png.pixels().filter(|p| p[3] == 255).count();
+    assert!(opaque > 50, "the tracked person covers {opaque} pixels");
+}
+
 #[test]
 fn model_mode_renders_network_output() {
     let _serial = serial();
@@ -29,8 +77,9 @@ fn model_mode_renders_network_output() {
     assert_eq!(s["mode"], "model", "{s}");
     // The segmentation's count of people in the walking scene: exactly one.
     assert_eq!(s["people"], 1, "{s}");
-    // No close-range model configured: nothing to report.
+    // No close-range model configured, no segmentation track: nothing to report.
     assert!(s["close_range"].is_null(), "{s}");
+    assert!(s["segment_track"].is_null(), "{s}");
     assert!(
         s["mode_note"]
             .as_str()

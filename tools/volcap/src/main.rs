@@ -171,6 +171,17 @@ pub struct PipelineArgs {
     /// `volcap.segment_passes`), as `volcapd` runs it.
     #[arg(long = "segment-passes", value_delimiter = ',')]
     pub segment_passes: Vec<u8>,
+    /// `model.segment_full_every` values (comma-separated, 1..=30): with two passes the
+    /// whole frame is segmented every this many frames, the frames between only the last
+    /// frame's person's crop (one segmentation a frame instead of two; its accuracy in
+    /// `volcap bench temporal --setting default,default+segment_full_every=8`). 1 segments
+    /// every frame whole.
+    #[arg(
+        long = "segment-full-every",
+        value_delimiter = ',',
+        default_value = "1"
+    )]
+    pub segment_full_every: Vec<u32>,
     /// `render.drop_apart` values (comma-separated fractions of the grid's side in [0, 1]):
     /// inside pieces farther than this from the body left out of the render (0: kept; what
     /// the pass costs; its accuracy in `volcap eval --drop-apart`).

@@ -87,6 +87,8 @@ pub struct Row {
     pub reruns_per_frame: f64,
     /// `model.segment_passes`.
     pub segment_passes: u8,
+    /// `model.segment_full_every` (1: every frame segmented whole).
+    pub segment_full_every: u32,
     /// `render.drop_apart` (0: pieces apart from the body kept).
     pub drop_apart: f32,
     /// The adapter's milliseconds per frame, as `adapter_ms_per_frame`, of the frames'
@@ -144,7 +146,14 @@ type Setup = (
     usize,
     bool,
     f32,
-    (usize, RoundWaits, RenderDevice, u8, f32, (usize, usize)),
+    (
+        usize,
+        RoundWaits,
+        RenderDevice,
+        (u8, u32),
+        f32,
+        (usize, usize),
+    ),
 );
 
 /// A loaded model set: name, precision, runtime index, segmentation passes.
@@ -161,14 +170,14 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         display,
         temporal,
         yaw,
-        (rounds, waits, device, passes, apart, (workers, seg_workers)),
+        (rounds, waits, device, (passes, full_every), apart, (workers, seg_workers)),
     ) = setup;
     let device = device.name();
     let waits = waits.name();
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
          [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\ndrop_apart = {apart:?}\n\
-         [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\n\
+         [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\nsegment_full_every = {full_every}\n\
          [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\nrender_workers = {workers}\nsegment_workers = {seg_workers}\n\
          [dbus]\nbus = \"none\"\n\
          [temporal]\nenabled = {temporal}\n",
@@ -271,6 +280,7 @@ fn measure(
         predicted_per_frame: (work1[9] - work0[9]) as f64 / published.max(1) as f64,
         reruns_per_frame: (work1[10] - work0[10]) as f64 / published.max(1) as f64,
         segment_passes: cfg.model.segment_passes.unwrap_or(1),
+        segment_full_every: cfg.model.segment_full_every,
         drop_apart: cfg.render.drop_apart,
         maps_ms_per_frame: (work1[6] - work0[6]) as f64 / 1e6 / published.max(1) as f64,
         localize_ms_per_frame: (work1[7] - work0[7]) as f64 / 1e6 / published.max(1) as f64,
@@ -327,6 +337,10 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
     if !a.segment_passes.is_empty() {
         crate::backend::check_segment_passes(&a.segment_passes)?;
     }
+    let every = &volcapd::config::SEGMENT_FULL_EVERY;
+    if let Some(n) = a.segment_full_every.iter().find(|n| !every.contains(*n)) {
+        bail!("--segment-full-every {n} must be in {every:?}");
+    }
     for &g in &a.drop_apart {
         volcap_engine::pieces::gap_setting(g).map_err(|e| anyhow!("--drop-apart {e}"))?;
     }
@@ -370,6 +384,16 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         } else {
             a.segment_passes.clone()
         };
+        // The track only where there are two passes (one pass has no crop to track).
+        let passes_of_model: Vec<(u8, u32)> = passes_of_model
+            .iter()
+            .flat_map(|&p| {
+                a.segment_full_every
+                    .iter()
+                    .filter(move |&&f| p > 1 || f == 1 || a.segment_full_every.len() == 1)
+                    .map(move |&f| (p, if p > 1 { f } else { 1 }))
+            })
+            .collect();
         for &res in &a.res {
             for &c in &a.coarse_levels {
                 for &split in &a.segment_split {
@@ -507,6 +531,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.segment_workers == r.segment_workers
                     && b.round_waits == r.round_waits
                     && b.segment_passes == r.segment_passes
+                    && b.segment_full_every == r.segment_full_every
                     && b.drop_apart == r.drop_apart
             })
             .map(|b| r.fps / b.fps.max(1e-9));

@@ -301,6 +301,11 @@ fn pipeline_bench_names_bad_arguments() {
         (vec!["--render-workers", "0"], "--render-workers 0"),
         (vec!["--render-workers", "1,5"], "--render-workers 5"),
         (vec!["--segment-workers", "0"], "--segment-workers 0"),
+        (vec!["--segment-full-every", "0"], "--segment-full-every 0"),
+        (
+            vec!["--segment-full-every", "1,31"],
+            "--segment-full-every 31",
+        ),
     ] {
         let out = volcap()
             .current_dir(repo_root())
@@ -346,6 +351,45 @@ fn pipeline_bench_measures_render_and_segment_workers() {
     assert!(md.contains("| 2 render workers |"), "{md}");
     assert!(md.contains("| 2 segment workers |"), "{md}");
     assert!(md.contains("(2 render workers, 2 segment workers)"), "{md}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--segment-full-every`: with two segmentation passes a row per setting of the track,
+/// each publishing frames and saying which; with one pass the track has no crop to follow
+/// and only the untracked row is measured.
+#[test]
+fn pipeline_bench_measures_the_segmentation_track() {
+    let dir = std::env::temp_dir().join(format!("volcap-bench-track-{}", std::process::id()));
+    let (text, rows) = pipeline_rows(
+        &[
+            "--res",
+            "33",
+            "--threads",
+            "1",
+            "--segment-passes",
+            "1,2",
+            "--segment-full-every",
+            "1,4",
+            "--seconds",
+            "1.5",
+        ],
+        &dir,
+    );
+    let got: Vec<(u64, u64)> = rows
+        .iter()
+        .map(|r| {
+            assert!(r["error"].is_null(), "{r}");
+            assert!(r["frames"].as_u64().unwrap() > 0, "{r}");
+            (
+                r["segment_passes"].as_u64().unwrap(),
+                r["segment_full_every"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(got, [(1, 1), (2, 1), (2, 4)], "{text}");
+    let md = std::fs::read_to_string(dir.join("pipeline.md")).unwrap();
+    assert!(md.contains("segmented twice, whole every 4 |"), "{md}");
+    assert!(md.contains("(whole every 4)"), "{md}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -52,6 +52,13 @@ pub struct ModelConfig {
     /// `fourier-small-seg2`, 1 for `fourier-small`).
     #[serde(default)]
     pub segment_passes: Option<u8>,
+    /// With two passes: the whole frame is segmented every this many frames, the frames
+    /// between segment only the last frame's person's crop (one network run instead of
+    /// two; at once the whole frame again when the person reaches the crop's edge:
+    /// `volcap_engine::model::SegmentTrack`). 1 segments every frame whole. A person
+    /// walking in is counted at the next whole frame.
+    #[serde(default = "d_segment_full_every")]
+    pub segment_full_every: u32,
 }
 
 /// `model.thin_parts`.
@@ -77,6 +84,14 @@ impl ThinParts {
 /// `model.segment_passes`: the engine's range.
 pub use volcap_engine::model::SEGMENT_PASSES;
 
+/// `model.segment_full_every`: from every frame to once a second at 30 fps.
+pub const SEGMENT_FULL_EVERY: std::ops::RangeInclusive<u32> =
+    1..=volcap_engine::model::SEGMENT_FULL_EVERY_MAX;
+
+fn d_segment_full_every() -> u32 {
+    1
+}
+
 /// About a quarter of a second at the sim's frame rate, a few frames on a webcam.
 fn d_close_range_frames() -> u32 {
     5
@@ -100,6 +115,7 @@ impl Default for ModelConfig {
             close_range_frames: d_close_range_frames(),
             thin_parts: ThinParts::Series,
             segment_passes: None,
+            segment_full_every: d_segment_full_every(),
         }
     }
 }

@@ -320,6 +320,34 @@ fn thin_parts_is_read_and_a_wrong_value_named() {
     );
 }
 
+/// `model.segment_full_every`: 1 (every frame whole) by default, up to 30, and 0 or more
+/// refused naming the key, the line and the range.
+#[test]
+fn segment_full_every_is_read_and_a_wrong_count_named() {
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    let c = Config::parse(base, Path::new("b.toml")).unwrap();
+    assert_eq!(c.model.segment_full_every, 1);
+    for n in [1u32, 8, 30] {
+        let c = Config::parse(
+            &format!("{base}[model]\nsegment_full_every = {n}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.model.segment_full_every, n);
+    }
+    for bad in ["0", "31", "-2", "\"8\""] {
+        let e = Config::parse(
+            &format!("{base}[model]\nsegment_full_every = {bad}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("b.toml") && e.contains("segment_full_every") && e.contains("line 5"),
+            "{bad}: {e}"
+        );
+    }
+}
+
 /// `model.segment_passes`: unset by default (the shape model's own), one or two by choice,
 /// and anything else refused naming the key and the range.
 #[test]

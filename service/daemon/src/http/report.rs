@@ -95,6 +95,7 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         "temporal": sh.temporal.then(|| serde_json::json!({
             "resets": sh.temporal_resets.load(Ordering::Relaxed),
         })),
+        "segment_track": segment_track(sh),
         "drop_apart": {
             // As the file gives it (0.1, not f32's 0.10000000149).
             "gap": live.drop_apart.to_string().parse::<f64>().unwrap_or(0.0),
@@ -123,6 +124,23 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         "controls": app.controls(),
         "view": {"yaw": live.yaw, "pitch": live.pitch, "distance": live.distance},
         "uptime_s": up,
+    })
+}
+
+/// Model mode with two segmentation passes and `[model] segment_full_every` > 1: the track's
+/// setting and how its frames went (null otherwise).
+fn segment_track(sh: &crate::pipeline::Shared) -> serde_json::Value {
+    let full_every = sh.segment_track.lock().map_or(1, |t| t.full_every);
+    let [full, crop, lost] = [0, 1, 2].map(|i| sh.segment_tracked[i].load(Ordering::Relaxed));
+    if sh.mode != "model" || full_every <= 1 || !sh.field_label.contains("segmented twice") {
+        return serde_json::Value::Null;
+    }
+    serde_json::json!({
+        "full_every": full_every,
+        "whole_frames": full,
+        "crop_frames": crop,
+        "lost_frames": lost,
+        "note": "model.segment_full_every: the whole frame segmented every this many frames, the frames between only the last person's crop (crop_frames); lost_frames: the person reached the crop's edge and the whole frame followed",
     })
 }
 
@@ -202,6 +220,15 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
         sh.apart_frames.load(Ordering::Relaxed),
         sh.apart_points.load(Ordering::Relaxed)
     ));
+    if !segment_track(sh).is_null() {
+        s.push_str("# HELP volcap_segment_track_frames_total frames segmented with model.segment_full_every's track: whole (the whole frame too), crop (the last person's crop alone), lost (the person reached the crop's edge)\n# TYPE volcap_segment_track_frames_total counter\n");
+        for (i, kind) in ["whole", "crop", "lost"].iter().enumerate() {
+            s.push_str(&format!(
+                "volcap_segment_track_frames_total{{kind=\"{kind}\"}} {}\n",
+                sh.segment_tracked[i].load(Ordering::Relaxed)
+            ));
+        }
+    }
     s.push_str(&app.rtsp.metrics());
     s.push_str(&sh.compute.metrics());
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], s).into_response()

@@ -6,6 +6,9 @@
 //! `compute.segment_thread_up_to` (default 129) the field thread segments too (two compute
 //! stages for two cores). With `compute.segment_workers` > 1 the segment stage has that many
 //! threads (each with one frame in flight, their people handed on in capture order). With
+//! `[model] segment_full_every` > 1 (and two segmentation passes) the segment threads share
+//! a `SegmentTrack` (each takes a copy, segments, puts it back): between whole frames only
+//! the last person's crop is segmented, and `/state` `segment_track` counts the frames. With
 //! `compute.threads` > 1 the networks' matrix products use that many threads (tract's pool),
 //! so the field stage can take the core the render stage leaves idle at lower resolutions. The field thread also holds the temporal
 //! filter (`[temporal]`, `volcap_engine::model::temporal`): the person's mask and crop are
@@ -19,7 +22,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 use volcap_engine::model::preprocess::{CloseRangeSwitch, Crop};
 use volcap_engine::model::temporal::{Step, Temporal, TemporalSettings};
-use volcap_engine::model::{FrameError, FrameInfo, ModelField, ModelView, Models};
+use volcap_engine::model::{FrameError, FrameInfo, ModelField, ModelView, Models, Tracked};
 
 /// What the field thread hands the render thread: the model's field of a frame, or why
 /// there is none (shown as a degraded state with a placeholder).
@@ -55,9 +58,25 @@ pub struct Person {
 fn segment(sh: &Shared, models: &Models, f: &Frame, threads: usize) -> Segmented {
     let t = Instant::now();
     let mut info = FrameInfo::default();
-    match volcap_engine::model::with_threads(threads, || {
-        models.prepare(&f.rgb, f.width, f.height, &mut info)
-    }) {
+    // A copy of the track for this frame (the segment threads share it); the last frame
+    // segmented puts its own back.
+    let mut track = sh.segment_track.lock().map(|t| *t).unwrap_or_default();
+    let prepared = volcap_engine::model::with_threads(threads, || {
+        models.prepare_tracked(&f.rgb, f.width, f.height, &mut info, Some(&mut track))
+    });
+    if let Ok(mut shared) = sh.segment_track.lock() {
+        *shared = track;
+    }
+    let counter = match info.tracked {
+        Tracked::Off => None,
+        Tracked::Full => Some(0),
+        Tracked::Crop => Some(1),
+        Tracked::Lost => Some(2),
+    };
+    if let Some(i) = counter {
+        sh.segment_tracked[i].fetch_add(1, Ordering::Relaxed);
+    }
+    match prepared {
         Ok((img, mask, crop)) => {
             sh.people.store(info.people, Ordering::Relaxed);
             sh.stats[stage::SEGMENT].record(t.elapsed().as_secs_f64() * 1e3);

@@ -35,7 +35,9 @@ use crate::field::FieldError;
 use crate::softz::{SOFTZ_BINS, soft_z};
 pub use field::{EncodeTimings, ModelField, ShapeState};
 pub use fourier::{DepthFrame, FourierNet};
-pub use segment::{FrameError, FrameInfo, SegmentTimings};
+pub use segment::{
+    FrameError, FrameInfo, SEGMENT_FULL_EVERY_MAX, SegmentTimings, SegmentTrack, Tracked,
+};
 pub use shape::{ShapeModel, trained_segment_passes};
 
 use glam::Vec3;

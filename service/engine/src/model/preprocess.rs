@@ -80,6 +80,17 @@ pub fn letterbox(rgb: &[u8], w: usize, h: usize) -> Vec<f32> {
     out
 }
 
+/// Where a `w x h` frame's pixels lie in the input square, in input NDC: `[x0, x1, y0, y1]`
+/// of its first and last columns' and rows' centres (the letterbox's bars beyond).
+pub fn letterbox_extent(w: usize, h: usize) -> [f32; 4] {
+    if w == 0 || h == 0 {
+        return [-1.0, 1.0, -1.0, 1.0];
+    }
+    let (_, fw, fh, ox, oy) = letterbox_geometry(w, h);
+    let ndc = |i: usize| -1.0 + 2.0 * i as f32 / (INPUT_SIZE - 1) as f32;
+    [ndc(ox), ndc(ox + fw - 1), ndc(oy), ndc(oy + fh - 1)]
+}
+
 /// Where a `w x h` frame lands in the input square: scale, fitted size, offset (pixels).
 fn letterbox_geometry(w: usize, h: usize) -> (f32, usize, usize, usize, usize) {
     let s = INPUT_SIZE;

@@ -34,7 +34,9 @@ use volcap_engine::localize::{Localizer, Method};
 use volcap_engine::mesh::Mesh;
 use volcap_engine::metrics::iou_bits;
 use volcap_engine::model::temporal::{Temporal, TemporalSettings};
-use volcap_engine::model::{DepthFrame, FrameInfo, ModelView, Models, Precision};
+use volcap_engine::model::{
+    DepthFrame, FrameInfo, ModelView, Models, Precision, SegmentTrack, Tracked,
+};
 use volcap_sim::scene::{MotionSpec, Scene};
 use volcap_sim::sim::Simulator;
 
@@ -67,14 +69,16 @@ pub struct TemporalArgs {
     #[arg(long, default_value = volcap_engine::model::DEFAULT_MODEL)]
     pub model: String,
     /// Filter settings (comma-separated): `off`, `default` (volcapd's defaults), or
-    /// `KEY=VALUE+KEY=VALUE...` over the defaults (keys of `[temporal]`: crop_min_cutoff_hz,
+    /// `KEY=VALUE+KEY=VALUE...` over the defaults (`off+segment_full_every=N` or
+    /// `default+segment_full_every=N`: the segmentation's track, `[model]`'s key; keys of
+    /// `[temporal]`: crop_min_cutoff_hz,
     /// crop_beta, mask_low, mask_high, mask_motion, mask_hold_frames, map_min_cutoff_hz, map_beta,
     /// map_change_cutoff_hz,
     /// same_person_iou).
     #[arg(
         long = "setting",
         value_delimiter = ',',
-        default_value = "off,default,map_change_cutoff_hz=1.5,mask_low=0.5+mask_high=0.5"
+        default_value = "off,default,default+segment_full_every=8,map_change_cutoff_hz=1.5,mask_low=0.5+mask_high=0.5"
     )]
     pub settings: Vec<String>,
     /// Inside pieces farther than this fraction of the grid's side from the body are left
@@ -97,16 +101,32 @@ pub struct TemporalArgs {
     pub replot: bool,
 }
 
-/// A `--setting` value: its label and the filter (none: off).
-pub fn parse_setting(s: &str) -> anyhow::Result<(String, Option<TemporalSettings>)> {
+/// A `--setting` value: its label, the filter (none: off) and the segmentation's track
+/// (`segment_full_every`, the daemon's `[model]` key: 1 segments every frame whole).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Setting {
+    pub label: String,
+    pub filter: Option<TemporalSettings>,
+    pub segment_full_every: u32,
+}
+
+/// Parse a `--setting`: `off`, `default`, or `+`-joined `KEY=VALUE`s over the defaults
+/// (`[temporal]`'s keys, and `segment_full_every`), optionally with `off` among them (no
+/// filter: then only `segment_full_every` may follow).
+pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
     let s = s.trim();
-    match s {
-        "off" => return Ok(("off".into(), None)),
-        "default" => return Ok(("default".into(), Some(TemporalSettings::default()))),
-        _ => {}
-    }
     let mut t = TemporalSettings::default();
+    let (mut off, mut filter_keys, mut full_every) = (false, false, 1u32);
     for kv in s.split('+') {
+        let kv = kv.trim();
+        match kv {
+            "off" => {
+                off = true;
+                continue;
+            }
+            "default" => continue,
+            _ => {}
+        }
         let (k, v) = kv
             .split_once('=')
             .ok_or_else(|| anyhow!("--setting {s}: '{kv}' is not KEY=VALUE (or off, default)"))?;
@@ -114,12 +134,27 @@ pub fn parse_setting(s: &str) -> anyhow::Result<(String, Option<TemporalSettings
             .trim()
             .parse()
             .map_err(|_| anyhow!("--setting {s}: {k} = '{v}' is not a number"))?;
-        if k.trim() == "mask_hold_frames" {
-            if v.fract() != 0.0 || !(0.0..=255.0).contains(&v) {
-                bail!("--setting {s}: mask_hold_frames = {v} is not a whole number of frames");
+        let whole = |range: std::ops::RangeInclusive<f32>| {
+            if v.fract() != 0.0 || !range.contains(&v) {
+                bail!(
+                    "--setting {s}: {k} = {v} is not a whole number in {}..={}",
+                    range.start(),
+                    range.end()
+                );
             }
-            t.mask_hold_frames = v as u32;
-            continue;
+            Ok(v as u32)
+        };
+        match k.trim() {
+            "segment_full_every" => {
+                full_every = whole(1.0..=volcap_engine::model::SEGMENT_FULL_EVERY_MAX as f32)?;
+                continue;
+            }
+            "mask_hold_frames" => {
+                t.mask_hold_frames = whole(0.0..=255.0)?;
+                filter_keys = true;
+                continue;
+            }
+            _ => {}
         }
         let slot = match k.trim() {
             "crop_min_cutoff_hz" => &mut t.crop_min_cutoff_hz,
@@ -134,14 +169,24 @@ pub fn parse_setting(s: &str) -> anyhow::Result<(String, Option<TemporalSettings
             other => bail!("--setting {s}: unknown key '{other}'"),
         };
         *slot = v;
+        filter_keys = true;
+    }
+    if off && filter_keys {
+        bail!("--setting {s}: 'off' (no filter) with the filter's keys");
     }
     t.check().map_err(|(_, e)| anyhow!("--setting {s}: {e}"))?;
-    Ok((s.to_string(), Some(t)))
+    Ok(Setting {
+        label: s.to_string(),
+        filter: (!off).then_some(t),
+        segment_full_every: full_every,
+    })
 }
 
 /// One scene's frame with its truth.
 struct VFrame {
     rgb: Vec<u8>,
+    /// The true person mask, letterboxed as the networks see the frame (`[S, S]`, > 0.5).
+    truth_mask: Vec<bool>,
     width: usize,
     height: usize,
     gt_mesh: Mesh,
@@ -338,6 +383,29 @@ pub struct VideoRow {
     pub lag_frames: usize,
     /// Filter resets over the run (the first frame is one).
     pub resets: u64,
+    /// The segmented person mask (before the filter) against the truth's, IoU in the
+    /// networks' letterboxed input (mean over the frames with a person).
+    #[serde(default)]
+    pub mask_iou: f64,
+    /// The segment stage's wall ms per frame (mean; letterbox, networks, person).
+    #[serde(default)]
+    pub segment_ms: f64,
+    /// Frames segmented in the last frame's crop alone, and frames where the track lost the
+    /// person and both passes followed (`segment_full_every` > 1).
+    #[serde(default)]
+    pub tracked_frames: usize,
+    #[serde(default)]
+    pub lost_frames: usize,
+}
+
+/// IoU of a soft mask (> 0.5) against a true one.
+fn mask_iou_of(mask: &[f32], truth: &[bool]) -> f64 {
+    let (mut i, mut u) = (0usize, 0usize);
+    for (&m, &t) in mask.iter().zip(truth) {
+        i += (m > 0.5 && t) as usize;
+        u += (m > 0.5 || t) as usize;
+    }
+    if u == 0 { 1.0 } else { i as f64 / u as f64 }
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -381,7 +449,11 @@ fn render_scene(
             .mean_depth()
             .unwrap_or(0.0),
         };
+        let truth_rgb: Vec<u8> = f.person_mask().iter().flat_map(|&m| [m; 3]).collect();
+        let truth = volcap_engine::model::preprocess::letterbox(&truth_rgb, f.width, f.height);
+        let plane = volcap_engine::model::preprocess::INPUT_SIZE.pow(2);
         out.push(VFrame {
+            truth_mask: truth[..plane].iter().map(|&v| v > 0.5).collect(),
             gt_mesh: volcap_sim::dataset::clothed_surface(&sim),
             oracle,
             rgb: f.rgb,
@@ -435,24 +507,39 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
         let (mxy, mz) = frames.first().map(metres_per_ndc).unwrap_or((1.0, 1.0));
         // The unfiltered run's views, the reference of the filtered runs' lag.
         let mut unfiltered: Option<Vec<Option<Views>>> = None;
-        for (setting, ts) in &settings {
+        for st in &settings {
+            let (setting, ts) = (&st.label, &st.filter);
             pb.set_message(format!("{label}: {setting}"));
             let mut temporal = ts.map(Temporal::new);
+            let mut track = SegmentTrack::new(st.segment_full_every);
             let mut per: Vec<Option<(Views, Views, f32)>> = Vec::new();
             let (mut chamfer, mut p2s, mut iou) = (Vec::new(), Vec::new(), Vec::new());
+            let (mut mask_iou, mut segment_ms, mut tracked) = (Vec::new(), Vec::new(), [0usize; 2]);
             for (i, fr) in frames.iter().enumerate() {
                 pb.inc(1);
                 let t = i as f64 / fps;
                 let mut info = FrameInfo::default();
-                let Ok((img, mut mask, crop)) =
-                    models.prepare(&fr.rgb, fr.width, fr.height, &mut info)
-                else {
+                let prepared = models.prepare_tracked(
+                    &fr.rgb,
+                    fr.width,
+                    fr.height,
+                    &mut info,
+                    Some(&mut track),
+                );
+                segment_ms.push(info.segment_ms);
+                match info.tracked {
+                    Tracked::Crop => tracked[0] += 1,
+                    Tracked::Lost => tracked[1] += 1,
+                    Tracked::Off | Tracked::Full => {}
+                }
+                let Ok((img, mut mask, crop)) = prepared else {
                     if let Some(tf) = temporal.as_mut() {
                         tf.reset();
                     }
                     per.push(None);
                     continue;
                 };
+                mask_iou.push(mask_iou_of(&mask, &fr.truth_mask));
                 let crop = match temporal.as_mut() {
                     Some(tf) => tf.steady_input(t, info.people, &mut mask, crop).0,
                     None => Some(crop),
@@ -552,12 +639,16 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 side_jitter_cm: mean(&js),
                 lag_frames: lag,
                 resets: temporal.as_ref().map_or(0, |t| t.resets),
+                mask_iou: mean(&mask_iou),
+                segment_ms: mean(&segment_ms),
+                tracked_frames: tracked[0],
+                lost_frames: tracked[1],
             };
             if a.json {
                 println!("{}", serde_json::to_string(&row)?);
             }
             rows.push(row);
-            if ts.is_none() {
+            if ts.is_none() && st.segment_full_every <= 1 {
                 unfiltered = Some(per.into_iter().map(|p| p.map(|(m, _, _)| m)).collect());
             }
         }
@@ -583,3 +674,6 @@ fn write(a: &TemporalArgs, rows: &[VideoRow]) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests;

@@ -28,10 +28,10 @@ pub(super) fn table(rows: &[Row]) -> String {
             s,
             "| {}{}{} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {:.0} / {:.0} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.0} | {} |",
             r.model,
-            if r.segment_passes > 1 {
-                ", segmented twice"
-            } else {
-                ""
+            match (r.segment_passes > 1, r.segment_full_every > 1) {
+                (true, true) => format!(", segmented twice, whole every {}", r.segment_full_every),
+                (true, false) => ", segmented twice".to_string(),
+                _ => String::new(),
             },
             apart_note(r.drop_apart),
             r.runtime,
@@ -161,9 +161,14 @@ pub(super) fn parts_table(rows: &[Row]) -> String {
             s,
             "| {}{} | {} | {} | {} |",
             r.model,
-            match workers_label(r) {
-                w if w.is_empty() => w,
-                w => format!(" ({w})"),
+            match (
+                workers_label(r),
+                r.segment_passes > 1 && r.segment_full_every > 1
+            ) {
+                (w, false) if w.is_empty() => w,
+                (w, false) => format!(" ({w})"),
+                (w, true) if w.is_empty() => format!(" (whole every {})", r.segment_full_every),
+                (w, true) => format!(" ({w}, whole every {})", r.segment_full_every),
             },
             r.runtime,
             r.resolution,

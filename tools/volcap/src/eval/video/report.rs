@@ -13,6 +13,12 @@ struct Summary {
     still_side_iou_min: f64,
     moving_chamfer_cm: f64,
     moving_lag_frames: f64,
+    mask_iou: f64,
+    segment_ms: f64,
+    /// Frames segmented in the last crop alone / lost, over all scenes.
+    tracked: usize,
+    lost: usize,
+    frames: usize,
 }
 
 fn summarize(rows: &[VideoRow]) -> Vec<Summary> {
@@ -36,6 +42,31 @@ fn summarize(rows: &[VideoRow]) -> Vec<Summary> {
                 still_side_iou_min: min(&of("still").map(|r| r.side_iou_min).collect::<Vec<_>>()),
                 moving_chamfer_cm: f(of("moving").map(|r| r.chamfer_cm).collect()),
                 moving_lag_frames: f(of("moving").map(|r| r.lag_frames as f64).collect()),
+                mask_iou: f(rows
+                    .iter()
+                    .filter(|r| r.setting == s)
+                    .map(|r| r.mask_iou)
+                    .collect()),
+                segment_ms: f(rows
+                    .iter()
+                    .filter(|r| r.setting == s)
+                    .map(|r| r.segment_ms)
+                    .collect()),
+                tracked: rows
+                    .iter()
+                    .filter(|r| r.setting == s)
+                    .map(|r| r.tracked_frames)
+                    .sum(),
+                lost: rows
+                    .iter()
+                    .filter(|r| r.setting == s)
+                    .map(|r| r.lost_frames)
+                    .sum(),
+                frames: rows
+                    .iter()
+                    .filter(|r| r.setting == s)
+                    .map(|r| r.frames)
+                    .sum(),
             }
         })
         .collect()
@@ -50,7 +81,11 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
          Flicker is what the display shows (the crop's cube, consecutive frames; flicker and jitter leave out the first {} frames of each scene); accuracy is \
          against the simulator's truth of each frame; jitter is the model's frame-to-frame depth \
          change minus the truth's (camera frame); lag is the shift that best lines the \
-         silhouettes up with the unfiltered run's (`off`).\n",
+         silhouettes up with the unfiltered run's (`off`). Mask IoU is the segmented person \
+         (before the filter) against the true mask in the networks' input; segment ms the \
+         segment stage's wall time a frame (one thread here, beside nothing else); tracked / \
+         lost count the frames segmented in the last frame's crop alone and those where the \
+         track lost the person (`segment_full_every`, the daemon's `[model]` key).\n",
         a.res,
         a.coarse_level,
         a.model,
@@ -64,28 +99,33 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
     let _ = writeln!(md, "## Per setting (means over the scenes of each kind)\n");
     let _ = writeln!(
         md,
-        "| setting | still: side IoU mean | still: side IoU worst | moving: Chamfer cm | moving: lag frames |\n|---|---|---|---|---|"
+        "| setting | still: side IoU mean | still: side IoU worst | moving: Chamfer cm | moving: lag frames | mask IoU | segment ms | tracked / lost of frames |\n|---|---|---|---|---|---|---|---|"
     );
     for s in summarize(rows) {
         let _ = writeln!(
             md,
-            "| {} | {:.4} | {:.4} | {:.3} | {:.2} |",
+            "| {} | {:.4} | {:.4} | {:.3} | {:.2} | {:.4} | {:.1} | {} / {} of {} |",
             s.setting,
             s.still_side_iou_mean,
             s.still_side_iou_min,
             s.moving_chamfer_cm,
-            s.moving_lag_frames
+            s.moving_lag_frames,
+            s.mask_iou,
+            s.segment_ms,
+            s.tracked,
+            s.lost,
+            s.frames
         );
     }
     let _ = writeln!(md, "\n## Per scene\n");
     let _ = writeln!(
         md,
-        "| scene | kind | setting | front IoU mean / worst | side IoU mean / worst | depth change front / side cm | Chamfer cm | P2S cm | IoU | jitter front / side cm | lag | resets | failed |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| scene | kind | setting | front IoU mean / worst | side IoU mean / worst | depth change front / side cm | Chamfer cm | P2S cm | IoU | jitter front / side cm | lag | resets | failed | mask IoU | segment ms | tracked / lost |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {:.4} / {:.4} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} | {:.3} | {:.4} | {:+.3} / {:+.3} | {} | {} | {} |",
+            "| {} | {} | {} | {:.4} / {:.4} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} | {:.3} | {:.4} | {:+.3} / {:+.3} | {} | {} | {} | {:.4} | {:.1} | {} / {} |",
             r.scene,
             r.kind,
             r.setting,
@@ -102,7 +142,11 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
             r.side_jitter_cm,
             r.lag_frames,
             r.resets,
-            r.failed
+            r.failed,
+            r.mask_iou,
+            r.segment_ms,
+            r.tracked_frames,
+            r.lost_frames
         );
     }
     md
