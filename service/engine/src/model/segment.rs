@@ -70,7 +70,9 @@ pub enum Tracked {
 /// frame's and the crop's masks together (so a limb the first pass missed, which the crop
 /// cut, is taken in; the crop's mask alone could lose a hand and the crop follow it away);
 /// on a scheduled whole frame only once that crop differs from it by [`TRACK_HOLD`] (a
-/// still person's crop stays put). Measured side by side with the untracked path by
+/// still person's crop stays put). A crop that magnifies nothing (`s` >= 1: the person fills
+/// the frame) is not segmented: the tracked frames segment the whole frame instead, one run
+/// either way. Measured side by side with the untracked path by
 /// `volcap bench temporal --setting default,default+segment_full_every=8` (accuracy,
 /// flicker and the segment stage's ms; docs/bench/segment-track/).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -89,6 +91,14 @@ pub struct SegmentTrack {
 /// The longest `full_every` a caller should take: once a second at 30 fps (a person walking
 /// in is counted within a second).
 pub const SEGMENT_FULL_EVERY_MAX: u32 = 30;
+
+/// The crop that is the whole input square (a copy).
+const WHOLE_FRAME: Crop = Crop {
+    s: 1.0,
+    tx: 0.0,
+    ty: 0.0,
+    cut_by_frame: false,
+};
 
 /// A tracked crop's mask touching its edge within this many pixels (of the `S x S` crop
 /// input) means the person may extend past it.
@@ -128,8 +138,13 @@ fn held(last: Crop, new: Crop) -> Crop {
 /// A crop's mask taken into an empty input square, its most prominent person kept; `None`
 /// when it holds no person.
 fn crop_alone(crop: &Crop, crop_mask: &[f32], size: usize) -> Option<Vec<f32>> {
-    let mut mask = vec![0.0f32; size * size];
-    crop.paste_max(crop_mask, size, &mut mask);
+    let mut mask = if *crop == WHOLE_FRAME {
+        crop_mask.to_vec()
+    } else {
+        let mut mask = vec![0.0f32; size * size];
+        crop.paste_max(crop_mask, size, &mut mask);
+        mask
+    };
     (preprocess::keep_most_prominent(&mut mask, size) > 0).then_some(mask)
 }
 
@@ -225,9 +240,19 @@ impl Models {
         // frame beyond.
         let mut tracked = None;
         if let Some(tr) = track.as_deref().filter(|_| tracking)
-            && let Some(crop) = tr.crop
+            && let Some(held_crop) = tr.crop
         {
-            let m2 = timed(&crop.apply(img, 3, s))?;
+            // A crop that magnifies nothing (the person fills the frame) shows the person
+            // no larger than the whole frame, and thin parts smaller: the whole frame is
+            // segmented in its place (the crop's mask alone lost a still T-pose's hands,
+            // mask IoU 0.78 where the whole frame's is 0.91).
+            let whole = held_crop.s >= 1.0;
+            let crop = if whole { WHOLE_FRAME } else { held_crop };
+            let m2 = if whole {
+                timed(img)?
+            } else {
+                timed(&crop.apply(img, 3, s))?
+            };
             let edge = reaches_inner_edge(&crop, &m2, s, extent);
             if !edge
                 && tr.since_full + 1 < tr.full_every
@@ -239,9 +264,13 @@ impl Models {
                 }
                 return Ok((mask, people, Tracked::Crop));
             }
-            tracked = Some((crop, m2, edge));
+            tracked = Some((crop, held_crop, m2, edge));
         }
-        let mut mask = timed(img)?;
+        // The whole frame (already segmented when the track's crop was the whole frame).
+        let mut mask = match &tracked {
+            Some((crop, _, m2, _)) if *crop == WHOLE_FRAME => m2.clone(),
+            _ => timed(img)?,
+        };
         let people = preprocess::keep_most_prominent(&mut mask, s);
         let mut how = if tracking {
             Tracked::Full
@@ -250,7 +279,7 @@ impl Models {
         };
         let mut next = None;
         match tracked {
-            Some((crop, m2, edge)) => {
+            Some((crop, held_crop, m2, edge)) => {
                 // The whole frame's person inside the tracked crop, which holds all of them:
                 // the frame keeps the crop's mask alone, as the tracked frames do (a whole
                 // frame in the track counts the people and checks the crop).
@@ -264,7 +293,7 @@ impl Models {
                 next = Crop::from_mask(&mask, s);
                 match alone {
                     Some(alone) => {
-                        next = next.map(|c| held(crop, c));
+                        next = next.map(|c| held(held_crop, c));
                         mask = alone;
                     }
                     None => how = Tracked::Lost,
