@@ -311,13 +311,26 @@ fn a_person_who_left_the_crop_is_found_in_the_whole_frame_and_a_person_gone_rest
 
 /// A person filling the frame (the main job's walker: a crop larger than the frame): the
 /// tracked frames segment the whole frame once, their mask the first pass's, and keep the
-/// person's count.
+/// person's count; a frame of another size than the track's last is segmented whole.
 #[test]
 fn a_person_filling_the_frame_is_tracked_in_the_whole_frame() {
     let models = models();
     let text = std::fs::read_to_string(repo().join("tests/scenes/front-walk.toml")).unwrap();
     let frames = frames(&text, 3);
     let mut track = SegmentTrack::new(8);
+    // The track starts on another camera's smaller frame: the first frame of this one is
+    // segmented whole all the same.
+    let small = &self::frames(&walker(0.0), 1)[0];
+    models
+        .prepare_tracked(
+            &small.rgb,
+            small.w,
+            small.h,
+            &mut FrameInfo::default(),
+            Some(&mut track),
+        )
+        .unwrap();
+    assert!(track.next_crop().is_some());
     for (i, f) in frames.iter().enumerate() {
         let mut info = FrameInfo::default();
         let (img, mask, crop) = models

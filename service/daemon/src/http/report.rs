@@ -130,7 +130,11 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
 /// Model mode with two segmentation passes and `[model] segment_full_every` > 1: the track's
 /// setting and how its frames went (null otherwise).
 fn segment_track(sh: &crate::pipeline::Shared) -> serde_json::Value {
-    let full_every = sh.segment_track.lock().map_or(1, |t| t.full_every);
+    let full_every = sh
+        .segment_track
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .full_every;
     let [full, crop, lost] = [0, 1, 2].map(|i| sh.segment_tracked[i].load(Ordering::Relaxed));
     if sh.mode != "model" || full_every <= 1 || !sh.field_label.contains("segmented twice") {
         return serde_json::Value::Null;
@@ -140,7 +144,7 @@ fn segment_track(sh: &crate::pipeline::Shared) -> serde_json::Value {
         "whole_frames": full,
         "crop_frames": crop,
         "lost_frames": lost,
-        "note": "model.segment_full_every: the whole frame segmented every this many frames, the frames between only the last person's crop (crop_frames); lost_frames: the person reached the crop's edge and the whole frame followed",
+        "note": "model.segment_full_every: the whole frame segmented every this many frames, the frames between only the last person's crop (crop_frames; the whole frame once where that crop would magnify nothing); lost_frames: the person reached the crop's edge and the whole frame followed",
     })
 }
 

@@ -60,13 +60,11 @@ fn segment(sh: &Shared, models: &Models, f: &Frame, threads: usize) -> Segmented
     let mut info = FrameInfo::default();
     // A copy of the track for this frame (the segment threads share it); the last frame
     // segmented puts its own back.
-    let mut track = sh.segment_track.lock().map(|t| *t).unwrap_or_default();
+    let mut track = *sh.segment_track.lock().unwrap_or_else(|p| p.into_inner());
     let prepared = volcap_engine::model::with_threads(threads, || {
         models.prepare_tracked(&f.rgb, f.width, f.height, &mut info, Some(&mut track))
     });
-    if let Ok(mut shared) = sh.segment_track.lock() {
-        *shared = track;
-    }
+    *sh.segment_track.lock().unwrap_or_else(|p| p.into_inner()) = track;
     let counter = match info.tracked {
         Tracked::Off => None,
         Tracked::Full => Some(0),

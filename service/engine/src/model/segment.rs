@@ -86,6 +86,9 @@ pub struct SegmentTrack {
     since_full: u32,
     /// The people counted by the last whole frame.
     people: usize,
+    /// Where the frames' pixels lie in the input square ([`preprocess::letterbox_extent`]):
+    /// a frame of another size (another camera) is segmented whole.
+    extent: [f32; 4],
 }
 
 /// The longest `full_every` a caller should take: once a second at 30 fps (a person walking
@@ -117,7 +120,7 @@ impl SegmentTrack {
         }
     }
 
-    /// The crop the next frame segments alone, if it will.
+    /// The crop the next frame segments alone, if it will (and is of the last one's size).
     pub fn next_crop(&self) -> Option<Crop> {
         self.crop.filter(|_| self.since_full + 1 < self.full_every)
     }
@@ -240,7 +243,7 @@ impl Models {
         // frame beyond.
         let mut tracked = None;
         if let Some(tr) = track.as_deref().filter(|_| tracking)
-            && let Some(held_crop) = tr.crop
+            && let Some(held_crop) = tr.crop.filter(|_| tr.extent == extent)
         {
             // A crop that magnifies nothing (the person fills the frame) shows the person
             // no larger than the whole frame, and thin parts smaller: the whole frame is
@@ -313,6 +316,7 @@ impl Models {
             tr.crop = next.or_else(|| Crop::from_mask(&mask, s));
             tr.since_full = 0;
             tr.people = people;
+            tr.extent = extent;
         }
         Ok((mask, people, how))
     }
