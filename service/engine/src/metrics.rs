@@ -23,6 +23,21 @@ pub fn iou_bits(a: &BitSet, b: &BitSet) -> f64 {
     }
 }
 
+/// IoU of two binary masks given pixel by pixel as `(a, b)` pairs (a mask > 0.5 against a
+/// true one, say); 1.0 when both are empty.
+pub fn mask_iou(pairs: impl IntoIterator<Item = (bool, bool)>) -> f64 {
+    let (mut inter, mut uni) = (0usize, 0usize);
+    for (a, b) in pairs {
+        inter += (a && b) as usize;
+        uni += (a || b) as usize;
+    }
+    if uni == 0 {
+        1.0
+    } else {
+        inter as f64 / uni as f64
+    }
+}
+
 /// IoU of two grids after binarization.
 pub fn iou(a: &Grid, b: &Grid) -> f64 {
     iou_bits(&a.binarized(), &b.binarized())

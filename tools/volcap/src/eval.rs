@@ -179,17 +179,9 @@ fn run_case(
     let t = Instant::now();
     let (prob, _) = models.person_mask(&img)?;
     row.segment_ms = t.elapsed().as_secs_f64() * 1e3;
-    let (mut inter, mut union) = (0usize, 0usize);
-    for (p, m) in prob.iter().zip(&c.mask) {
-        let (a, b) = (*p > 0.5, *m > 127);
-        inter += (a && b) as usize;
-        union += (a || b) as usize;
-    }
-    row.mask_iou = if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    };
+    row.mask_iou = volcap_engine::metrics::mask_iou(
+        prob.iter().zip(&c.mask).map(|(p, m)| (*p > 0.5, *m > 127)),
+    );
     let prob = if gt_mask || truth_k.is_some() {
         truth_mask
     } else {

@@ -384,14 +384,13 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         } else {
             a.segment_passes.clone()
         };
-        // The track only where there are two passes (one pass has no crop to track).
+        // The track only where there are two passes (one pass has no crop to track: one
+        // untracked row).
         let passes_of_model: Vec<(u8, u32)> = passes_of_model
             .iter()
-            .flat_map(|&p| {
-                a.segment_full_every
-                    .iter()
-                    .filter(move |&&f| p > 1 || f == 1 || a.segment_full_every.len() == 1)
-                    .map(move |&f| (p, if p > 1 { f } else { 1 }))
+            .flat_map(|&p| match p {
+                1 => vec![(1, 1)],
+                _ => a.segment_full_every.iter().map(|&f| (p, f)).collect(),
             })
             .collect();
         for &res in &a.res {

@@ -59,12 +59,7 @@ fn masks(models: &mut Models, scene_text: &str, yaw: f32) -> Masks {
 }
 
 fn iou(m: &[f32], truth: &[bool]) -> f64 {
-    let (mut i, mut u) = (0usize, 0usize);
-    for (&v, &t) in m.iter().zip(truth) {
-        i += (v > 0.5 && t) as usize;
-        u += (v > 0.5 || t) as usize;
-    }
-    i as f64 / u.max(1) as f64
+    volcap_engine::metrics::mask_iou(m.iter().zip(truth).map(|(&v, &t)| (v > 0.5, t)))
 }
 
 #[test]

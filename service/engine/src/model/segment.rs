@@ -43,7 +43,8 @@ pub enum Tracked {
     /// The whole frame segmented: the track's first frame (or the first after a frame
     /// without a person: both passes, as untracked), or every `full_every`-th, which
     /// segments the tracked crop too and keeps its mask alone when the whole frame's
-    /// person lies inside it (two runs); the people are counted again.
+    /// person lies inside it (two runs, one where the crop is the whole frame); the people
+    /// are counted again.
     Full,
     /// Only the last frame's crop was segmented (one network run instead of two).
     Crop,
@@ -120,7 +121,8 @@ impl SegmentTrack {
         }
     }
 
-    /// The crop the next frame segments alone, if it will (and is of the last one's size).
+    /// The crop the next frame segments alone, if it will (a frame of another size than the
+    /// last is segmented whole all the same).
     pub fn next_crop(&self) -> Option<Crop> {
         self.crop.filter(|_| self.since_full + 1 < self.full_every)
     }

@@ -398,16 +398,6 @@ pub struct VideoRow {
     pub lost_frames: usize,
 }
 
-/// IoU of a soft mask (> 0.5) against a true one.
-fn mask_iou_of(mask: &[f32], truth: &[bool]) -> f64 {
-    let (mut i, mut u) = (0usize, 0usize);
-    for (&m, &t) in mask.iter().zip(truth) {
-        i += (m > 0.5 && t) as usize;
-        u += (m > 0.5 || t) as usize;
-    }
-    if u == 0 { 1.0 } else { i as f64 / u as f64 }
-}
-
 fn mean(v: &[f64]) -> f64 {
     if v.is_empty() {
         f64::NAN
@@ -539,7 +529,9 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                     per.push(None);
                     continue;
                 };
-                mask_iou.push(mask_iou_of(&mask, &fr.truth_mask));
+                mask_iou.push(volcap_engine::metrics::mask_iou(
+                    mask.iter().zip(&fr.truth_mask).map(|(&m, &t)| (m > 0.5, t)),
+                ));
                 let crop = match temporal.as_mut() {
                     Some(tf) => tf.steady_input(t, info.people, &mut mask, crop).0,
                     None => Some(crop),

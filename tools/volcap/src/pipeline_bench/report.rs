@@ -161,14 +161,16 @@ pub(super) fn parts_table(rows: &[Row]) -> String {
             s,
             "| {}{} | {} | {} | {} |",
             r.model,
-            match (
-                workers_label(r),
-                r.segment_passes > 1 && r.segment_full_every > 1
-            ) {
-                (w, false) if w.is_empty() => w,
-                (w, false) => format!(" ({w})"),
-                (w, true) if w.is_empty() => format!(" (whole every {})", r.segment_full_every),
-                (w, true) => format!(" ({w}, whole every {})", r.segment_full_every),
+            {
+                let mut notes = vec![workers_label(r)];
+                if r.segment_passes > 1 && r.segment_full_every > 1 {
+                    notes.push(format!("whole every {}", r.segment_full_every));
+                }
+                notes.retain(|n| !n.is_empty());
+                match notes.join(", ") {
+                    n if n.is_empty() => n,
+                    n => format!(" ({n})"),
+                }
             },
             r.runtime,
             r.resolution,

@@ -35,6 +35,8 @@ fn summarize(rows: &[VideoRow]) -> Vec<Summary> {
                 rows.iter()
                     .filter(move |r| r.setting == s && r.kind == kind)
             };
+            // The setting's rows over every scene.
+            let mine = || rows.iter().filter(move |r| r.setting == s);
             let f = |v: Vec<f64>| mean(&v);
             Summary {
                 setting: s.to_string(),
@@ -42,31 +44,11 @@ fn summarize(rows: &[VideoRow]) -> Vec<Summary> {
                 still_side_iou_min: min(&of("still").map(|r| r.side_iou_min).collect::<Vec<_>>()),
                 moving_chamfer_cm: f(of("moving").map(|r| r.chamfer_cm).collect()),
                 moving_lag_frames: f(of("moving").map(|r| r.lag_frames as f64).collect()),
-                mask_iou: f(rows
-                    .iter()
-                    .filter(|r| r.setting == s)
-                    .map(|r| r.mask_iou)
-                    .collect()),
-                segment_ms: f(rows
-                    .iter()
-                    .filter(|r| r.setting == s)
-                    .map(|r| r.segment_ms)
-                    .collect()),
-                tracked: rows
-                    .iter()
-                    .filter(|r| r.setting == s)
-                    .map(|r| r.tracked_frames)
-                    .sum(),
-                lost: rows
-                    .iter()
-                    .filter(|r| r.setting == s)
-                    .map(|r| r.lost_frames)
-                    .sum(),
-                frames: rows
-                    .iter()
-                    .filter(|r| r.setting == s)
-                    .map(|r| r.frames)
-                    .sum(),
+                mask_iou: f(mine().map(|r| r.mask_iou).collect()),
+                segment_ms: f(mine().map(|r| r.segment_ms).collect()),
+                tracked: mine().map(|r| r.tracked_frames).sum(),
+                lost: mine().map(|r| r.lost_frames).sum(),
+                frames: mine().map(|r| r.frames).sum(),
             }
         })
         .collect()

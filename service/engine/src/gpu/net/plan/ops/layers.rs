@@ -150,7 +150,8 @@ pub(super) fn conv(
     let row_blocks = nb * m.div_ceil(4) * o[0] * o[1].div_ceil(4);
     let pixel_blocks = nb * m.div_ceil(4) * o[0] * o[1];
     let rows = o[1] >= ROW_MIN_COLUMNS;
-    let kind = match pl.conv_kernels {
+    let kernel = match pl.conv_kernels {
+        _ if transpose => Kernel::ConvTranspose,
         _ if !blocked => Kernel::Conv,
         ConvKernels::Conv4 => Kernel::Conv4,
         ConvKernels::Split
@@ -162,7 +163,7 @@ pub(super) fn conv(
         _ if rows => Kernel::ConvRow,
         _ => Kernel::Conv4,
     };
-    if matches!(kind, Kernel::ConvRow | Kernel::ConvSplit) {
+    if matches!(kernel, Kernel::ConvRow | Kernel::ConvSplit) {
         w = block_weights(&w, m.div_ceil(4) * 4);
     }
     let wb = pl.upload(w);
@@ -172,11 +173,6 @@ pub(super) fn conv(
     let dims = [
         nb, c, h, wd, m, o[0], o[1], k[0], k[1], s[0], s[1], pt[0], pt[1], d[0], d[1], group,
     ];
-    let kernel = if transpose {
-        Kernel::ConvTranspose
-    } else {
-        kind
-    };
     let count = match kernel {
         Kernel::ConvRow => row_blocks,
         Kernel::ConvSplit => pixel_blocks * 64,
