@@ -109,30 +109,46 @@ impl Stages {
         &mut self.cpu
     }
 
-    /// The paper's hierarchical localization of `field` on `spec` into `grid`.
+    /// The paper's hierarchical localization of `field` on `spec` into `grid` (the product's).
     pub fn localize(
         &mut self,
         field: &volcap_engine::model::ModelField,
         spec: volcap_engine::grid::GridSpec,
         grid: &mut volcap_engine::grid::Grid,
     ) -> anyhow::Result<volcap_engine::localize::LocalizeStats> {
-        use volcap_engine::localize::{Method, default_coarse};
+        self.localize_with(
+            volcap_engine::localize::Method::Hierarchical,
+            field,
+            spec,
+            grid,
+        )
+    }
+
+    /// [`Stages::localize`] with another method: on the adapter for the hierarchical family
+    /// with the field's seeds (the product's, the tight variant, the one without the conflict
+    /// loop), on the CPU's localizer for the others.
+    pub fn localize_with(
+        &mut self,
+        method: volcap_engine::localize::Method,
+        field: &volcap_engine::model::ModelField,
+        spec: volcap_engine::grid::GridSpec,
+        grid: &mut volcap_engine::grid::Grid,
+    ) -> anyhow::Result<volcap_engine::localize::LocalizeStats> {
+        use volcap_engine::localize::default_coarse;
         let coarse = self.coarse_level.unwrap_or_else(|| default_coarse(spec));
         #[cfg(feature = "wgpu")]
-        if let (Some((loc, _)), Some(on_gpu)) = (self.gpu.as_mut(), field.gpu_field())
+        if let (Some((loc, _)), Some(on_gpu), Some(mode)) =
+            (self.gpu.as_mut(), field.gpu_field(), gpu_mode(method))
             && loc.check_size(spec).is_ok()
         {
-            use volcap_engine::localize::HierarchicalMode;
             let stats = loc
-                .run(&on_gpu, spec, coarse, HierarchicalMode::Paper)
+                .run(&on_gpu, spec, coarse, mode)
                 .map_err(|e| anyhow!("localization on the adapter: {e}"))?;
             loc.read_grid(grid)
                 .map_err(|e| anyhow!("localization on the adapter: {e}"))?;
             return Ok(stats);
         }
-        Ok(self
-            .cpu
-            .run(Method::Hierarchical, field, spec, coarse, grid)?)
+        Ok(self.cpu.run(method, field, spec, coarse, grid)?)
     }
 
     /// Render `field` (its own colours) on `spec` into `r`.
@@ -152,6 +168,21 @@ impl Stages {
         }
         r.render(field, field, spec, opts)?;
         Ok(())
+    }
+}
+
+/// The GPU localizer's mode for `method`: the hierarchical methods that take the field's
+/// seeds (the adapter's localizer always does); none for the others.
+#[cfg(feature = "wgpu")]
+fn gpu_mode(
+    method: volcap_engine::localize::Method,
+) -> Option<volcap_engine::localize::HierarchicalMode> {
+    use volcap_engine::localize::{HierarchicalMode, Method};
+    match method {
+        Method::Hierarchical => Some(HierarchicalMode::Paper),
+        Method::HierarchicalNoConflict => Some(HierarchicalMode::NoConflict),
+        Method::HierarchicalTight => Some(HierarchicalMode::Tight),
+        _ => None,
     }
 }
 

@@ -25,9 +25,11 @@ mod cases;
 mod distances;
 mod framing;
 mod report;
+mod tradeoff;
 pub use apart::Apart;
 use apart::parse_apart;
 pub use args::{EvalArgs, FrameArg, TruthSurface};
+use args::{grid_knobs, methods_of};
 pub use report::ModelRow;
 mod turntable;
 pub mod video;
@@ -35,7 +37,8 @@ use cases::{Case, render_cases};
 use distances::surface_distances;
 pub use framing::Framing;
 use framing::{OracleInCrop, ToCamera};
-use report::{plot, report};
+use report::report;
+use tradeoff::plot;
 pub use turntable::TURNTABLE_YAWS;
 use turntable::{colour_errors, turntable};
 
@@ -138,6 +141,7 @@ fn run_case(
     label: &str,
     c: &Case,
     spec: GridSpec,
+    method: Method,
     stages: &mut crate::backend::Stages,
     grid: &mut Grid,
     truth: &mut Grid,
@@ -218,7 +222,7 @@ fn run_case(
     row.encode_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     // On the adapter with `--backend wgpu` (the same evaluated points: tested in gpu_frames).
-    let stats = stages.localize(&field, spec, grid)?;
+    let stats = stages.localize_with(method, &field, spec, grid)?;
     row.localize_ms = t.elapsed().as_secs_f64() * 1e3;
     row.evaluations = stats.evaluations;
     let t = Instant::now();
@@ -293,8 +297,22 @@ fn level_in_pixels(
     Ok(())
 }
 
+/// Segment (and with `encode`, encode) case `c` once, untimed.
+fn warm_up(models: &Models, c: &Case, encode: bool) -> anyhow::Result<()> {
+    let img = volcap_engine::model::preprocess::letterbox(&c.rgb, c.size, c.size);
+    let (prob, _) = models.person_mask(&img)?;
+    if encode && let Some(crop) = volcap_engine::model::preprocess::Crop::from_mask(&prob, c.size) {
+        models.encode(&img, &prob, crop, ModelView::default())?;
+    }
+    Ok(())
+}
+
 pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
-    let spec = GridSpec::from_resolution(a.res).with_context(|| format!("--res {}", a.res))?;
+    if a.replot {
+        return tradeoff::replot(&a.out);
+    }
+    let grids = grid_knobs(a)?;
+    let methods = methods_of(&a.method)?;
     let mut specs = Vec::new();
     for m in &a.model {
         let (name, prec) = match m.split_once('@') {
@@ -361,6 +379,15 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         Some(m) if m.len() == 3 => vec![None, Some((m[0], m[1], m[2] as usize))],
         _ => vec![None],
     };
+    // Every backend opened before the images are drawn (a missing adapter fails at once).
+    let mut runtimes = Vec::new();
+    for b in &a.backend {
+        if runtimes.iter().any(|(n, _)| n == b.trim()) {
+            bail!("--backend {b}: given twice");
+        }
+        let (runtime, _) = crate::backend::open(b, &a.runtime, &a.adapter)?;
+        runtimes.push((b.trim().to_string(), runtime));
+    }
     let cases = render_cases(a)?;
     if a.turntable && a.turntable_image >= cases.len() {
         bail!(
@@ -377,183 +404,230 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
         a.segment_passes.iter().map(|p| Some(*p)).collect()
     };
     let pb = ProgressBar::new(
-        (cases.len() * specs.len() * levels.len() * fills.len() * passes.len()) as u64,
+        (cases.len()
+            * specs.len()
+            * levels.len()
+            * fills.len()
+            * passes.len()
+            * grids.len()
+            * methods.len()
+            * a.backend.len()) as u64,
     );
+    // A row's cases, once per grid and method (skipped variants count them all).
+    let per_variant = (cases.len() * grids.len() * methods.len()) as u64;
     pb.set_style(
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let (runtime, _) = crate::backend::open(&a.backend, &a.runtime, &a.adapter)?;
     let mut images = Vec::new();
     let mut summary = Vec::new();
-    let mut stages = crate::backend::Stages::new(&runtime)?;
-    stages.coarse_level = a.coarse_level;
-    let (mut grid, mut truth) = (Grid::new(spec), Grid::new(spec));
-    for ((((name, prec), level), fill), seg_passes) in specs
-        .iter()
-        .flat_map(|s| levels.iter().map(move |l| (s, *l)))
-        .flat_map(|sl| fills.iter().map(move |f| (sl, *f)))
-        .flat_map(|slf| passes.iter().map(move |p| (slf, *p)))
-    {
-        let truth_k = truth_order(name);
-        // Ground-truth fields still segment (for the mask IoU column) with the default models.
-        let mut models = Models::load_on(
-            &a.models_dir,
-            if truth_k.is_some() { "compact" } else { name },
-            *prec,
-            &runtime,
-        )?;
-        let own_passes = models.segment_passes;
-        let seg_passes = seg_passes.unwrap_or(own_passes);
-        models.segment_passes = seg_passes;
-        // The Fourier net's decode knobs (not the ground-truth rows' nor other families').
-        let knobs = a.peak_level.is_some()
-            || a.moment_fill.is_some()
-            || level.is_some()
-            || a.interior_level.is_some()
-            || a.thin_level.is_some();
-        let mut fourier = match &mut models.shape {
-            ShapeModel::Fourier(f) if truth_k.is_none() && knobs => {
-                Some(Arc::get_mut(f).ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?)
-            }
-            _ => None,
-        };
-        let peak = match (&mut fourier, &a.peak_level) {
-            (Some(f), Some(pl)) if pl.len() >= 2 => {
-                f.peak_level = Some((pl[0], pl[1]));
-                f.peak_gate = pl.get(2).copied();
-                Some((pl[0], f.peak_gate))
-            }
-            _ => None,
-        };
-        let interior = match (&mut fourier, &a.interior_level) {
-            (Some(f), Some(m)) if m.len() == 2 => {
-                f.interior_level = Some((m[0], m[1] as usize));
-                f.interior_level
-            }
-            _ => None,
-        };
-        let thin = match (&mut fourier, &a.thin_level) {
-            (Some(f), Some(m)) if m.len() == 2 => {
-                f.thin_level = Some((m[0], m[1] as usize));
-                f.thin_level
-            }
-            _ => None,
-        };
-        let fill = match (&mut fourier, fill) {
-            (Some(f), Some(m)) => {
-                f.moment_fill = Some(m);
-                Some((m.1, m.2))
-            }
-            // Other families and the ground-truth rows have no series to fill: once.
-            (None, Some(_)) => {
-                pb.inc(cases.len() as u64);
-                continue;
-            }
-            _ => None,
-        };
-        let level = match (&mut fourier, level) {
-            (Some(f), Some(l)) => {
-                f.iso_level = l;
-                Some(l)
-            }
-            // Other families and the ground-truth rows once, at their own rule.
-            (_, Some(l)) if Some(l) != levels[0] => {
-                pb.inc(cases.len() as u64);
-                continue;
-            }
-            _ => None,
-        };
-        let label = format!(
-            "{name}-{}{}{}{}{}{}{}{}{}",
-            prec.name(),
-            if a.gt_mask { "-gtmask" } else { "" },
-            if seg_passes != own_passes {
-                format!("-seg{seg_passes}")
+    for (backend, runtime) in &runtimes {
+        let mut stages = crate::backend::Stages::new(runtime)?;
+        for ((((name, prec), level), fill), seg_passes) in specs
+            .iter()
+            .flat_map(|s| levels.iter().map(move |l| (s, *l)))
+            .flat_map(|sl| fills.iter().map(move |f| (sl, *f)))
+            .flat_map(|slf| passes.iter().map(move |p| (slf, *p)))
+        {
+            let truth_k = truth_order(name);
+            // Ground-truth fields still segment (for the mask IoU column) with the default models.
+            let mut models = Models::load_on(
+                &a.models_dir,
+                if truth_k.is_some() { "compact" } else { name },
+                *prec,
+                runtime,
+            )?;
+            let own_passes = models.segment_passes;
+            let seg_passes = seg_passes.unwrap_or(own_passes);
+            models.segment_passes = seg_passes;
+            // The Fourier net's decode knobs (not the ground-truth rows' nor other families').
+            let knobs = a.peak_level.is_some()
+                || a.moment_fill.is_some()
+                || level.is_some()
+                || a.interior_level.is_some()
+                || a.thin_level.is_some();
+            let mut fourier = match &mut models.shape {
+                ShapeModel::Fourier(f) if truth_k.is_none() && knobs => Some(
+                    Arc::get_mut(f).ok_or_else(|| anyhow!("{name}: the Fourier net is shared"))?,
+                ),
+                _ => None,
+            };
+            let peak = match (&mut fourier, &a.peak_level) {
+                (Some(f), Some(pl)) if pl.len() >= 2 => {
+                    f.peak_level = Some((pl[0], pl[1]));
+                    f.peak_gate = pl.get(2).copied();
+                    Some((pl[0], f.peak_gate))
+                }
+                _ => None,
+            };
+            let interior = match (&mut fourier, &a.interior_level) {
+                (Some(f), Some(m)) if m.len() == 2 => {
+                    f.interior_level = Some((m[0], m[1] as usize));
+                    f.interior_level
+                }
+                _ => None,
+            };
+            let thin = match (&mut fourier, &a.thin_level) {
+                (Some(f), Some(m)) if m.len() == 2 => {
+                    f.thin_level = Some((m[0], m[1] as usize));
+                    f.thin_level
+                }
+                _ => None,
+            };
+            let fill = match (&mut fourier, fill) {
+                (Some(f), Some(m)) => {
+                    f.moment_fill = Some(m);
+                    Some((m.1, m.2))
+                }
+                // Other families and the ground-truth rows have no series to fill: once.
+                (None, Some(_)) => {
+                    pb.inc(per_variant);
+                    continue;
+                }
+                _ => None,
+            };
+            let level = match (&mut fourier, level) {
+                (Some(f), Some(l)) => {
+                    f.iso_level = l;
+                    Some(l)
+                }
+                // Other families and the ground-truth rows once, at their own rule.
+                (_, Some(l)) if Some(l) != levels[0] => {
+                    pb.inc(per_variant);
+                    continue;
+                }
+                _ => None,
+            };
+            let variant = format!(
+                "{name}-{}{}{}{}{}{}{}{}",
+                prec.name(),
+                if a.gt_mask { "-gtmask" } else { "" },
+                if seg_passes != own_passes {
+                    format!("-seg{seg_passes}")
+                } else {
+                    String::new()
+                },
+                level.map(|l| format!("-iso{l:.2}")).unwrap_or_default(),
+                peak.map(|(f, g)| format!(
+                    "-peak{f:.2}{}",
+                    g.map(|g| format!("g{g:.2}")).unwrap_or_default()
+                ))
+                .unwrap_or_default(),
+                fill.map(|(l, d)| format!("-fill{l:.2}x{d}"))
+                    .unwrap_or_default(),
+                interior
+                    .map(|(l, e)| format!("-in{l:.2}e{e}"))
+                    .unwrap_or_default(),
+                thin.map(|(l, r)| format!("-thin{l:.2}r{r}"))
+                    .unwrap_or_default(),
+            );
+            let backend_label = if a.backend.len() > 1 {
+                format!("-{backend}")
             } else {
                 String::new()
-            },
-            level.map(|l| format!("-iso{l:.2}")).unwrap_or_default(),
-            peak.map(|(f, g)| format!(
-                "-peak{f:.2}{}",
-                g.map(|g| format!("g{g:.2}")).unwrap_or_default()
-            ))
-            .unwrap_or_default(),
-            fill.map(|(l, d)| format!("-fill{l:.2}x{d}"))
-                .unwrap_or_default(),
-            interior
-                .map(|(l, e)| format!("-in{l:.2}e{e}"))
-                .unwrap_or_default(),
-            thin.map(|(l, r)| format!("-thin{l:.2}r{r}"))
-                .unwrap_or_default(),
-            a.drop_apart.label()
-        );
-        pb.set_message(label.clone());
-        let frame = frame_of(a.depth_frame, &models, truth_k);
-        if let Some(c) = cases
-            .get(a.turntable_image)
-            .filter(|_| a.turntable && truth_k.is_none())
-        {
-            std::fs::create_dir_all(&a.out).with_context(|| format!("{}", a.out.display()))?;
-            let path = a.out.join(format!("turntable-{label}.png"));
-            turntable(
-                &models,
-                c,
-                a.turntable_res,
-                ToCamera::new(frame, c, false),
-                a.drop_apart.0.map(|g| g[0]),
-                &path,
-            )
-            .with_context(|| format!("turntable of {label}"))?;
-        }
-        let start = images.len();
-        for c in &cases {
-            let row = run_case(
-                &models,
-                &label,
-                c,
-                spec,
-                &mut stages,
-                &mut grid,
-                &mut truth,
-                a.gt_mask,
-                truth_k,
-                ToCamera::new(frame, c, truth_k.is_some()),
-                a.drop_apart.0,
-                a.colour_res,
-            )
-            .with_context(|| format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw))?;
-            if a.json {
-                println!("{}", serde_json::to_string(&row)?);
-            }
-            images.push(row);
-            pb.inc(1);
-        }
-        let (g, mp, p) = report::card(&a.models_dir, name);
-        let m = ModelRow::summarize(
-            &label,
-            frame.name(),
-            match &models.shape {
-                ShapeModel::Fourier(f) if truth_k.is_none() => Some(f.iso_level),
-                _ => None,
-            },
-            if let Some((basis, k)) = truth_k {
-                format!(
-                    "{} series, {} terms (ground truth)",
-                    basis.name(),
-                    2 * k + 1
+            };
+            let frame = frame_of(a.depth_frame, &models, truth_k);
+            if let Some(c) = cases
+                .get(a.turntable_image)
+                .filter(|_| a.turntable && truth_k.is_none())
+            {
+                std::fs::create_dir_all(&a.out).with_context(|| format!("{}", a.out.display()))?;
+                let label = format!("{variant}{backend_label}{}", a.drop_apart.label());
+                let path = a.out.join(format!("turntable-{label}.png"));
+                turntable(
+                    &models,
+                    c,
+                    a.turntable_res,
+                    ToCamera::new(frame, c, false),
+                    a.drop_apart.0.map(|g| g[0]),
+                    &path,
                 )
-            } else {
-                models.shape.family().to_string()
-            },
-            seg_passes,
-            (g, mp, p),
-            &images[start..],
-        );
-        if a.json {
-            println!("{}", serde_json::to_string(&m)?);
+                .with_context(|| format!("turntable of {label}"))?;
+            }
+            // The networks run once before the timed images (the first run of a loaded
+            // model pays for its plans and buffers; the rows' times are the frames').
+            if let Some(c) = cases.first() {
+                warm_up(&models, c, truth_k.is_none())?;
+            }
+            let variant_rows = summary.len();
+            for g in &grids {
+                for &method in &methods {
+                    let label = format!(
+                        "{variant}{}{}{}{backend_label}{}",
+                        g.label,
+                        if methods.len() > 1 {
+                            format!("-{}", method.label())
+                        } else {
+                            String::new()
+                        },
+                        g.coarse_label,
+                        a.drop_apart.label()
+                    );
+                    pb.set_message(label.clone());
+                    stages.coarse_level = Some(g.coarse);
+                    let (mut grid, mut truth) = (Grid::new(g.spec), Grid::new(g.spec));
+                    let start = images.len();
+                    for c in &cases {
+                        let row = run_case(
+                            &models,
+                            &label,
+                            c,
+                            g.spec,
+                            method,
+                            &mut stages,
+                            &mut grid,
+                            &mut truth,
+                            a.gt_mask,
+                            truth_k,
+                            ToCamera::new(frame, c, truth_k.is_some()),
+                            a.drop_apart.0,
+                            a.colour_res,
+                        )
+                        .with_context(|| {
+                            format!("{label} on {} pose {} yaw {}", c.subject, c.pose, c.yaw)
+                        })?;
+                        if a.json {
+                            println!("{}", serde_json::to_string(&row)?);
+                        }
+                        images.push(row);
+                        pb.inc(1);
+                    }
+                    let (gm, mp, p) = report::card(&a.models_dir, name);
+                    let mut m = ModelRow::summarize(
+                        &label,
+                        frame.name(),
+                        match &models.shape {
+                            ShapeModel::Fourier(f) if truth_k.is_none() => Some(f.iso_level),
+                            _ => None,
+                        },
+                        if let Some((basis, k)) = truth_k {
+                            format!(
+                                "{} series, {} terms (ground truth)",
+                                basis.name(),
+                                2 * k + 1
+                            )
+                        } else {
+                            models.shape.family().to_string()
+                        },
+                        seg_passes,
+                        (gm, mp, p),
+                        &images[start..],
+                    );
+                    m.res = g.spec.n();
+                    m.coarse_level = g.coarse;
+                    m.localization = method.label();
+                    m.backend = runtime.label();
+                    m.bound = truth_k.is_some();
+                    summary.push(m);
+                }
+            }
+            tradeoff::pool_networks(&mut summary[variant_rows..]);
+            if a.json {
+                for m in &summary[variant_rows..] {
+                    println!("{}", serde_json::to_string(m)?);
+                }
+            }
         }
-        summary.push(m);
     }
     pb.finish_and_clear();
     std::fs::create_dir_all(&a.out).with_context(|| format!("{}", a.out.display()))?;

@@ -130,6 +130,8 @@ pub struct Labelled {
     pub x: f64,
     pub y: f64,
     pub x_bar: Option<f64>,
+    /// Drawn hollow: a reference (a bound), not a setting.
+    pub hollow: bool,
 }
 
 /// Axes of a [`scatter`] plot: caption, axis titles and ranges, picture size.
@@ -140,52 +142,96 @@ pub struct Axes<'a> {
     pub x: std::ops::Range<f64>,
     pub y: std::ops::Range<f64>,
     pub size: (u32, u32),
+    /// The x axis in powers of ten (`x` then a positive range): times that span orders of
+    /// magnitude stay apart at the fast end.
+    pub log_x: bool,
 }
 
-/// A scatter plot with one legend entry per point (the trade-off plots of `eval` and
-/// `bench temporal`).
-pub fn scatter(path: &Path, axes: &Axes, points: &[Labelled]) -> anyhow::Result<()> {
+/// A scatter plot with one legend entry per point (hollow where [`Labelled::hollow`]), the
+/// legend in a column beside the chart (so that many points stay readable), and `front` (if
+/// any) drawn as a line through its points in order: the trade-off plots of `eval` (its
+/// accuracy-against-time front) and `bench temporal`.
+pub fn scatter(
+    path: &Path,
+    axes: &Axes,
+    points: &[Labelled],
+    front: &[(f64, f64)],
+) -> anyhow::Result<()> {
     register_font();
     let root = BitMapBackend::new(path, axes.size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let mut chart = ChartBuilder::on(&root)
+    let (plot, legend) = root.split_horizontally(axes.size.0 * 64 / 100);
+    // On a log axis the chart's x is log10 of the value, labelled with the value.
+    let tx = |x: f64| if axes.log_x { x.max(1e-9).log10() } else { x };
+    let mut chart = ChartBuilder::on(&plot)
         .caption(axes.caption, ("sans-serif", 18))
         .margin(14)
         .x_label_area_size(40)
         .y_label_area_size(60)
-        .build_cartesian_2d(axes.x.clone(), axes.y.clone())
+        .build_cartesian_2d(tx(axes.x.start)..tx(axes.x.end), axes.y.clone())
         .map_err(|e| anyhow!("{e}"))?;
-    chart
-        .configure_mesh()
-        .x_desc(axes.x_desc)
+    let log_label = |v: &f64| format!("{:.0}", 10f64.powf(*v));
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc(axes.x_desc)
         .y_desc(axes.y_desc)
-        .label_style(("sans-serif", 12))
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
+        .label_style(("sans-serif", 12));
+    if axes.log_x {
+        mesh.x_label_formatter(&log_label);
+    }
+    mesh.draw().map_err(|e| anyhow!("{e}"))?;
+    if front.len() > 1 {
+        chart
+            .draw_series([PathElement::new(
+                front.iter().map(|&(x, y)| (tx(x), y)).collect::<Vec<_>>(),
+                BLACK.mix(0.5).stroke_width(2),
+            )])
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    // The legend column: a row per point, as many as fit.
+    let row_px = 16i32;
+    let top = 40i32;
+    let fits = ((axes.size.1 as i32 - top - 8) / row_px).max(1) as usize;
     for (i, p) in points.iter().enumerate() {
         let c = Palette99::pick(i).to_rgba();
         if let Some(lo) = p.x_bar {
             chart
                 .draw_series([PathElement::new(
-                    vec![(lo, p.y), (p.x, p.y)],
+                    vec![(tx(lo), p.y), (tx(p.x), p.y)],
                     c.stroke_width(2),
                 )])
                 .map_err(|e| anyhow!("{e}"))?;
         }
+        let style = if p.hollow {
+            c.stroke_width(2)
+        } else {
+            c.filled()
+        };
         chart
-            .draw_series([Circle::new((p.x, p.y), 6, c.filled())])
-            .map_err(|e| anyhow!("{e}"))?
-            .label(p.label.clone())
-            .legend(move |(x, y)| Circle::new((x, y), 5, c.filled()));
+            .draw_series([Circle::new((tx(p.x), p.y), 6, style)])
+            .map_err(|e| anyhow!("{e}"))?;
+        if i < fits {
+            let y = top + row_px * i as i32;
+            legend
+                .draw(&Circle::new((10, y), 5, style))
+                .map_err(|e| anyhow!("{e}"))?;
+            legend
+                .draw(&Text::new(
+                    p.label.clone(),
+                    (22, y - 7),
+                    ("sans-serif", 12).into_font(),
+                ))
+                .map_err(|e| anyhow!("{e}"))?;
+        }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 12))
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
+    if points.len() > fits {
+        legend
+            .draw(&Text::new(
+                format!("(and {} more: see the table)", points.len() - fits),
+                (22, top + row_px * fits as i32 - 7),
+                ("sans-serif", 12).into_font(),
+            ))
+            .map_err(|e| anyhow!("{e}"))?;
+    }
     root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }

@@ -144,8 +144,9 @@ fn both_framings_score_the_truth_as_near_exact() {
     }
 }
 
-/// The experimental decode knobs are refused by name when their values are off (before any
-/// image is rendered).
+/// The experimental decode knobs and the accuracy-against-time knobs (grid, coarse level,
+/// method, backend) are refused by name when their values are off (before any image is
+/// rendered).
 #[test]
 fn bad_decode_knobs_are_refused_by_name() {
     for (flag, value) in [
@@ -165,6 +166,15 @@ fn bad_decode_knobs_are_refused_by_name() {
         ("--segment-passes", "3"),
         ("--segment-passes", "1,0"),
         ("--colour-res", "20"),
+        ("--res", "64"),
+        ("--res", "33,64"),
+        ("--res", "65,65"),
+        ("--coarse-level", "3,3"),
+        ("--method", "marching"),
+        ("--coarse-level", "9"),
+        ("--coarse-level", "0"),
+        ("--backend", "tpu"),
+        ("--backend", "cpu,cpu"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
             .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
@@ -180,13 +190,84 @@ fn bad_decode_knobs_are_refused_by_name() {
 /// One image, one view, 33^3: the smallest run that still makes every row.
 const TINY: [&str; 6] = ["--poses", "1", "--views", "1", "--res", "33"];
 
+/// The models' summary rows of a run's JSON lines (the image rows left out), in order.
+fn summaries(rows: &[serde_json::Value]) -> Vec<&serde_json::Value> {
+    rows.iter().filter(|r| r.get("family").is_some()).collect()
+}
+
+/// The names of summary rows.
+fn names<'a>(summaries: &[&'a serde_json::Value]) -> Vec<&'a str> {
+    summaries
+        .iter()
+        .map(|r| r["model"].as_str().unwrap())
+        .collect()
+}
+
 /// The models' summary rows' names of a [`TINY`] run with `args`, in order.
 fn tiny_row_names(name: &str, args: &[&str]) -> Vec<String> {
-    run_eval(name, &[&TINY[..], args].concat())
-        .iter()
-        .filter(|r| r.get("family").is_some())
-        .map(|r| r["model"].as_str().unwrap().to_string())
+    let rows = run_eval(name, &[&TINY[..], args].concat());
+    names(&summaries(&rows))
+        .into_iter()
+        .map(String::from)
         .collect()
+}
+
+/// The knobs that trade accuracy for time in one run: a row per grid x method, each named
+/// for what it changed and carrying its knobs; the finer grid evaluates more points; the
+/// rows of one model share its networks' pooled ms (the same networks ran for each), so
+/// their ms a frame differ by their localization alone.
+#[test]
+fn grid_and_method_rows_stand_side_by_side() {
+    let rows = run_eval(
+        "knobs",
+        &[
+            &TINY[..2],
+            &[
+                "--views",
+                "1",
+                "--colour-res",
+                "0",
+                "--model",
+                "fourier-small",
+            ],
+            &["--res", "33,65", "--method", "hierarchical,mise"],
+        ]
+        .concat(),
+    );
+    let summaries = summaries(&rows);
+    let names = names(&summaries);
+    assert_eq!(
+        names,
+        [
+            "fourier-small-f32-r33-hierarchical",
+            "fourier-small-f32-r33-mise",
+            "fourier-small-f32-r65-hierarchical",
+            "fourier-small-f32-r65-mise",
+        ]
+    );
+    let f = |r: &serde_json::Value, k: &str| r[k].as_f64().unwrap();
+    for (r, (res, method)) in summaries.iter().zip([
+        (33, "hierarchical"),
+        (33, "mise"),
+        (65, "hierarchical"),
+        (65, "mise"),
+    ]) {
+        assert_eq!(r["res"], res, "{r}");
+        assert_eq!(r["localization"], method, "{r}");
+        assert_eq!(r["backend"], "tract", "{r}");
+        assert_eq!(r["bound"], false, "{r}");
+        assert!(f(r, "iou") > 0.5 && f(r, "chamfer_cm") < 5.0, "{r}");
+        assert_eq!(f(r, "segment_ms"), f(summaries[0], "segment_ms"), "{r}");
+        assert_eq!(f(r, "encode_ms"), f(summaries[0], "encode_ms"), "{r}");
+        let sum = f(r, "segment_ms") + f(r, "encode_ms") + f(r, "localize_ms");
+        assert!((f(r, "frame_ms") - sum).abs() < 1e-9, "{r}");
+    }
+    for m in 0..2 {
+        assert!(
+            f(summaries[m + 2], "evaluations") > 2.0 * f(summaries[m], "evaluations"),
+            "{summaries:?}"
+        );
+    }
 }
 
 /// `--moment-fill` puts each Fourier model's filled row beside its row as predicted, in one
@@ -265,12 +346,8 @@ fn segment_pass_rows_stand_beside_each_other() {
         ]
         .concat(),
     );
-    let summaries: Vec<&serde_json::Value> =
-        rows.iter().filter(|r| r.get("family").is_some()).collect();
-    let names: Vec<&str> = summaries
-        .iter()
-        .map(|r| r["model"].as_str().unwrap())
-        .collect();
+    let summaries = summaries(&rows);
+    let names = names(&summaries);
     assert_eq!(names, ["fourier-small-f32", "fourier-small-f32-seg2"]);
     let passes: Vec<u64> = summaries
         .iter()

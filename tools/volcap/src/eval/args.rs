@@ -1,8 +1,11 @@
 //! `volcap eval`'s command line: what is evaluated, on which images, and how it is read.
 
 use super::{Apart, Framing, parse_apart};
+use anyhow::{Context, anyhow, bail};
 use clap::Args;
 use std::path::PathBuf;
+use volcap_engine::grid::GridSpec;
+use volcap_engine::localize::{Method, default_coarse};
 
 #[derive(Args, Debug, Clone)]
 pub struct EvalArgs {
@@ -10,10 +13,11 @@ pub struct EvalArgs {
     /// accuracy is the same on both, tests/runtimes.rs; the ms columns are the runtime's).
     #[arg(long, default_value = "tract")]
     pub runtime: String,
-    /// Where the networks run: cpu (with --runtime) or wgpu (the GPU backend; build with
-    /// `--features wgpu`).
-    #[arg(long, default_value = "cpu")]
-    pub backend: String,
+    /// Where the networks run, comma-separated (a row set each): cpu (with --runtime) or
+    /// wgpu (the GPU backend: the networks, the series and the hierarchical localizations on
+    /// the adapter; build with `--features wgpu`).
+    #[arg(long, value_delimiter = ',', default_value = "cpu")]
+    pub backend: Vec<String>,
     /// `--backend wgpu`: the adapter, auto or a substring of its name or driver.
     #[arg(long, default_value = "auto")]
     pub adapter: String,
@@ -34,9 +38,18 @@ pub struct EvalArgs {
     /// Views per pose, evenly around the subject.
     #[arg(long, default_value_t = 3)]
     pub views: usize,
-    /// Grid resolution (2^L + 1) for localization and meshing.
-    #[arg(long, default_value_t = 257)]
-    pub res: usize,
+    /// Grid resolutions (each 2^L + 1) for localization and meshing, comma-separated: every
+    /// model gets a row per resolution (named `-rRES` when more than one is given).
+    #[arg(long, value_delimiter = ',', default_value = "257")]
+    pub res: Vec<usize>,
+    /// Surface localization methods, comma-separated (`volcap bench localize`'s names:
+    /// hierarchical, the product's; hierarchical-tight, hierarchical-no-conflict,
+    /// hierarchical-unseeded, demo-faster, mise, octree-threshold[@T], dense): every model gets
+    /// a row per method (named for it when more than one is given), scored against the truth
+    /// as the product's is. On `--backend wgpu` the hierarchical family runs on the adapter,
+    /// the others on the CPU's localizer.
+    #[arg(long, value_delimiter = ',', default_value = "hierarchical")]
+    pub method: Vec<String>,
     /// Models: NAME or NAME@int8 (files models/shape-NAME.*), comma-separated; `truth-kK`
     /// is the ground-truth Fourier field of order K (crop from the true mask): the Fourier
     /// family's upper bound at that truncation; `truth-cosN` the ground-truth half-range
@@ -75,6 +88,10 @@ pub struct EvalArgs {
     /// Folder for eval.md, eval.json and eval.png.
     #[arg(long, default_value = "docs/eval")]
     pub out: PathBuf,
+    /// Draw OUT/eval.png again from OUT/eval.json (no measurement; a packed `eval.json.xz`
+    /// unpacked first).
+    #[arg(long)]
+    pub replot: bool,
     /// Depth frame of the comparison: `auto` (each model's own, `volcap.depth_frame`: a
     /// `body` model places the person's mean depth at the crop's z = 0, so the truth is moved
     /// there too; everything else, the ground-truth rows included, as the camera saw it),
@@ -118,10 +135,11 @@ pub struct EvalArgs {
     /// trained (its file's `volcap.segment_passes`), as `volcapd` runs it.
     #[arg(long, value_delimiter = ',')]
     pub segment_passes: Vec<u8>,
-    /// Localization's coarsest level (`2^l + 1` points a side; the boards' `render.coarse_level`
-    /// is 4): default, the engine's for the grid (3 at 257^3: 9^3 seeds).
-    #[arg(long)]
-    pub coarse_level: Option<u32>,
+    /// Localization's coarsest levels (`2^l + 1` points a side; the boards' `render.coarse_level`
+    /// is 4), comma-separated (a row each, named `-cL` when more than one is given): unset,
+    /// the engine's for the grid (3 at 257^3: 9^3 seeds).
+    #[arg(long, value_delimiter = ',')]
+    pub coarse_level: Vec<u32>,
     /// Framing of the test images: `whole` (the whole person in the frame, as the dataset) or
     /// `upper` (a person close to the camera, cut by the frame's lower edge between the hips
     /// and the knees: a webcam's view, where a close-range model takes over). Either way the
@@ -154,4 +172,75 @@ pub enum FrameArg {
     Auto,
     Body,
     Camera,
+}
+
+/// One grid of `--res` x `--coarse-level`: its spec, the coarse level it starts from (the
+/// engine's default for the grid where none is given) and the rows' name parts.
+pub(super) struct GridKnob {
+    pub spec: GridSpec,
+    pub coarse: u32,
+    pub label: String,
+    pub coarse_label: String,
+}
+
+/// The grids `--res` and `--coarse-level` name, each checked (a resolution 2^L + 1, a coarse
+/// level within it) with the flag and value in the error.
+pub(super) fn grid_knobs(a: &EvalArgs) -> anyhow::Result<Vec<GridKnob>> {
+    let coarse: Vec<Option<u32>> = if a.coarse_level.is_empty() {
+        vec![None]
+    } else {
+        a.coarse_level.iter().map(|&l| Some(l)).collect()
+    };
+    fn twice<T: PartialEq + Copy>(v: &[T]) -> Option<T> {
+        (1..v.len()).find(|&i| v[..i].contains(&v[i])).map(|i| v[i])
+    }
+    if let Some(r) = twice(&a.res) {
+        bail!("--res {r}: given twice");
+    }
+    if let Some(l) = twice(&a.coarse_level) {
+        bail!("--coarse-level {l}: given twice");
+    }
+    let mut out = Vec::new();
+    for &r in &a.res {
+        let spec = GridSpec::from_resolution(r).with_context(|| format!("--res {r}"))?;
+        for &l in &coarse {
+            let l = l.unwrap_or_else(|| default_coarse(spec));
+            volcap_engine::localize::check_coarse(spec, l)
+                .map_err(|e| anyhow!("--coarse-level {l} at --res {r}: {e}"))?;
+            out.push(GridKnob {
+                spec,
+                coarse: l,
+                label: if a.res.len() > 1 {
+                    format!("-r{r}")
+                } else {
+                    String::new()
+                },
+                coarse_label: if coarse.len() > 1 {
+                    format!("-c{l}")
+                } else {
+                    String::new()
+                },
+            });
+        }
+    }
+    if out.is_empty() {
+        bail!("--res: at least one grid resolution");
+    }
+    Ok(out)
+}
+
+/// `--method`'s localization methods (`octree-threshold` expands to its thresholds).
+pub(super) fn methods_of(given: &[String]) -> anyhow::Result<Vec<Method>> {
+    let mut out: Vec<Method> = Vec::new();
+    for g in given {
+        for m in Method::parse(g).map_err(|e| anyhow!("--method {g:?}: {e}"))? {
+            if !out.contains(&m) {
+                out.push(m);
+            }
+        }
+    }
+    if out.is_empty() {
+        bail!("--method: at least one localization method");
+    }
+    Ok(out)
 }

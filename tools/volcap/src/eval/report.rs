@@ -1,5 +1,5 @@
-//! The evaluation's report: the Markdown table (models side by side, per-image rows) and the
-//! Chamfer-vs-time plot.
+//! The evaluation's report: the Markdown tables (models side by side, per part, per image);
+//! the accuracy-against-time table and plot are `tradeoff`'s.
 
 use super::{EvalArgs, Framing, ImageRow, mean, worst10};
 use serde::Serialize;
@@ -49,6 +49,18 @@ pub struct ModelRow {
     pub facing_right: [f64; 3],
     /// [`ImageRow::colour_l1`] averaged over the images that have it (NaN: none).
     pub colour_l1: [f64; 4],
+    /// The grid's resolution (`--res`).
+    pub res: usize,
+    /// The localization's coarsest level (`--coarse-level`, else the engine's for the grid).
+    pub coarse_level: u32,
+    /// The localization method (`--method`; `hierarchical`: the product's).
+    pub localization: String,
+    /// What ran the networks (`--backend`, `--runtime`): "tract", "onnxruntime 1.32.0",
+    /// "wgpu ADAPTER".
+    pub backend: String,
+    /// A ground-truth series (`truth-*`): a bound, not a setting the product can run, so off
+    /// the accuracy-against-time front.
+    pub bound: bool,
 }
 
 impl ModelRow {
@@ -114,6 +126,11 @@ impl ModelRow {
             colour_l1: std::array::from_fn(|i| {
                 mean(ok.iter().map(|r| r.colour_l1[i]).filter(|v| v.is_finite()))
             }),
+            res: 0,
+            coarse_level: 0,
+            localization: String::new(),
+            backend: String::new(),
+            bound: false,
         }
     }
 }
@@ -167,11 +184,16 @@ fn knobs(a: &EvalArgs) -> String {
     if a.colour_res != 129 {
         let _ = write!(k, " --colour-res {}", a.colour_res);
     }
-    if let Some(l) = a.coarse_level {
-        let _ = write!(k, " --coarse-level {l}");
+    let joined = |v: &[String]| v.iter().map(|x| x.trim()).collect::<Vec<_>>().join(",");
+    if !a.coarse_level.is_empty() {
+        let levels: Vec<String> = a.coarse_level.iter().map(|l| l.to_string()).collect();
+        let _ = write!(k, " --coarse-level {}", levels.join(","));
     }
-    if a.backend != "cpu" {
-        let _ = write!(k, " --backend {}", a.backend);
+    if a.method != ["hierarchical"] {
+        let _ = write!(k, " --method {}", joined(&a.method));
+    }
+    if a.backend != ["cpu"] {
+        let _ = write!(k, " --backend {}", joined(&a.backend));
     }
     k
 }
@@ -182,7 +204,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         s,
         "# Evaluation: full pipeline on held-out simulator subjects\n\n\
          `volcap eval --subjects {} --poses {} --views {} --res {} --model {} --seed {}{}` (manifest `{}`, assets {}).\n\
-         Pipeline: segmentation -> crop -> shape encoder -> hierarchical localization at {}^3{} -> marching cubes.\n\
+         Pipeline: segmentation -> crop -> shape encoder -> {} localization at {}{} -> marching cubes.\n\
          Chamfer / P2S in cm against the ground-truth clothed mesh{} (10k surface samples each); IoU against the\n\
          simulator's occupancy oracle on the same grid; mask IoU of the segmentation; worst-10 = mean of the 10\n\
          worst images (a failed image counts as infinitely far). Times are per frame on this machine.\n\n\
@@ -192,7 +214,7 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         a.subjects.join(","),
         a.poses,
         a.views,
-        a.res,
+        res_list(&a.res, ","),
         a.model.join(","),
         a.seed,
         knobs(a),
@@ -201,7 +223,16 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             .as_ref()
             .map(|p| p.display().to_string())
             .unwrap_or_else(|| "embedded pack".into()),
-        a.res,
+        a.method
+            .iter()
+            .map(|m| m.trim())
+            .collect::<Vec<_>>()
+            .join(" / "),
+        a.res
+            .iter()
+            .map(|r| format!("{r}^3"))
+            .collect::<Vec<_>>()
+            .join(" / "),
         if a.drop_apart.0.is_some() {
             " -> pieces apart from the body dropped"
         } else {
@@ -265,6 +296,9 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             m.failed,
             m.images
         );
+    }
+    if summary.len() > 1 {
+        super::tradeoff::tradeoff_table(&mut s, summary);
     }
     let _ = writeln!(
         s,
@@ -442,34 +476,12 @@ pub(super) fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, 
     )
 }
 
-pub(super) fn plot(summary: &[ModelRow], path: &Path) -> anyhow::Result<()> {
-    let pts: Vec<&ModelRow> = summary
-        .iter()
-        .filter(|m| m.chamfer_cm.is_finite())
-        .collect();
-    let xmax = pts.iter().map(|m| m.frame_ms).fold(1.0, f64::max) * 1.25;
-    let ymax = pts.iter().map(|m| m.chamfer_cm).fold(0.1, f64::max) * 1.25;
-    let points: Vec<crate::plot::Labelled> = pts
-        .iter()
-        .map(|m| crate::plot::Labelled {
-            label: m.model.clone(),
-            x: m.frame_ms,
-            y: m.chamfer_cm,
-            x_bar: None,
-        })
-        .collect();
-    crate::plot::scatter(
-        path,
-        &crate::plot::Axes {
-            caption: "Accuracy vs time per frame (volcap eval)",
-            x_desc: "ms per frame (segment + encode + localize)",
-            y_desc: "Chamfer cm (lower is better)",
-            x: 0.0..xmax,
-            y: 0.0..ymax,
-            size: (760, 480),
-        },
-        &points,
-    )
+/// Resolutions joined by `sep`.
+fn res_list(res: &[usize], sep: &str) -> String {
+    res.iter()
+        .map(|r| r.to_string())
+        .collect::<Vec<_>>()
+        .join(sep)
 }
 
 #[cfg(test)]
@@ -500,11 +512,17 @@ mod tests {
             "0.5,0.2",
             "--framing",
             "upper",
+            "--coarse-level",
+            "3,4",
+            "--method",
+            "hierarchical,mise",
+            "--backend",
+            "cpu,wgpu",
         ])
         .a;
         assert_eq!(
             knobs(&a),
-            " --framing upper --gt-mask --iso-level 0.5,0.55 --peak-level 0.5,0.2 --moment-fill 0.02,0.1,4"
+            " --framing upper --gt-mask --iso-level 0.5,0.55 --peak-level 0.5,0.2 --moment-fill 0.02,0.1,4 --coarse-level 3,4 --method hierarchical,mise --backend cpu,wgpu"
         );
     }
 }

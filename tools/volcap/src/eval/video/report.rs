@@ -159,6 +159,7 @@ pub(super) fn plot(rows: &[VideoRow], path: &Path) -> anyhow::Result<()> {
             x: s.still_side_iou_mean,
             y: s.moving_chamfer_cm,
             x_bar: Some(s.still_side_iou_min),
+            hollow: false,
         })
         .collect();
     crate::plot::scatter(
@@ -169,8 +170,10 @@ pub(super) fn plot(rows: &[VideoRow], path: &Path) -> anyhow::Result<()> {
             y_desc: "moving: Chamfer cm (lower is better)",
             x: xmin..1.0,
             y: ymin..ymax,
-            size: (820, 500),
+            size: (1180, 500),
+            log_x: false,
         },
         &points,
+        &[],
     )
 }
