@@ -66,10 +66,11 @@ pub(super) fn tradeoff_table(s: &mut String, summary: &[ModelRow]) {
         s,
         "\n**Accuracy against time**, fastest first: every row's knobs beside its ms per frame \
          (segment + encode + localize on this machine, the networks warmed up first; a model's \
-         network ms pooled over its rows, which run the same networks) and its accuracy. On the front: no other row (ground-truth series aside: bounds, not settings) \
-         is both faster and more accurate (lower Chamfer); the plot's line joins them. Rows a \
-         few ms apart are within the timing's noise on a shared machine.\n\n\
-         | row | res | coarse | localization | backend | ms/frame | localize ms | evals | Chamfer cm | P2S cm | IoU | front |\n\
+         network ms pooled over its rows, which run the same networks) and its accuracy. On \
+         the front: no other row (ground-truth series aside: bounds, not settings) is both \
+         faster and more accurate (lower Chamfer); the plot's line joins them. Rows a few ms \
+         apart are within the timing's noise on a shared machine.\n\n\
+         | row | res | coarse | localization | networks on | ms/frame | localize ms | evals | Chamfer cm | P2S cm | IoU | front |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for m in rows {
