@@ -187,6 +187,25 @@ fn bad_decode_knobs_are_refused_by_name() {
     }
 }
 
+/// The committed manifest's held-out subjects wear outfits the embedded pack does not hold:
+/// without `--data` the run stops at once, naming the subject, the manifest and the flag.
+#[test]
+fn held_out_subjects_without_their_wardrobe_ask_for_data() {
+    let out = Command::new(env!("CARGO_BIN_EXE_volcap"))
+        .current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."))
+        .args(["eval", "--poses", "1", "--views", "1", "--colour-res", "0"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("unknown outfit")
+            && err.contains("models/dataset.json")
+            && err.contains("--data"),
+        "{err}"
+    );
+}
+
 /// One image, one view, 33^3: the smallest run that still makes every row.
 const TINY: [&str; 6] = ["--poses", "1", "--views", "1", "--res", "33"];
 

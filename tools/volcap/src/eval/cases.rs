@@ -94,8 +94,24 @@ pub(super) fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
                 look_y,
                 volcap_sim::dataset::STUDIO_LIGHTING,
             );
-            let scene = Scene::parse(&text, Path::new("<eval>")).map_err(|e| anyhow!("{e}"))?;
-            let mut sim = Simulator::new(scene, assets.clone())?;
+            // The held-out subjects are dressed from the whole MakeHuman wardrobe; the
+            // embedded pack holds the runtime's few assets.
+            let hint = |e: String| {
+                if a.data.is_none() {
+                    anyhow!(
+                        "{e} (subject {id} of {}: the embedded pack holds only the runtime's \
+                         assets; pass --data with the MakeHuman folder, e.g. --data \
+                         ../shared/data/makehuman)",
+                        a.manifest.display()
+                    )
+                } else {
+                    anyhow!("{e}")
+                }
+            };
+            let scene =
+                Scene::parse(&text, Path::new("<eval>")).map_err(|e| hint(e.to_string()))?;
+            let mut sim =
+                Simulator::new(scene, assets.clone()).map_err(|e| hint(format!("{e:#}")))?;
             for v in 0..a.views {
                 let yaw = 360.0 * v as f32 / a.views as f32;
                 sim.set_view_yaw(yaw);
