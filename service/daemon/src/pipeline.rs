@@ -233,8 +233,14 @@ impl Shared {
             apart_points: AtomicU64::new(0),
             temporal: cfg.field() == FieldMode::Model && cfg.temporal.enabled,
             temporal_resets: AtomicU64::new(0),
+            // Model mode only (the other modes segment nothing); one pass turns it off
+            // (`set_segment_passes`).
             segment_track: Mutex::new(volcap_engine::model::SegmentTrack::new(
-                cfg.model.segment_full_every,
+                if cfg.field() == FieldMode::Model {
+                    cfg.model.segment_full_every
+                } else {
+                    1
+                },
             )),
             segment_tracked: Default::default(),
         }
@@ -242,15 +248,33 @@ impl Shared {
 
     /// Model mode: how many times each frame is segmented, as the loaded networks run it
     /// (`[model] segment_passes`, unset: as the shape model was trained); two joins the
-    /// field's label (`reconstruction: NAME (PRECISION, segmented twice)`). Called before
-    /// [`Self::set_runtime`].
+    /// field's label (`reconstruction: NAME (PRECISION, segmented twice)`), one turns the
+    /// segmentation's track off (it tracks the second pass's crop: the engine segments every
+    /// frame whole then). Called before [`Self::set_runtime`].
     pub fn set_segment_passes(&mut self, passes: u8) {
+        if passes < 2 {
+            self.segment_track
+                .get_mut()
+                .unwrap_or_else(|p| p.into_inner())
+                .full_every = 1;
+        }
         if self.mode == "model"
             && passes > 1
             && let Some(open) = self.field_label.rfind(')')
         {
             self.field_label.insert_str(open, ", segmented twice");
         }
+    }
+
+    /// The segmentation's track's `full_every` while it tracks (model mode, two passes,
+    /// `[model] segment_full_every` > 1), else none.
+    pub fn segment_tracking(&self) -> Option<u32> {
+        let every = self
+            .segment_track
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .full_every;
+        (every > 1).then_some(every)
     }
 
     /// Model mode: the runtime the networks were loaded on (its label joins the field's:

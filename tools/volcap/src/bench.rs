@@ -354,18 +354,13 @@ pub fn localize(a: &LocalizeArgs) -> anyhow::Result<()> {
         .iter()
         .map(|&r| GridSpec::from_resolution(r).with_context(|| format!("--res {r}")))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let mut methods = Vec::new();
-    if a.methods.is_empty() {
-        methods = Method::all();
+    let mut methods = if a.methods.is_empty() {
+        Method::all()
     } else {
-        for m in &a.methods {
-            methods.extend(
-                Method::parse(m)
-                    .map_err(anyhow::Error::msg)
-                    .context("--methods")?,
-            );
-        }
-    }
+        Method::parse_list(&a.methods)
+            .map_err(anyhow::Error::msg)
+            .context("--methods")?
+    };
     methods.retain(|m| *m != Method::Dense);
     methods.insert(0, Method::Dense);
     if a.runs == 0 {

@@ -130,15 +130,10 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
 /// Model mode with two segmentation passes and `[model] segment_full_every` > 1: the track's
 /// setting and how its frames went (null otherwise).
 fn segment_track(sh: &crate::pipeline::Shared) -> serde_json::Value {
-    let full_every = sh
-        .segment_track
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .full_every;
-    let [full, crop, lost] = [0, 1, 2].map(|i| sh.segment_tracked[i].load(Ordering::Relaxed));
-    if sh.mode != "model" || full_every <= 1 || !sh.field_label.contains("segmented twice") {
+    let Some(full_every) = sh.segment_tracking() else {
         return serde_json::Value::Null;
-    }
+    };
+    let [full, crop, lost] = [0, 1, 2].map(|i| sh.segment_tracked[i].load(Ordering::Relaxed));
     serde_json::json!({
         "full_every": full_every,
         "whole_frames": full,
@@ -224,7 +219,7 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
         sh.apart_frames.load(Ordering::Relaxed),
         sh.apart_points.load(Ordering::Relaxed)
     ));
-    if !segment_track(sh).is_null() {
+    if sh.segment_tracking().is_some() {
         s.push_str("# HELP volcap_segment_track_frames_total frames segmented with model.segment_full_every's track: whole (the whole frame too), crop (the last person's crop alone), lost (the person reached the crop's edge)\n# TYPE volcap_segment_track_frames_total counter\n");
         for (i, kind) in ["whole", "crop", "lost"].iter().enumerate() {
             s.push_str(&format!(

@@ -129,6 +129,16 @@ impl Method {
         })
     }
 
+    /// Methods named in a list ([`Method::parse`] each, in order; the command lines'
+    /// comma-separated `--methods` / `--method`).
+    pub fn parse_list(names: &[String]) -> Result<Vec<Method>, String> {
+        let mut out = Vec::new();
+        for n in names {
+            out.extend(Method::parse(n)?);
+        }
+        Ok(out)
+    }
+
     /// Every method, with every octree threshold.
     pub fn all() -> Vec<Method> {
         let mut v = vec![Method::Dense, Method::Mise];

@@ -229,14 +229,13 @@ pub(super) fn grid_knobs(a: &EvalArgs) -> anyhow::Result<Vec<GridKnob>> {
     Ok(out)
 }
 
-/// `--method`'s localization methods (`octree-threshold` expands to its thresholds).
+/// `--method`'s localization methods (`octree-threshold` expands to its thresholds), each
+/// once.
 pub(super) fn methods_of(given: &[String]) -> anyhow::Result<Vec<Method>> {
     let mut out: Vec<Method> = Vec::new();
-    for g in given {
-        for m in Method::parse(g).map_err(|e| anyhow!("--method {g:?}: {e}"))? {
-            if !out.contains(&m) {
-                out.push(m);
-            }
+    for m in Method::parse_list(given).map_err(|e| anyhow!("--method: {e}"))? {
+        if !out.contains(&m) {
+            out.push(m);
         }
     }
     if out.is_empty() {

@@ -214,7 +214,11 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
         a.subjects.join(","),
         a.poses,
         a.views,
-        res_list(&a.res, ","),
+        a.res
+            .iter()
+            .map(|r| r.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
         a.model.join(","),
         a.seed,
         knobs(a),
@@ -474,14 +478,6 @@ pub(super) fn card(models_dir: &Path, name: &str) -> (Option<f64>, Option<f64>, 
         c["macs_point"].as_f64(),
         c["params"].as_u64(),
     )
-}
-
-/// Resolutions joined by `sep`.
-fn res_list(res: &[usize], sep: &str) -> String {
-    res.iter()
-        .map(|r| r.to_string())
-        .collect::<Vec<_>>()
-        .join(sep)
 }
 
 #[cfg(test)]
