@@ -18,14 +18,12 @@ mod slot;
 
 pub(crate) use adapter_render::AdapterRenderer;
 pub use adapter_render::render_device;
-use glam::{Quat, Vec3};
 pub use pixels::{composite_over, letterbox};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use volcap_engine::grid::GridSpec;
 use volcap_engine::render::{RenderOptions, Renderer};
-use volcap_sim::camera::Camera as SimView;
 
 pub use crate::config::{Live, LiveError};
 pub use slot::{Put, Slot, StageStats};
@@ -471,21 +469,6 @@ struct Rendered {
     placeholder: bool,
 }
 
-fn orbit(cam: &SimView, yaw_deg: f32, pitch_deg: f32, distance: f32) -> SimView {
-    let off = cam.eye - cam.target;
-    let side = off.cross(Vec3::Y).normalize_or(Vec3::X);
-    let q = Quat::from_rotation_y(yaw_deg.to_radians())
-        * Quat::from_axis_angle(side, -pitch_deg.to_radians());
-    let mut dir = q * off;
-    if distance > 0.0 {
-        dir = dir.normalize_or(Vec3::Z) * distance;
-    }
-    SimView {
-        eye: cam.target + dir,
-        ..*cam
-    }
-}
-
 fn camera_status_from(sup: &Supervisor<dyn Camera>, st: &mut CameraStatus) {
     st.frames = sup.frames;
     st.faults = sup.faults;
@@ -513,87 +496,6 @@ fn camera_status_from(sup: &Supervisor<dyn Camera>, st: &mut CameraStatus) {
     st.state = state;
     st.fault = fault;
     st.reason = reason;
-}
-
-/// Render a field at the live resolution and view settings, timed as the render stage; a
-/// failure becomes the degraded state (and `None`).
-fn render_field(
-    renderer: &mut Renderer,
-    sh: &Shared,
-    field: &dyn volcap_engine::OccupancyField,
-    colors: &dyn volcap_engine::ColorField,
-    live: &Live,
-) -> Option<Vec<u8>> {
-    let t = Instant::now();
-    let spec = GridSpec::from_resolution(live.resolution).ok()?;
-    let opts = RenderOptions {
-        coarse_level: live.coarse_level,
-        background: live.background,
-        shade: false,
-        drop_apart: live.drop_apart(),
-    };
-    let r = renderer.render(field, colors, spec, &opts);
-    let r = r.map_err(|e| e.to_string());
-    let times = renderer.last_times();
-    finish_render(sh, t, live, r.map(|st| (st, times)), |size| {
-        Ok(if size == live.resolution {
-            renderer.rgba().to_vec()
-        } else {
-            renderer.render_display(size, live.background).to_vec()
-        })
-    })
-}
-
-/// A rendered frame's accounting: its evaluations and time, or the failure as the degraded
-/// state; the image at the live output size from `image`.
-fn finish_render(
-    sh: &Shared,
-    t: Instant,
-    live: &Live,
-    r: Result<
-        (
-            volcap_engine::render::RenderStats,
-            volcap_engine::render::RenderTimes,
-        ),
-        String,
-    >,
-    image: impl FnOnce(usize) -> Result<Vec<u8>, String>,
-) -> Option<Vec<u8>> {
-    let fail = |e: String| {
-        sh.stats[stage::RENDER].lost.fetch_add(1, Ordering::Relaxed);
-        sh.set_state(PipelineState::Degraded(format!("render failed: {e}")));
-    };
-    let times = match r {
-        Ok((st, times)) => {
-            let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
-            sh.evaluations.fetch_add(n, Ordering::Relaxed);
-            if st.dropped_apart > 0 {
-                sh.apart_frames.fetch_add(1, Ordering::Relaxed);
-                sh.apart_points
-                    .fetch_add(st.dropped_apart, Ordering::Relaxed);
-            }
-            times
-        }
-        Err(e) => {
-            fail(e);
-            return None;
-        }
-    };
-    let rgba = match image(live.out_size()) {
-        Ok(px) => px,
-        Err(e) => {
-            fail(e);
-            return None;
-        }
-    };
-    let ms = t.elapsed().as_secs_f64() * 1e3;
-    sh.stats[stage::RENDER].record(ms);
-    if sh.mode == "model" {
-        sh.parts[part::LOCALIZE].record(times.localize_ms);
-        sh.parts[part::SURFACE].record(times.surface_ms);
-        sh.parts[part::DISPLAY].record((ms - times.localize_ms - times.surface_ms).max(0.0));
-    }
-    Some(rgba)
 }
 
 pub use field_stage::FieldOutcome;

@@ -2,6 +2,8 @@
 //! it draws on (`compute.render_device`, [`render_device`]).
 
 use super::*;
+#[cfg(feature = "wgpu")]
+use render_stage::{finish_render, render_field};
 
 /// The render stage's renderer on the GPU backend's adapter (`volcap_engine::gpu::render`):
 /// the model's frames are localized, culled and drawn there, their colour and shading
