@@ -15,7 +15,7 @@ pub use model::{
     CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_FULL_EVERY, SEGMENT_PASSES, ThinParts,
 };
 pub use rtsp::RtspConfig;
-pub use temporal::TemporalConfig;
+pub use temporal::{TemporalConfig, settings_json as temporal_json};
 
 use serde::Deserialize;
 use std::net::SocketAddr;

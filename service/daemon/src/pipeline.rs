@@ -155,8 +155,9 @@ pub struct Shared {
     /// and the level `L - 1` points it dropped in all (`RenderStats::dropped_apart`).
     pub apart_frames: AtomicU64,
     pub apart_points: AtomicU64,
-    /// Model mode with `[temporal]` enabled: the field thread's filter is on...
-    pub temporal: bool,
+    /// Model mode with `[temporal]` enabled: the field thread's filter is on, with these
+    /// settings (`/state`'s `temporal.settings`)...
+    pub temporal: Option<serde_json::Value>,
     /// ...and how often it started again (a new person, a people count change, a gap, a
     /// close-range switch, a frame without a person).
     pub temporal_resets: AtomicU64,
@@ -229,7 +230,10 @@ impl Shared {
             evaluations: AtomicU64::new(0),
             apart_frames: AtomicU64::new(0),
             apart_points: AtomicU64::new(0),
-            temporal: cfg.field() == FieldMode::Model && cfg.temporal.enabled,
+            temporal: (cfg.field() == FieldMode::Model)
+                .then(|| cfg.temporal.settings())
+                .flatten()
+                .map(|s| crate::config::temporal_json(&s)),
             temporal_resets: AtomicU64::new(0),
             // Model mode only (the other modes segment nothing); one pass turns it off
             // (`set_segment_passes`).

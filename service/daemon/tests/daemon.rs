@@ -41,6 +41,24 @@ fn the_main_job_shows_the_reconstruction() {
     assert_eq!(s["people"], 1, "{s}");
     assert_eq!(s["resolution"], 257, "{s}");
     assert!(s["temporal"]["resets"].as_u64() >= Some(1), "{s}");
+    // The filter runs with the file's settings: each key sim.toml sets is in force, as the
+    // file writes it; the others at the engine's defaults.
+    let shipped: toml::Table =
+        toml::from_str(&std::fs::read_to_string(root().join("board-config/sim.toml")).unwrap())
+            .unwrap();
+    let given = shipped["temporal"].as_table().unwrap();
+    let settings = s["temporal"]["settings"].as_object().unwrap();
+    assert_eq!(settings.len(), 11, "{s}");
+    assert!(given.len() > 1, "sim.toml sets a filter key: {given:?}");
+    for (key, value) in given.iter().filter(|(k, _)| *k != "enabled") {
+        let file = value.as_float().or(value.as_integer().map(|v| v as f64));
+        assert_eq!(settings[key].as_f64(), file, "{key}: {s}");
+    }
+    let defaults = volcap_engine::model::temporal::TemporalSettings::default();
+    if !given.contains_key("mask_low") {
+        let default = defaults.mask_low.to_string().parse::<f64>().ok();
+        assert_eq!(settings["mask_low"].as_f64(), default, "{s}");
+    }
     // The pieces apart from the body left out at the board's gap, counted.
     let apart = &s["drop_apart"];
     assert_eq!(apart["gap"].as_f64(), Some(0.1), "{s}");

@@ -158,9 +158,19 @@ pub fn scatter(
     front: &[(f64, f64)],
 ) -> anyhow::Result<()> {
     register_font();
-    let root = BitMapBackend::new(path, axes.size).into_drawing_area();
+    // The chart keeps 64 % of the asked width; the legend column takes the rest, widened
+    // (the picture with it) to its longest label, about 7 px a character at 12 px.
+    let chart_w = axes.size.0 * 64 / 100;
+    let longest = points
+        .iter()
+        .map(|p| p.label.chars().count())
+        .max()
+        .unwrap_or(0) as u32;
+    let legend_w = (axes.size.0 - chart_w).max(30 + 7 * longest);
+    let size = (chart_w + legend_w, axes.size.1);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let (plot, legend) = root.split_horizontally(axes.size.0 * 64 / 100);
+    let (plot, legend) = root.split_horizontally(chart_w);
     // On a log axis the chart's x is log10 of the value, labelled with the value.
     let tx = |x: f64| if axes.log_x { x.max(1e-9).log10() } else { x };
     let mut chart = ChartBuilder::on(&plot)

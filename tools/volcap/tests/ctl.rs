@@ -111,9 +111,9 @@ fn cli_reads_status_and_controls_the_daemon() {
     // its library is installed).
     let model = status["Model"].as_str().unwrap_or_default();
     assert!(
-        model == "reconstruction: fourier-small-seg2 (f32, segmented twice, tract)"
+        model == "reconstruction: fourier-medium (f32, segmented twice, tract)"
             || (model.starts_with(
-                "reconstruction: fourier-small-seg2 (f32, segmented twice, onnxruntime 1."
+                "reconstruction: fourier-medium (f32, segmented twice, onnxruntime 1."
             ) && model.ends_with(')')),
         "{model}"
     );

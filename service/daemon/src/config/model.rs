@@ -18,8 +18,9 @@ pub enum Precision {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
-    /// The shape model: `fourier-small-seg2` (the default, the best measured:
-    /// [`volcap_engine::model::DEFAULT_MODEL`]) or another committed variant
+    /// The shape model: `fourier-small-seg2` (the default, the fastest of the accurate ones:
+    /// [`volcap_engine::model::DEFAULT_MODEL`]), `fourier-medium` (the most accurate, 1.4-1.8x
+    /// the encoder: the main job's and the x86-cpu board's) or another committed variant
     /// (`models/models.json`).
     #[serde(default = "d_model")]
     pub name: String,

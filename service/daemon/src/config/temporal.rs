@@ -73,3 +73,23 @@ impl TemporalConfig {
         }
     }
 }
+
+/// The filter's settings as `/state` shows them (`temporal.settings`): every key of
+/// `[temporal]` with the value in force, as the file writes it (0.3, not f32's
+/// 0.30000001192092896).
+pub fn settings_json(s: &volcap_engine::model::temporal::TemporalSettings) -> serde_json::Value {
+    let f = |v: f32| v.to_string().parse::<f64>().unwrap_or(f64::NAN);
+    serde_json::json!({
+        "crop_min_cutoff_hz": f(s.crop_min_cutoff_hz),
+        "crop_beta": f(s.crop_beta),
+        "mask_low": f(s.mask_low),
+        "mask_high": f(s.mask_high),
+        "mask_motion": f(s.mask_motion),
+        "mask_hold_frames": s.mask_hold_frames,
+        "map_min_cutoff_hz": f(s.map_min_cutoff_hz),
+        "map_beta": f(s.map_beta),
+        "map_change_cutoff_hz": f(s.map_change_cutoff_hz),
+        "same_person_iou": f(s.same_person_iou),
+        "max_gap_s": f(s.max_gap_s),
+    })
+}

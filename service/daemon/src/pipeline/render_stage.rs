@@ -186,58 +186,6 @@ pub(super) fn spawn(
         .expect("spawning the render thread")
 }
 
-#[cfg(test)]
-mod tests {
-    use super::super::*;
-
-    /// `compute.render_workers = 3`: the render stage on three threads, each taking the
-    /// latest frame as it comes free. The frames that come out are in capture order (a
-    /// frame finished after a newer one is dropped, never published after it), more than one
-    /// worker rendered, and `/state`'s counters add up to the render stage's frames.
-    #[test]
-    fn several_render_workers_publish_in_capture_order() {
-        let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../tests/scenes/front-walk.toml");
-        let cfg = Config::parse(
-            &format!(
-                "[camera]\nbackend = \"sim\"\nscene = {:?}\n[render]\nfield = \"oracle\"\n\
-                 resolution = 65\ndisplay_size = 0\n[dbus]\nbus = \"none\"\n\
-                 [compute]\nrender_workers = 3\n",
-                scene.display().to_string()
-            ),
-            std::path::Path::new("workers.toml"),
-        )
-        .unwrap();
-        let (factory, _) = crate::capture::factory(&cfg).unwrap();
-        let (tx, mut rx) = tokio::sync::watch::channel(None);
-        let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
-        assert_eq!(shared.render.count(), 3);
-        let threads = start(&cfg, factory, shared.clone(), None);
-        let seen = published_indices(&mut rx, 40, Duration::from_secs(60));
-        shared.stop.store(true, Ordering::Relaxed);
-        for t in threads {
-            t.join().unwrap();
-        }
-        assert!(seen.len() >= 40, "{} frames published in 60 s", seen.len());
-        assert!(
-            seen.windows(2).all(|w| w[0] < w[1]),
-            "published out of capture order: {seen:?}"
-        );
-        let per_worker = shared.render.frame_counts();
-        assert_eq!(per_worker.len(), 3);
-        assert!(
-            per_worker.iter().filter(|&&n| n > 0).count() >= 2,
-            "one worker did all the work: {per_worker:?}"
-        );
-        assert_eq!(
-            per_worker.iter().sum::<u64>(),
-            shared.stats[stage::RENDER].frames.load(Ordering::Relaxed),
-            "{per_worker:?}"
-        );
-        assert!(shared.worker_beats().iter().all(|(_, b)| *b > 0));
-    }
-}
-
 /// The view turned about the camera's target by the live yaw and pitch (degrees), at `distance`
 /// from it when above 0.
 fn orbit(cam: &SimView, yaw_deg: f32, pitch_deg: f32, distance: f32) -> SimView {
@@ -334,4 +282,56 @@ pub(super) fn finish_render(
         sh.parts[part::DISPLAY].record((ms - times.localize_ms - times.surface_ms).max(0.0));
     }
     Some(rgba)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::*;
+
+    /// `compute.render_workers = 3`: the render stage on three threads, each taking the
+    /// latest frame as it comes free. The frames that come out are in capture order (a
+    /// frame finished after a newer one is dropped, never published after it), more than one
+    /// worker rendered, and `/state`'s counters add up to the render stage's frames.
+    #[test]
+    fn several_render_workers_publish_in_capture_order() {
+        let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/scenes/front-walk.toml");
+        let cfg = Config::parse(
+            &format!(
+                "[camera]\nbackend = \"sim\"\nscene = {:?}\n[render]\nfield = \"oracle\"\n\
+                 resolution = 65\ndisplay_size = 0\n[dbus]\nbus = \"none\"\n\
+                 [compute]\nrender_workers = 3\n",
+                scene.display().to_string()
+            ),
+            std::path::Path::new("workers.toml"),
+        )
+        .unwrap();
+        let (factory, _) = crate::capture::factory(&cfg).unwrap();
+        let (tx, mut rx) = tokio::sync::watch::channel(None);
+        let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
+        assert_eq!(shared.render.count(), 3);
+        let threads = start(&cfg, factory, shared.clone(), None);
+        let seen = published_indices(&mut rx, 40, Duration::from_secs(60));
+        shared.stop.store(true, Ordering::Relaxed);
+        for t in threads {
+            t.join().unwrap();
+        }
+        assert!(seen.len() >= 40, "{} frames published in 60 s", seen.len());
+        assert!(
+            seen.windows(2).all(|w| w[0] < w[1]),
+            "published out of capture order: {seen:?}"
+        );
+        let per_worker = shared.render.frame_counts();
+        assert_eq!(per_worker.len(), 3);
+        assert!(
+            per_worker.iter().filter(|&&n| n > 0).count() >= 2,
+            "one worker did all the work: {per_worker:?}"
+        );
+        assert_eq!(
+            per_worker.iter().sum::<u64>(),
+            shared.stats[stage::RENDER].frames.load(Ordering::Relaxed),
+            "{per_worker:?}"
+        );
+        assert!(shared.worker_beats().iter().all(|(_, b)| *b > 0));
+    }
 }

@@ -148,9 +148,11 @@ pub struct Models {
 }
 
 /// The shape model a board or a tool runs unless told otherwise (the daemon's `[model] name`,
-/// the tools' `--model`): the best measured, `fourier-small-seg2` (`fourier-small`'s network
-/// trained on to run (12) on two-pass masks: held-out 257^3 better than `fourier-small` with
-/// one segmentation pass as with two, docs/eval/eval.md and docs/eval/hands.md sections 10-11).
+/// the tools' `--model`): `fourier-small-seg2` (`fourier-small`'s network trained on to run
+/// (12) on two-pass masks: held-out 257^3 better than `fourier-small` with one segmentation
+/// pass as with two, docs/eval/eval.md and docs/eval/hands.md sections 10-11), the fastest
+/// accurate network; `fourier-medium` is more accurate for 1.4-1.8x its encoder
+/// (docs/eval/knobs), and the boards that can afford it name it (the main job's sim.toml).
 pub const DEFAULT_MODEL: &str = "fourier-small-seg2";
 
 /// The counts [`Models::segment_passes`] takes (the daemon's `[model] segment_passes`, the

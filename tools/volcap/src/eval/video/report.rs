@@ -139,11 +139,10 @@ pub(super) fn plot(rows: &[VideoRow], path: &Path) -> anyhow::Result<()> {
         .into_iter()
         .filter(|s| s.still_side_iou_mean.is_finite() && s.moving_chamfer_cm.is_finite())
         .collect();
-    let xmin = pts
-        .iter()
-        .map(|s| s.still_side_iou_min)
-        .fold(1.0, f64::min)
-        .min(0.9);
+    // Zoomed on the settings' worst frames (a tenth of their span, at least 0.002, to the
+    // left of the worst): steady settings differ in the third decimal.
+    let worst = pts.iter().map(|s| s.still_side_iou_min).fold(1.0, f64::min);
+    let xmin = (worst - 0.1 * (1.0 - worst)).min(worst - 0.002).max(0.0);
     // The settings differ by tenths of a millimetre to a millimetre: zoom on them.
     let ymax = pts.iter().map(|s| s.moving_chamfer_cm).fold(0.1, f64::max) * 1.02;
     let ymin = pts
