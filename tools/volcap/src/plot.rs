@@ -159,14 +159,15 @@ pub fn scatter(
 ) -> anyhow::Result<()> {
     register_font();
     // The chart keeps 64 % of the asked width; the legend column takes the rest, widened
-    // (the picture with it) to its longest label, about 7 px a character at 12 px.
+    // (the picture with it) to its longest label, about 7 px a character at 12 px, up to
+    // 4,000 px (a label is a command line's setting: a longer one is cut).
     let chart_w = axes.size.0 * 64 / 100;
     let longest = points
         .iter()
         .map(|p| p.label.chars().count())
         .max()
         .unwrap_or(0) as u32;
-    let legend_w = (axes.size.0 - chart_w).max(30 + 7 * longest);
+    let legend_w = (axes.size.0 - chart_w).max(30 + 7 * longest.min(566));
     let size = (chart_w + legend_w, axes.size.1);
     let root = BitMapBackend::new(path, size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
@@ -244,4 +245,48 @@ pub fn scatter(
     }
     root.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn width_with_label(label: String) -> u32 {
+        let path = std::env::temp_dir().join(format!(
+            "volcap-scatter-{}-{}.png",
+            std::process::id(),
+            label.len()
+        ));
+        let axes = Axes {
+            caption: "c",
+            x_desc: "x",
+            y_desc: "y",
+            x: 0.0..1.0,
+            y: 0.0..1.0,
+            size: (600, 200),
+            log_x: false,
+        };
+        let p = Labelled {
+            label,
+            x: 0.5,
+            y: 0.5,
+            x_bar: Some(0.25),
+            hollow: false,
+        };
+        scatter(&path, &axes, &[p], &[]).unwrap();
+        let w = image::open(&path).unwrap().width();
+        let _ = std::fs::remove_file(&path);
+        w
+    }
+
+    /// The legend column is as wide as its longest label (no label cut at the picture's
+    /// edge), within a bound whatever a command line's setting names.
+    #[test]
+    fn the_legend_widens_the_picture_to_its_labels_within_a_bound() {
+        assert_eq!(width_with_label("short".into()), 600);
+        let long = width_with_label("x".repeat(100));
+        assert!(long >= 384 + 7 * 100, "{long}");
+        let huge = width_with_label("x".repeat(100_000));
+        assert!(huge <= 384 + 4_000 + 30, "{huge}");
+    }
 }
