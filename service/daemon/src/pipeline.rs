@@ -157,7 +157,7 @@ pub struct Shared {
     pub apart_points: AtomicU64,
     /// Model mode with `[temporal]` enabled: the field thread's filter is on, with these
     /// settings (`/state`'s `temporal.settings`)...
-    pub temporal: Option<serde_json::Value>,
+    pub temporal: Option<volcap_engine::model::temporal::TemporalSettings>,
     /// ...and how often it started again (a new person, a people count change, a gap, a
     /// close-range switch, a frame without a person).
     pub temporal_resets: AtomicU64,
@@ -232,8 +232,7 @@ impl Shared {
             apart_points: AtomicU64::new(0),
             temporal: (cfg.field() == FieldMode::Model)
                 .then(|| cfg.temporal.settings())
-                .flatten()
-                .map(|s| crate::config::temporal_json(&s)),
+                .flatten(),
             temporal_resets: AtomicU64::new(0),
             // Model mode only (the other modes segment nothing); one pass turns it off
             // (`set_segment_passes`).

@@ -550,7 +550,11 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 warm_up(&models, c, truth_k.is_none())?;
             }
             let variant_rows = summary.len();
+            // The model card's figures, read once for the model's rows.
+            let card = report::card(&a.models_dir, name);
             for g in &grids {
+                // The grids, once per resolution (every method's rows reuse them).
+                let (mut grid, mut truth) = (Grid::new(g.spec), Grid::new(g.spec));
                 for &method in &methods {
                     let label = format!(
                         "{variant}{}{}{}{backend_label}{}",
@@ -565,7 +569,6 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                     );
                     pb.set_message(label.clone());
                     stages.coarse_level = Some(g.coarse);
-                    let (mut grid, mut truth) = (Grid::new(g.spec), Grid::new(g.spec));
                     let start = images.len();
                     for c in &cases {
                         let row = run_case(
@@ -592,7 +595,6 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                         images.push(row);
                         pb.inc(1);
                     }
-                    let (gm, mp, p) = report::card(&a.models_dir, name);
                     let mut m = ModelRow::summarize(
                         &label,
                         frame.name(),
@@ -610,7 +612,7 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                             models.shape.family().to_string()
                         },
                         seg_passes,
-                        (gm, mp, p),
+                        card,
                         &images[start..],
                     );
                     m.res = g.spec.n();

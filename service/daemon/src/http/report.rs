@@ -94,7 +94,7 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         "close_range": sh.close_range_model.then(|| sh.close_range.load(Ordering::Relaxed)),
         "temporal": sh.temporal.as_ref().map(|settings| serde_json::json!({
             "resets": sh.temporal_resets.load(Ordering::Relaxed),
-            "settings": settings,
+            "settings": crate::config::temporal_json(settings),
         })),
         "segment_track": segment_track(sh),
         "drop_apart": {
