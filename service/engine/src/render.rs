@@ -29,9 +29,11 @@
 use crate::field::{ColorField, Evaluator, FieldError, OccupancyField};
 use crate::grid::{BitSet, Grid, GridSpec};
 use crate::localize::{Hierarchical, HierarchicalMode, LocalizeError, check_coarse};
+pub use bytes::{rgb8, to_u8};
 use columns::{col_k, crossing_depth, first_hits, update_hits};
 use glam::Vec3;
 
+mod bytes;
 mod columns;
 mod display;
 
@@ -571,10 +573,6 @@ impl Renderer {
     pub fn grid(&self) -> Option<&Grid> {
         self.grid.as_ref()
     }
-}
-
-fn to_u8(x: f32) -> u8 {
-    (x.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
 #[cfg(test)]

@@ -25,15 +25,13 @@
 use crate::assets::{GarmentKind, HumanAssets};
 use crate::pose::Style;
 use crate::raster::Sh9;
-use crate::rays::{DEFAULT_STEP_M, ray_intervals};
 use crate::scene::Scene;
+use crate::shards::{self, ShardWriter, ViewJob};
 use crate::sim::{SimError, Simulator};
 use glam::{DVec3, Vec3};
 use rand::seq::{IndexedRandom, SliceRandom};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use safetensors::Dtype;
-use safetensors::tensor::TensorView;
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 use std::sync::Arc;
@@ -56,6 +54,9 @@ pub struct DatasetConfig {
     /// Fraction of subject identities held out for validation.
     pub val_fraction: f32,
     pub voxel_m: f32,
+    /// Threads writing the views' shards (0: every core); the files are the same on any
+    /// number ([`crate::shards`]).
+    pub threads: usize,
     pub seed: u64,
     /// Draw the poses, views, points and light rigs from this seed instead of `seed`: the
     /// same identities and split (those come from `seed`) in new poses.
@@ -169,6 +170,7 @@ impl Default for DatasetConfig {
             sigma_m: 0.05,
             val_fraction: 0.25,
             voxel_m: 0.005,
+            threads: 1,
             seed: 0,
             pose_seed: None,
             lighting: DatasetLighting::Studio,
@@ -302,19 +304,7 @@ pub fn clothed_surface(sim: &Simulator) -> Mesh {
     surf
 }
 
-fn tensor<'a>(
-    dtype: Dtype,
-    shape: Vec<usize>,
-    data: &'a [u8],
-) -> Result<TensorView<'a>, DatasetError> {
-    TensorView::new(dtype, shape, data).map_err(|e| DatasetError::Config(format!("tensor: {e}")))
-}
-
-fn f32_bytes(v: &[f32]) -> Vec<u8> {
-    v.iter().flat_map(|x| x.to_le_bytes()).collect()
-}
-
-/// Generate the dataset into `out`; `progress(images_done)` is called after each image.
+/// Generate the dataset into `out`; `progress(images_done)` is called as images are written.
 pub fn generate(
     assets: Arc<HumanAssets>,
     cfg: &DatasetConfig,
@@ -377,7 +367,7 @@ pub fn generate(
         serde_json::to_string_pretty(&manifest).unwrap_or_default(),
     )
     .map_err(|e| werr(&mpath, &e))?;
-    let mut done = 0u64;
+    let mut writer = ShardWriter::new(shards::threads(cfg.threads));
     for (si, table) in tables.iter().enumerate() {
         let split = if val[si] { "val" } else { "train" };
         let dir = out.join(split).join(&ids[si]);
@@ -402,7 +392,7 @@ pub fn generate(
                 .map_err(|e| DatasetError::Config(e.to_string()))?;
             let mut sim = Simulator::new(scene, assets.clone())?;
             sim.render(frame)?;
-            let field = sim.oracle(cfg.voxel_m);
+            let field = Arc::new(sim.oracle(cfg.voxel_m));
             // World-space samples shared by the views of this pose.
             let surf = clothed_surface(&sim);
             let (lo, hi) = surf
@@ -442,37 +432,18 @@ pub fn generate(
             // The seed of the views' coloured surface samples (one draw, as ever: the poses,
             // views and light rigs of a seed stay what they were).
             let surface_seed: u64 = r.random();
-            let labels: Vec<f32> = std::iter::repeat_n(1.0f32, ins.len())
-                .chain(std::iter::repeat_n(0.0, outs.len()))
-                .collect();
-            let world_pts: Vec<Vec3> = ins.iter().chain(&outs).copied().collect();
+            let labels: Arc<Vec<f32>> = Arc::new(
+                std::iter::repeat_n(1.0f32, ins.len())
+                    .chain(std::iter::repeat_n(0.0, outs.len()))
+                    .collect(),
+            );
+            let world_pts: Arc<Vec<Vec3>> = Arc::new(ins.iter().chain(&outs).copied().collect());
             // Views evenly around the subject from a random phase per pose.
             let phase: f32 = r.random_range(0.0..360.0 / cfg.views as f32);
             for vi in 0..cfg.views {
                 let yaw = phase + 360.0 * vi as f32 / cfg.views as f32;
                 sim.set_view_yaw(yaw);
                 let f = sim.render(frame)?;
-                let view = f.camera.projector();
-                let to_ndc = |v: &[Vec3]| -> Vec<f32> {
-                    v.iter()
-                        .flat_map(|p| view.world_to_ndc(*p).to_array())
-                        .collect()
-                };
-                let pts = f32_bytes(&to_ndc(&world_pts));
-                let occ = f32_bytes(&labels);
-                let mask = f.person_mask();
-                let (h, w) = (f.height, f.width);
-                let rays = ray_intervals(&field.oracle, &f.camera, DEFAULT_STEP_M);
-                let surface =
-                    seen_surface(&rays, &view, cfg.surface_points, surface_seed ^ vi as u64);
-                let surface_rgb: Vec<f32> = surface
-                    .iter()
-                    .flat_map(|p| field.colors.color(*p))
-                    .collect();
-                let sp = f32_bytes(&to_ndc(&surface));
-                let sc = f32_bytes(&surface_rgb);
-                let roff: Vec<u8> = rays.offsets.iter().flat_map(|x| x.to_le_bytes()).collect();
-                let rz = f32_bytes(rays.z.as_flattened());
                 // One metadata key holding sorted JSON: byte-identical files for a seed.
                 let info = serde_json::json!({
                     "camera": f.camera,
@@ -485,38 +456,21 @@ pub fn generate(
                     "scene": text,
                     "frame": frame,
                 });
-                let meta: HashMap<String, String> = [("volcap".to_string(), info.to_string())]
-                    .into_iter()
-                    .collect();
-                let tensors = vec![
-                    ("image", tensor(Dtype::U8, vec![h, w, 3], &f.rgb)?),
-                    ("mask", tensor(Dtype::U8, vec![h, w], &mask)?),
-                    ("occ", tensor(Dtype::F32, vec![labels.len()], &occ)?),
-                    (
-                        "points",
-                        tensor(Dtype::F32, vec![world_pts.len(), 3], &pts)?,
-                    ),
-                    ("surface", tensor(Dtype::F32, vec![surface.len(), 3], &sp)?),
-                    ("ray_offsets", tensor(Dtype::U32, vec![w * h + 1], &roff)?),
-                    ("ray_z", tensor(Dtype::F32, vec![rays.z.len(), 2], &rz)?),
-                    (
-                        "surface_rgb",
-                        tensor(Dtype::F32, vec![surface.len(), 3], &sc)?,
-                    ),
-                ];
-                // Written beside, then renamed: a generator stopped mid-write (the training
-                // recipe's clock, a kill) leaves a `.part` file, never a torn shard.
-                let path = dir.join(format!("{pi:03}_{vi:02}.safetensors"));
-                let part = path.with_extension("safetensors.part");
-                safetensors::serialize_to_file(tensors, Some(meta), &part)
-                    .map_err(|e| werr(&part, &e))?;
-                std::fs::rename(&part, &path).map_err(|e| werr(&path, &e))?;
-                done += 1;
-                progress(done);
+                let job = ViewJob {
+                    path: dir.join(format!("{pi:03}_{vi:02}.safetensors")),
+                    frame: f,
+                    field: field.clone(),
+                    points: world_pts.clone(),
+                    labels: labels.clone(),
+                    surface_points: cfg.surface_points,
+                    surface_seed: surface_seed ^ vi as u64,
+                    info: info.to_string(),
+                };
+                writer.write(job, &mut progress)?;
             }
         }
     }
-    Ok(done)
+    writer.finish(&mut progress)
 }
 
 /// `count` points (world metres) of the surface a view's rays meet first and last, half

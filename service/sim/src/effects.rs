@@ -273,7 +273,7 @@ impl Stage for Jpeg {
     }
     fn apply(&mut self, _index: u64, _t: f64, hook: Hook) {
         let Hook::Image(img, meta) = hook else { return };
-        let bytes: Vec<u8> = img.rgb.iter().flat_map(|p| p.map(to_u8)).collect();
+        let bytes = rgb8(img.rgb);
         let mut out = Vec::new();
         let enc = image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, self.quality)
             .encode(
@@ -442,6 +442,4 @@ impl Stage for Hang {
     }
 }
 
-pub fn to_u8(v: f32) -> u8 {
-    (v.clamp(0.0, 1.0) * 255.0).round() as u8
-}
+pub use volcap_engine::render::{rgb8, to_u8};

@@ -24,6 +24,7 @@ pub mod pose;
 pub mod raster;
 pub mod rays;
 pub mod scene;
+pub mod shards;
 pub mod sim;
 pub mod subject;
 

@@ -31,9 +31,17 @@ impl Texture {
     pub fn sample(&self, uv: Vec2) -> [f32; 4] {
         let x = uv.x * self.width as f32 - 0.5;
         let y = (1.0 - uv.y) * self.height as f32 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
+        let (x0, y0) = (floor(x), floor(y));
         let (fx, fy) = (x - x0, y - y0);
-        let wrap = |v: f32, n: usize| (v as i64).rem_euclid(n as i64) as usize;
+        // Inside the image (nearly every sample) no division.
+        let wrap = |v: f32, n: usize| {
+            let (v, n) = (v as i64, n as i64);
+            (if (0..n).contains(&v) {
+                v
+            } else {
+                v.rem_euclid(n)
+            }) as usize
+        };
         let (xa, xb) = (wrap(x0, self.width), wrap(x0 + 1.0, self.width));
         let (ya, yb) = (wrap(y0, self.height), wrap(y0 + 1.0, self.height));
         let t = |x: usize, y: usize| self.rgba[y * self.width + x];
@@ -46,6 +54,14 @@ impl Texture {
         }
         out
     }
+}
+
+/// `x.floor()` for |x| < 2^63 (texture coordinates), without the call into libm that
+/// `f32::floor` is on x86-64's baseline; NaN gives 0 (the sample's weights stay NaN).
+#[inline]
+fn floor(x: f32) -> f32 {
+    let t = x as i64 as f32;
+    if t > x { t - 1.0 } else { t }
 }
 
 /// Irradiance as second-order real spherical harmonics, per colour channel:
@@ -281,5 +297,62 @@ impl Rasterizer {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sampler's floor is `f32::floor` on texture coordinates: integers, halves, ulps
+    /// either side of integers, negatives (wrapped coordinates) and large values.
+    #[test]
+    fn floor_is_f32_floor() {
+        let mut xs = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1e9,
+            -1e9,
+            16_777_217.0,
+            -3.999_999_8,
+        ];
+        for k in -70..70 {
+            let x = k as f32 * 0.75;
+            let up = f32::from_bits(x.to_bits() + 1);
+            let down = if x == 0.0 {
+                -f32::MIN_POSITIVE
+            } else {
+                f32::from_bits(x.to_bits() - 1)
+            };
+            xs.extend([x, up, down, x + 0.5]);
+        }
+        for x in xs {
+            assert_eq!(floor(x), x.floor(), "x = {x:e}");
+        }
+        assert_eq!(floor(f32::NAN), 0.0);
+    }
+
+    /// Texel centres give the texel; a coordinate one width over wraps to the same texel.
+    #[test]
+    fn sample_hits_texel_centres_and_wraps() {
+        let tex = Texture {
+            width: 2,
+            height: 2,
+            rgba: vec![
+                [255, 0, 0, 255],
+                [0, 255, 0, 255],
+                [0, 0, 255, 255],
+                [255, 255, 255, 0],
+            ],
+        };
+        // Row 0 of the image is the top: v = 0.75 is its centre, u = 0.25 the first column.
+        assert_eq!(tex.sample(Vec2::new(0.25, 0.75)), [1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(tex.sample(Vec2::new(0.75, 0.75)), [0.0, 1.0, 0.0, 1.0]);
+        assert_eq!(tex.sample(Vec2::new(-0.75, 0.25)), [0.0, 0.0, 1.0, 1.0]);
+        assert_eq!(tex.sample(Vec2::new(1.75, -0.75)), [1.0, 1.0, 1.0, 0.0]);
+        // Halfway between the two top texels: their mean.
+        assert_eq!(tex.sample(Vec2::new(0.5, 0.75)), [0.5, 0.5, 0.0, 1.0]);
     }
 }

@@ -513,7 +513,7 @@ impl Simulator {
                 s.apply(i, t, Hook::Image(&mut img, &mut meta));
             });
         }
-        let rgb = color.iter().flat_map(|p| p.map(effects::to_u8)).collect();
+        let rgb = effects::rgb8(&color);
         self.fb.color = color;
         Ok(SimFrame {
             index,

@@ -40,14 +40,30 @@ fn tiny_dataset_is_deterministic_split_by_identity_and_balanced() {
     let base = std::env::temp_dir().join(format!("volcap-ds-{}", std::process::id()));
     let (a, b) = (base.join("a"), base.join("b"));
     assert_eq!(generate(assets.clone(), &cfg, &a, |_| {}).unwrap(), 6);
-    generate(assets.clone(), &cfg, &b, |_| {}).unwrap();
+    // The views' shards written on three threads: the same files, byte for byte.
+    let threaded = DatasetConfig {
+        threads: 3,
+        ..cfg.clone()
+    };
+    let mut seen = Vec::new();
+    assert_eq!(
+        generate(assets.clone(), &threaded, &b, |d| seen.push(d)).unwrap(),
+        6
+    );
+    assert_eq!(
+        seen.last(),
+        Some(&6),
+        "progress ends at the count: {seen:?}"
+    );
+    assert!(seen.windows(2).all(|w| w[0] <= w[1]), "{seen:?}");
     let fa = files(&a);
     assert_eq!(fa.len(), 6);
+    assert_eq!(files(&b).len(), 6);
     for f in &fa {
         let g = b.join(f.strip_prefix(&a).unwrap());
         assert!(
             std::fs::read(f).unwrap() == std::fs::read(g).unwrap(),
-            "not deterministic: {}",
+            "not deterministic (one thread against three): {}",
             f.display()
         );
     }
@@ -395,4 +411,42 @@ fn coloured_surface_samples_are_the_surface_a_view_shows() {
         }
     }
     std::fs::remove_dir_all(&base).ok();
+}
+
+/// A shard that cannot be written fails the whole dataset with the path named, on one
+/// thread and on several (the workers' error reaches the caller; nothing hangs).
+#[test]
+fn a_shard_that_cannot_be_written_is_an_error_naming_it() {
+    let assets = Arc::new(HumanAssets::embedded().unwrap());
+    for threads in [1, 3] {
+        let cfg = DatasetConfig {
+            subjects: 2,
+            poses: 1,
+            views: 2,
+            size: 48,
+            points: 200,
+            surface_points: 50,
+            seed: 3,
+            threads,
+            ..Default::default()
+        };
+        let out =
+            std::env::temp_dir().join(format!("volcap-ds-err-{}-{threads}", std::process::id()));
+        // A folder (with a file in it) where each subject's second view would go: the
+        // rename onto it fails.
+        for split in ["train", "val"] {
+            for s in ["s000", "s001"] {
+                let blocker = out.join(split).join(s).join("000_01.safetensors");
+                std::fs::create_dir_all(&blocker).unwrap();
+                std::fs::write(blocker.join("keep"), b"x").unwrap();
+            }
+        }
+        let err = generate(assets.clone(), &cfg, &out, |_| {}).unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.contains("000_01.safetensors"),
+            "threads {threads}: {msg}"
+        );
+        std::fs::remove_dir_all(&out).unwrap();
+    }
 }

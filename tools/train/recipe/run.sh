@@ -12,7 +12,8 @@
 #
 # The data: --poses jobs, each `volcap sim dataset` over every subject (the same identities
 # and split, --seed 11) in one pose of its own (--pose-seed 100 + job), --procs of them at
-# once; their images are joined in training (`--more-data`). Every finished job holds every
+# once, each writing its views on one thread (`--threads 1`: the jobs fill the cores); their
+# images are joined in training (`--more-data`). Every finished job holds every
 # subject, so a clock that stops the data early costs poses, not subjects (a generator that
 # made all its poses per subject before the next subject, as this recipe did first, gave a
 # timed run three subjects in all).
@@ -101,7 +102,7 @@ start_job() {
   local j=$1
   rm -rf "$res/ds-$j"
   "$res/volcap" sim dataset --subjects "$subjects" --poses 1 --views "$views" --points "$points" \
-    --val-fraction 0.15 --seed 11 --pose-seed $((100 + j)) --lighting varied "${assets[@]}" --out "$res/ds-$j" \
+    --val-fraction 0.15 --seed 11 --pose-seed $((100 + j)) --lighting varied --threads 1 "${assets[@]}" --out "$res/ds-$j" \
     > "$res/ds-$j.log" 2>&1 &
   running[$j]=$!
 }

@@ -53,6 +53,10 @@ pub struct DatasetArgs {
     /// pose (same subjects, poses and labels as the studio dataset of the same options).
     #[arg(long, default_value = "studio")]
     pub lighting: volcap_sim::dataset::DatasetLighting,
+    /// Threads writing the views' shards (0: every core; the files are the same on any
+    /// number; the poses' oracles and labelled points stay on one thread, in order).
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]
@@ -387,6 +391,7 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
         seed: a.seed,
         pose_seed: a.pose_seed,
         lighting: a.lighting,
+        threads: a.threads,
         ..Default::default()
     };
     let assets = a.assets.load()?;
@@ -415,9 +420,10 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
     pb.finish_and_clear();
     let secs = t.elapsed().as_secs_f64();
     println!(
-        "wrote {n} images to {} in {secs:.1} s ({:.1} images/s)",
+        "wrote {n} images to {} in {secs:.1} s ({:.1} images/s, {} shard writer thread(s))",
         a.out.display(),
-        n as f64 / secs
+        n as f64 / secs,
+        volcap_sim::shards::threads(a.threads),
     );
     Ok(())
 }
