@@ -15,10 +15,11 @@
 # ASSETS (../shared/data/makehuman), VOLCAP (target/release/volcap; one that knows --colour-res), SEEDS ("100 200 300"),
 # NAME (the model's name, fourier-small-seg2), BASE_DIR (a folder of earlier reports of the
 # default named eval-base-SEED, reused instead of run again), BASE_NAME (the committed model it
-# is judged against, NAME), ISO (the surface level, the committed NAME's; needed for a new name).
+# is judged against, NAME), ISO (the surface level, the committed NAME's; needed for a new name),
+# JOBS (evaluations at once, each on one core: the cores, `nproc`; the reports are the same).
 set -euo pipefail
 if [ $# -ne 2 ]; then
-  sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
@@ -50,7 +51,9 @@ rm -rf "$OUT/models"
 cp -r "$ROOT/models" "$OUT/models"
 cp "$OUT/export/shape-$NAME".fourier*.onnx "$OUT/models/"
 
-# The reports, the default's and the run's, on the same images.
+# The reports, the default's and the run's, on the same images; JOBS at once (`volcap eval`
+# runs its networks and localization on one thread).
+JOBS=${JOBS:-$(nproc 2>/dev/null || echo 1)}
 A=() B=()
 for s in $SEEDS; do
   for side in base run; do
@@ -60,14 +63,20 @@ for s in $SEEDS; do
     else
       models="$ROOT/models" name="$BASE_NAME"
       [ "$side" = run ] && models="$OUT/models" name="$NAME"
+      while [ "$(jobs -rp | wc -l)" -ge "$JOBS" ]; do wait -n || true; done
       echo "judge: $side, seed $s" >&2
+      rm -f "$dir.failed"
       # The shape judged (the colour networks are shared: no colour columns).
-      "$VOLCAP" eval --data "$ASSETS" --subjects val --poses 2 --views 3 --res 257 \
+      ("$VOLCAP" eval --data "$ASSETS" --subjects val --poses 2 --views 3 --res 257 \
         --seed "$s" --coarse-level 4 --model "$name" --models-dir "$models" --out "$dir" --colour-res 0 \
-        > "$dir.log" 2>&1 || { echo "judge: volcap eval failed (see $dir.log)" >&2; exit 1; }
+        > "$dir.log" 2>&1 || touch "$dir.failed") &
     fi
     if [ "$side" = base ]; then B+=("$dir"); else A+=("$dir"); fi
   done
+done
+wait
+for d in "${A[@]}" "${B[@]}"; do
+  [ ! -e "$d.failed" ] || { echo "judge: volcap eval failed (see $d.log)" >&2; exit 1; }
 done
 (cd "$ROOT/tools/train" && PYTHONPATH=. .venv/bin/python -m volcap_train.compare_evals \
   --a "${A[@]}" --b "${B[@]}" --by-subject) | tee "$OUT/judge.txt"
