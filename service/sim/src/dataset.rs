@@ -188,6 +188,16 @@ pub enum DatasetError {
     Write { path: String, msg: String },
 }
 
+impl DatasetError {
+    /// Writing `path` failed.
+    pub fn write(path: &Path, e: &dyn std::fmt::Display) -> Self {
+        Self::Write {
+            path: path.display().to_string(),
+            msg: e.to_string(),
+        }
+    }
+}
+
 /// The wardrobe that [`random_subject`] draws from: the names of the pack's outfits, shoes,
 /// hair and skins. Recorded in the dataset's manifest: the embedded runtime pack holds 3 of
 /// the 9 outfits (2 of 4 shoes, 3 of 8 hair, 4 skins) that `volcap eval --data
@@ -343,10 +353,7 @@ pub fn generate(
         // Identities and split are drawn; everything after comes from the pose seed.
         r = ChaCha8Rng::seed_from_u64(ps);
     }
-    let werr = |p: &Path, e: &dyn std::fmt::Display| DatasetError::Write {
-        path: p.display().to_string(),
-        msg: e.to_string(),
-    };
+    let werr = DatasetError::write;
     std::fs::create_dir_all(out).map_err(|e| werr(out, &e))?;
     let manifest = serde_json::json!({
         "format": "volcap-sim-dataset/1",

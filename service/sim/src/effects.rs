@@ -9,6 +9,7 @@ use crate::scene::EffectSpec;
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use volcap_engine::render::rgb8;
 
 /// An image in linear [0, 1] RGB, row-major.
 pub struct Image<'a> {
@@ -441,5 +442,3 @@ impl Stage for Hang {
         index >= self.at
     }
 }
-
-pub use volcap_engine::render::{rgb8, to_u8};

@@ -92,10 +92,7 @@ pub fn write_view(job: ViewJob) -> Result<(), DatasetError> {
             tensor(Dtype::F32, vec![surface.len(), 3], &sc)?,
         ),
     ];
-    let werr = |p: &PathBuf, e: &dyn std::fmt::Display| DatasetError::Write {
-        path: p.display().to_string(),
-        msg: e.to_string(),
-    };
+    let werr = DatasetError::write;
     // Written beside, then renamed: a generator stopped mid-write (the training recipe's
     // clock, a kill) leaves a `.part` file, never a torn shard.
     let part = job.path.with_extension("safetensors.part");

@@ -513,7 +513,7 @@ impl Simulator {
                 s.apply(i, t, Hook::Image(&mut img, &mut meta));
             });
         }
-        let rgb = effects::rgb8(&color);
+        let rgb = volcap_engine::render::rgb8(&color);
         self.fb.color = color;
         Ok(SimFrame {
             index,
