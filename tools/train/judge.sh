@@ -16,10 +16,12 @@
 # NAME (the model's name, fourier-small-seg2), BASE_DIR (a folder of earlier reports of the
 # default named eval-base-SEED, reused instead of run again), BASE_NAME (the committed model it
 # is judged against, NAME), ISO (the surface level, the committed NAME's; needed for a new name),
-# JOBS (evaluations at once, each on one core: the cores, `nproc`; the reports are the same).
+# JOBS (evaluations at once, each on one core: the cores, `nproc`; the reports are the same),
+# EVAL_ARGS (more `volcap eval` options for both sides, e.g. "--hands varied": the same
+# images' people with drawn wrists and fingers; BASE_DIR's reports must have been made so).
 set -euo pipefail
 if [ $# -ne 2 ]; then
-  sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'
   exit 2
 fi
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
@@ -69,7 +71,7 @@ for s in $SEEDS; do
       # The shape judged (the colour networks are shared: no colour columns).
       ("$VOLCAP" eval --data "$ASSETS" --subjects val --poses 2 --views 3 --res 257 \
         --seed "$s" --coarse-level 4 --model "$name" --models-dir "$models" --out "$dir" --colour-res 0 \
-        > "$dir.log" 2>&1 || touch "$dir.failed") &
+        ${EVAL_ARGS:-} > "$dir.log" 2>&1 || touch "$dir.failed") &
     fi
     if [ "$side" = base ]; then B+=("$dir"); else A+=("$dir"); fi
   done

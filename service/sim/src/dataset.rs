@@ -21,9 +21,18 @@
 //! a varied dataset holds the same subjects, poses, views and labels as the studio one of the
 //! same configuration and only the shading differs. The rig is written into the scene text
 //! as its SH irradiance (with a comment naming the lights).
+//!
+//! Hands ([`Hands`], `hands.rs`): `rest` keeps every hand in the rest pose's (the scene text
+//! without a `hands` key, so these datasets are what they were before the key existed);
+//! `varied` draws forearm twists, wrist flexions and finger curls from a random stream of each
+//! motion's seed of its own: the same subjects, bodies and views, only the hands and the points'
+//! labels differ. (The labelled points come from the main stream, which sorts near-surface
+//! samples inside and outside until both halves are full: where moved hands made that take
+//! another round of draws, the later poses of the dataset would differ too. In DSF67H, docs/eval/
+//! hands.md section 51, none did: every shard checked holds DSF67's scene text and the hands.)
 
 use crate::assets::{GarmentKind, HumanAssets};
-use crate::pose::Style;
+use crate::pose::{Hands, Style};
 use crate::raster::Sh9;
 use crate::scene::Scene;
 use crate::shards::{self, ShardWriter, ViewJob};
@@ -62,6 +71,9 @@ pub struct DatasetConfig {
     /// same identities and split (those come from `seed`) in new poses.
     pub pose_seed: Option<u64>,
     pub lighting: DatasetLighting,
+    /// How the procedural poses hold the hands (`hands.rs`): `Rest` draws the datasets of
+    /// before 2026-12-02 byte for byte; `Varied` the same poses with drawn wrists and fingers.
+    pub hands: Hands,
 }
 
 /// How a dataset's images are lit (module docs).
@@ -174,6 +186,7 @@ impl Default for DatasetConfig {
             seed: 0,
             pose_seed: None,
             lighting: DatasetLighting::Studio,
+            hands: Hands::Rest,
         }
     }
 }
@@ -266,8 +279,7 @@ pub fn scene_text(size: usize, subject_table: &str, style: Style, seed: u32) -> 
     scene_text_framed(
         size,
         subject_table,
-        style,
-        seed,
+        Motion::new(style, seed),
         WHOLE_HEIGHT_M,
         WHOLE_LOOK_AT_Y,
         STUDIO_LIGHTING,
@@ -279,6 +291,43 @@ pub fn scene_text(size: usize, subject_table: &str, style: Style, seed: u32) -> 
 pub const WHOLE_HEIGHT_M: f32 = 2.3;
 pub const WHOLE_LOOK_AT_Y: f32 = 0.95;
 
+/// The procedural motion of a dataset's (or an evaluation's) scene.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Motion {
+    pub style: Style,
+    pub seed: u32,
+    pub hands: Hands,
+}
+
+impl Motion {
+    /// `style` at `seed` with the hands at rest.
+    pub fn new(style: Style, seed: u32) -> Self {
+        Self {
+            style,
+            seed,
+            hands: Hands::Rest,
+        }
+    }
+
+    pub fn with_hands(self, hands: Hands) -> Self {
+        Self { hands, ..self }
+    }
+
+    /// The scene file's `motion` value (`hands` only when not at rest, so that a rest
+    /// motion's text is what it was before the key existed).
+    fn toml(&self) -> String {
+        let hands = match self.hands {
+            Hands::Rest => String::new(),
+            h => format!(", hands = \"{}\"", h.name()),
+        };
+        format!(
+            "{{ kind = \"procedural\", style = \"{}\", seed = {}{hands} }}",
+            self.style.name(),
+            self.seed
+        )
+    }
+}
+
 /// [`scene_text`] with another weak-perspective framing and light: the image height spans
 /// `height_m` metres around a look-at point `look_at_y` metres above the floor (a smaller span
 /// higher up is a person close to the camera, cut by the frame's lower edge), lit by the
@@ -286,16 +335,15 @@ pub const WHOLE_LOOK_AT_Y: f32 = 0.95;
 pub fn scene_text_framed(
     size: usize,
     subject_table: &str,
-    style: Style,
-    seed: u32,
+    motion: Motion,
     height_m: f32,
     look_at_y: f32,
     lighting: &str,
 ) -> String {
     format!(
         "[camera]\nwidth = {size}\nheight = {size}\nheight_m = {height_m:?}\nlook_at = [0.0, {look_at_y:?}, 0.0]\n{lighting}{subject_table}\
-         motion = {{ kind = \"procedural\", style = \"{}\", seed = {seed} }}\n",
-        style.name()
+         motion = {}\n",
+        motion.toml()
     )
 }
 
@@ -362,7 +410,7 @@ pub fn generate(
         "surface": "seen",
         "seed": cfg.seed, "subjects": cfg.subjects, "poses": cfg.poses, "views": cfg.views, "size": cfg.size,
         "points": cfg.points, "surface_points": cfg.surface_points, "sigma_m": cfg.sigma_m, "voxel_m": cfg.voxel_m,
-        "lighting": cfg.lighting.name(), "pose_seed": cfg.pose_seed,
+        "lighting": cfg.lighting.name(), "pose_seed": cfg.pose_seed, "hands": cfg.hands.name(),
         "assets": assets.source,
         "wardrobe": wardrobe(&assets),
         "split": ids.iter().zip(&val).map(|(id, v)| (id.clone(), if *v { "val" } else { "train" })).collect::<HashMap<_, _>>(),
@@ -389,8 +437,7 @@ pub fn generate(
             let text = scene_text_framed(
                 cfg.size,
                 table,
-                style,
-                r.random::<u32>(),
+                Motion::new(style, r.random::<u32>()).with_hands(cfg.hands),
                 WHOLE_HEIGHT_M,
                 WHOLE_LOOK_AT_Y,
                 &lighting,

@@ -17,6 +17,7 @@ pub mod camera;
 pub mod dataset;
 pub mod effects;
 pub mod files;
+pub mod hands;
 pub mod makehuman;
 pub mod oracle;
 pub mod parts;

@@ -1,11 +1,14 @@
 //! Poses: static poses from the pack (BVH), and a seeded procedural generator with joint
-//! limits for walking, arms raised, crouching, turning, one arm across the body, leaning.
+//! limits for walking, arms raised, crouching, turning, one arm across the body, leaning; the
+//! hands at rest or, with [`Hands::Varied`], in drawn wrist and finger poses (`hands.rs`).
 //!
 //! Rotations are per bone, parent-relative, about mesh-frame axes (y up, the character faces
 //! +z, +x is its left): hip/shoulder flexion forward is a negative rotation about x, knee and
 //! spine flexion positive about x, abduction of the left arm positive about z.
 
 use crate::assets::HumanAssets;
+pub use crate::hands::Hands;
+use crate::hands::{HandDraw, HandRig};
 use glam::{Mat3, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -61,10 +64,15 @@ pub struct Angles {
     pub shoulder_flex: [f32; 2],
     pub shoulder_across: [f32; 2],
     pub elbow: [f32; 2],
+    /// The hands (`hands.rs`): zero at rest.
+    pub forearm_twist: [f32; 2],
+    pub wrist_flex: [f32; 2],
+    pub wrist_dev: [f32; 2],
+    pub finger_curl: [f32; 2],
 }
 
 /// Joint limits (degrees), (min, max).
-pub const LIMITS: [(&str, f32, f32); 10] = [
+pub const LIMITS: [(&str, f32, f32); 14] = [
     ("spine_flex", -20.0, 60.0),
     ("spine_side", -30.0, 30.0),
     ("neck_flex", -40.0, 40.0),
@@ -75,6 +83,10 @@ pub const LIMITS: [(&str, f32, f32); 10] = [
     ("shoulder_flex", -50.0, 170.0),
     ("shoulder_across", -10.0, 90.0),
     ("elbow", 0.0, 145.0),
+    ("forearm_twist", -85.0, 95.0),
+    ("wrist_flex", -60.0, 70.0),
+    ("wrist_dev", -20.0, 30.0),
+    ("finger_curl", 0.0, 90.0),
 ];
 
 fn lim(name: &str, v: f32) -> f32 {
@@ -100,6 +112,10 @@ impl Angles {
             self.shoulder_flex[s] = lim("shoulder_flex", self.shoulder_flex[s]);
             self.shoulder_across[s] = lim("shoulder_across", self.shoulder_across[s]);
             self.elbow[s] = lim("elbow", self.elbow[s]);
+            self.forearm_twist[s] = lim("forearm_twist", self.forearm_twist[s]);
+            self.wrist_flex[s] = lim("wrist_flex", self.wrist_flex[s]);
+            self.wrist_dev[s] = lim("wrist_dev", self.wrist_dev[s]);
+            self.finger_curl[s] = lim("finger_curl", self.finger_curl[s]);
         }
         self
     }
@@ -114,6 +130,8 @@ pub struct Procedural {
     phase: f32,
     side: usize,
     jitter: [f32; 4],
+    seed: u64,
+    hands: Option<HandDraw>,
 }
 
 impl Procedural {
@@ -131,6 +149,27 @@ impl Procedural {
                 r.random_range(-1.0..1.0),
                 r.random_range(-1.0..1.0),
             ],
+            seed,
+            hands: None,
+        }
+    }
+
+    /// The same motion with its hands posed as `hands` says (drawn from the seed's own
+    /// stream: the body's angles do not change).
+    pub fn with_hands(mut self, hands: Hands) -> Self {
+        self.hands = match hands {
+            Hands::Rest => None,
+            Hands::Varied => Some(HandDraw::new(self.seed)),
+        };
+        self
+    }
+
+    /// How the hands are posed.
+    pub fn hands(&self) -> Hands {
+        if self.hands.is_some() {
+            Hands::Varied
+        } else {
+            Hands::Rest
         }
     }
 
@@ -183,6 +222,9 @@ impl Procedural {
                 g.shoulder_abd = [15.0, 15.0];
             }
         }
+        if let Some(h) = &self.hands {
+            h.apply(ph, &mut g);
+        }
         g.limited()
     }
 }
@@ -200,6 +242,7 @@ pub struct Rig {
     lowerarm: [Option<usize>; 2],
     /// Rest direction of each upper arm (for abduction relative to the A pose).
     arm_dir: [Vec3; 2],
+    hands: HandRig,
     nbones: usize,
 }
 
@@ -228,6 +271,7 @@ impl Rig {
             upperarm,
             lowerarm,
             arm_dir,
+            hands: HandRig::new(assets, heads),
             nbones: assets.bones.len(),
         }
     }
@@ -265,6 +309,13 @@ impl Rig {
             let axis = self.arm_dir[s].cross(Vec3::Z).normalize_or(Vec3::X);
             set(self.lowerarm[s], Mat3::from_axis_angle(axis, r(a.elbow[s])));
         }
+        self.hands.rotations(a, out);
+    }
+
+    /// Where the palm of side `s` (0 left, 1 right) faces at rest (`hands.rs`; none where the
+    /// rig lacks that hand's joints).
+    pub fn palm(&self, s: usize) -> Option<Vec3> {
+        self.hands.palm(s)
     }
 }
 

@@ -253,6 +253,9 @@ pub enum MotionSpec {
         seed: u64,
         #[serde(default = "d_period")]
         period: Positive,
+        /// `rest` (the default) or `varied`: seeded wrist, forearm and finger poses.
+        #[serde(default)]
+        hands: crate::hands::Hands,
     },
 }
 

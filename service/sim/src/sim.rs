@@ -291,7 +291,10 @@ impl Simulator {
                     style,
                     seed,
                     period,
-                } => Motion::Procedural(Procedural::new(*style, *seed, period.0)),
+                    hands,
+                } => {
+                    Motion::Procedural(Procedural::new(*style, *seed, period.0).with_hands(*hands))
+                }
             };
             subjects.push(SubjectRt {
                 subject,
@@ -622,7 +625,9 @@ impl Simulator {
                         let a = p.angles(t as f32);
                         serde_json::json!({"kind": "procedural", "style": p.style.name(), "root_yaw": a.root_yaw,
                             "hip_flex": a.hip_flex, "knee": a.knee, "shoulder_abd": a.shoulder_abd, "shoulder_flex": a.shoulder_flex,
-                            "elbow": a.elbow, "spine_flex": a.spine_flex, "spine_side": a.spine_side})
+                            "elbow": a.elbow, "spine_flex": a.spine_flex, "spine_side": a.spine_side,
+                            "hands": p.hands().name(), "forearm_twist": a.forearm_twist, "wrist_flex": a.wrist_flex,
+                            "wrist_dev": a.wrist_dev, "finger_curl": a.finger_curl})
                     }
                 };
                 serde_json::json!({"id": e.id, "outfit": s.subject.spec.outfit, "hair": s.subject.spec.hair,

@@ -139,6 +139,15 @@ fn tensor_bytes(path: &Path, name: &str) -> Vec<u8> {
     st.tensor(name).unwrap().data().to_vec()
 }
 
+/// The scene text a shard's metadata holds (what reproduces its image).
+fn shard_scene(path: &Path) -> String {
+    let bytes = std::fs::read(path).unwrap();
+    let (_, meta) = SafeTensors::read_metadata(&bytes).unwrap();
+    let info: serde_json::Value =
+        serde_json::from_str(&meta.metadata().as_ref().unwrap()["volcap"]).unwrap();
+    info["scene"].as_str().unwrap().to_string()
+}
+
 /// A small dataset configuration at 48 px.
 fn tiny(subjects: usize, poses: usize, views: usize, seed: u64) -> DatasetConfig {
     DatasetConfig {
@@ -193,11 +202,7 @@ fn varied_lighting_changes_only_the_shading() {
             "{}: only {diff} bytes differ",
             g.display()
         );
-        let bytes = std::fs::read(&g).unwrap();
-        let (_, meta) = SafeTensors::read_metadata(&bytes).unwrap();
-        let info: serde_json::Value =
-            serde_json::from_str(&meta.metadata().as_ref().unwrap()["volcap"]).unwrap();
-        let scene = info["scene"].as_str().unwrap().to_string();
+        let scene = shard_scene(&g);
         assert!(
             scene.contains("# varied rig") && scene.contains("sh = ["),
             "{scene}"
@@ -234,8 +239,7 @@ fn varied_rigs_are_bounded_never_black_and_come_from_all_sides() {
         let text = volcap_sim::dataset::scene_text_framed(
             32,
             "[[subject]]\nid = \"a\"\n",
-            volcap_sim::pose::Style::ALL[0],
-            1,
+            volcap_sim::dataset::Motion::new(volcap_sim::pose::Style::ALL[0], 1),
             2.3,
             0.95,
             &table,
@@ -449,4 +453,63 @@ fn a_shard_that_cannot_be_written_is_an_error_naming_it() {
         );
         std::fs::remove_dir_all(&out).unwrap();
     }
+}
+
+/// `hands: Varied` draws the same people, poses and views with drawn wrists and fingers: the
+/// masks differ only around the hands, the scene text says so, a rest dataset's does not
+/// (its scene text, and so its files, as before the key existed).
+#[test]
+fn varied_hands_keep_the_bodies_and_move_the_hands() {
+    use volcap_sim::pose::Hands;
+    let cfg = DatasetConfig {
+        size: 96,
+        ..tiny(2, 2, 2, 4)
+    };
+    let hcfg = DatasetConfig {
+        hands: Hands::Varied,
+        ..cfg.clone()
+    };
+    let (base, rest, varied) = pair("hands", &cfg, &hcfg);
+    let fs = files(&rest);
+    assert_eq!(fs.len(), 8);
+    let mut changed = 0;
+    for f in &fs {
+        let g = varied.join(f.strip_prefix(&rest).unwrap());
+        let (sr, sv) = (shard_scene(f), shard_scene(&g));
+        assert!(!sr.contains("hands"), "{sr}");
+        assert!(sv.contains("hands = \"varied\""), "{sv}");
+        assert_eq!(
+            sr,
+            sv.replace(", hands = \"varied\"", ""),
+            "only the hands key differs"
+        );
+        let (a, b) = (tensor_bytes(f, "mask"), tensor_bytes(&g, "mask"));
+        let person = a.iter().filter(|x| **x != 0).count();
+        let diff = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        assert!(
+            diff * 8 < person,
+            "{}: {diff} of the person's {person} mask values differ",
+            g.display()
+        );
+        changed += diff;
+    }
+    assert!(changed > 0, "no mask changed with the hands");
+    let hands_of = |d: &Path| -> serde_json::Value {
+        serde_json::from_str::<serde_json::Value>(
+            &std::fs::read_to_string(d.join("dataset.json")).unwrap(),
+        )
+        .unwrap()["hands"]
+            .clone()
+    };
+    assert_eq!(hands_of(&rest), "rest");
+    assert_eq!(hands_of(&varied), "varied");
+    for h in Hands::ALL {
+        assert_eq!(h.name().parse::<Hands>(), Ok(h));
+    }
+    let err = "fist".parse::<Hands>().unwrap_err();
+    assert!(
+        err.contains("\"fist\"") && err.contains("rest or varied"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&base).ok();
 }

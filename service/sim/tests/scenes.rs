@@ -89,3 +89,40 @@ fn unknown_names_in_scenes_give_file_line_and_key() {
         "{e}"
     );
 }
+
+/// A scene's `hands = "varied"` poses the hands and the forearms' twist and nothing else: the
+/// same motion's head, torso, legs and feet stay where `rest` puts them, and the hands move.
+#[test]
+fn drawn_hands_move_the_hands_and_forearms_only() {
+    use volcap_sim::parts::{Part, vertex_parts};
+    let assets = Arc::new(HumanAssets::embedded().unwrap());
+    let parts = vertex_parts(&assets);
+    let posed = |hands: &str| {
+        let text = format!(
+            "[camera]\nwidth = 64\nheight = 64\n[[subject]]\nid = \"a\"\n\
+             motion = {{ kind = \"procedural\", style = \"walk\", seed = 5{hands} }}\n"
+        );
+        let scene = Scene::parse(&text, std::path::Path::new("hands.toml")).unwrap();
+        let mut sim = Simulator::new(scene, assets.clone()).unwrap();
+        sim.render(7).unwrap();
+        sim.world_meshes()[0].0[0].verts.to_vec()
+    };
+    let (rest, same, drawn) = (
+        posed(""),
+        posed(", hands = \"rest\""),
+        posed(", hands = \"varied\""),
+    );
+    assert_eq!(rest, same, "hands = \"rest\" is the default");
+    let mut hand_move = 0.0f32;
+    for (i, p) in parts.iter().enumerate() {
+        let d = (drawn[i] - rest[i]).length();
+        match p {
+            Part::Head | Part::Torso | Part::Legs | Part::Feet => {
+                assert!(d == 0.0, "a {p:?} vertex moved {d} m")
+            }
+            Part::Hands => hand_move = hand_move.max(d),
+            Part::Arms => {}
+        }
+    }
+    assert!(hand_move > 0.03, "the hands moved {hand_move} m at most");
+}

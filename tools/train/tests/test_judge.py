@@ -19,6 +19,7 @@ def test_without_arguments_it_prints_its_use():
     r = run([])
     assert r.returncode == 2
     assert "tools/train/judge.sh RUN OUT" in r.stdout and "BASE_DIR" in r.stdout
+    assert "EVAL_ARGS" in r.stdout and "JOBS" in r.stdout
 
 
 def test_a_missing_dataset_and_a_folder_that_is_not_a_run_are_named(tmp_path):

@@ -53,6 +53,10 @@ pub struct DatasetArgs {
     /// pose (same subjects, poses and labels as the studio dataset of the same options).
     #[arg(long, default_value = "studio")]
     pub lighting: volcap_sim::dataset::DatasetLighting,
+    /// `rest`: every hand in the rest pose's (open, the wrist straight); `varied`: the same
+    /// poses with drawn forearm twists, wrist flexions and finger curls (open hand to fist).
+    #[arg(long, default_value = "rest")]
+    pub hands: volcap_sim::pose::Hands,
     /// Threads writing the views' shards (0: every core; the files are the same on any
     /// number; the poses' oracles and labelled points stay on one thread, in order).
     #[arg(long, default_value_t = 0)]
@@ -391,6 +395,7 @@ fn dataset(a: &DatasetArgs) -> anyhow::Result<()> {
         seed: a.seed,
         pose_seed: a.pose_seed,
         lighting: a.lighting,
+        hands: a.hands,
         threads: a.threads,
         ..Default::default()
     };

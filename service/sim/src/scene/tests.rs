@@ -92,3 +92,26 @@ fn bad_values_name_line_and_key() {
         .to_string();
     assert!(e.contains("radius") && e.contains("line 2"), "{e}");
 }
+
+#[test]
+fn procedural_hands_parse_and_a_bad_value_names_line_and_choices() {
+    use crate::hands::Hands;
+    use crate::scene::MotionSpec;
+    let hands = |t: &str| -> Result<Hands, String> {
+        let s = parse(&format!(
+            "[[subject]]\nid = \"a\"\nmotion = {{ kind = \"procedural\", style = \"walk\"{t} }}\n"
+        ))
+        .map_err(|e| e.to_string())?;
+        match &s.subjects[0].motion {
+            MotionSpec::Procedural { hands, .. } => Ok(*hands),
+            m => Err(format!("{m:?}")),
+        }
+    };
+    assert_eq!(hands(""), Ok(Hands::Rest));
+    assert_eq!(hands(", hands = \"varied\""), Ok(Hands::Varied));
+    let e = hands(", hands = \"fist\"").unwrap_err();
+    assert!(
+        e.contains("line 3") && e.contains("fist") && e.contains("rest") && e.contains("varied"),
+        "{e}"
+    );
+}

@@ -147,6 +147,11 @@ pub struct EvalArgs {
     /// left out.
     #[arg(long, value_enum, default_value_t = Framing::Whole)]
     pub framing: Framing,
+    /// The test people's hands: `rest` (the rest pose's, as every report before 2026-12-02)
+    /// or `varied` (the same images' poses with drawn forearm twists, wrist flexions and finger
+    /// curls, from a stream of their own: the bodies, views and framing are `rest`'s).
+    #[arg(long, default_value = "rest")]
+    pub hands: volcap_sim::pose::Hands,
     /// The true surface Chamfer, P2S and the per-part distances are measured against:
     /// `clothed` (the body and its garments' meshes whole, the body under the clothes
     /// included, as every report before 2026-11-29 was) or `seen` (only what a view can show:

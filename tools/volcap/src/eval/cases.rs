@@ -88,8 +88,7 @@ pub(super) fn render_cases(a: &EvalArgs) -> anyhow::Result<Vec<Case>> {
             let text = volcap_sim::dataset::scene_text_framed(
                 size,
                 table,
-                style,
-                seed,
+                volcap_sim::dataset::Motion::new(style, seed).with_hands(a.hands),
                 height_m,
                 look_y,
                 volcap_sim::dataset::STUDIO_LIGHTING,

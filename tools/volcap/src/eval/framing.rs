@@ -138,8 +138,7 @@ mod tests {
         let text = volcap_sim::dataset::scene_text_framed(
             64,
             SUBJECT,
-            Style::ALL[0],
-            1,
+            volcap_sim::dataset::Motion::new(Style::ALL[0], 1),
             height_m,
             look_y,
             volcap_sim::dataset::STUDIO_LIGHTING,

@@ -149,6 +149,9 @@ fn knobs(a: &EvalArgs) -> String {
     if a.framing == Framing::Upper {
         let _ = write!(k, " --framing {}", a.framing.name());
     }
+    if a.hands != volcap_sim::pose::Hands::Rest {
+        let _ = write!(k, " --hands {}", a.hands.name());
+    }
     if a.gt_mask {
         k.push_str(" --gt-mask");
     }
@@ -258,6 +261,14 @@ pub(super) fn report(a: &EvalArgs, summary: &[ModelRow], images: &[ImageRow]) ->
             super::framing::UPPER_SPAN_M.0,
             super::framing::UPPER_SPAN_M.1,
             super::framing::UPPER_TOP_M,
+        );
+    }
+    if a.hands == volcap_sim::pose::Hands::Varied {
+        let _ = writeln!(
+            s,
+            "Hands `varied`: the same images' bodies, views and framing with drawn forearm twists, wrist\n\
+             flexions and finger curls (open hand to fist; `service/sim/src/hands.rs`), not the rest pose's\n\
+             open hands.\n",
         );
     }
     let _ = writeln!(
@@ -508,6 +519,8 @@ mod tests {
             "0.5,0.2",
             "--framing",
             "upper",
+            "--hands",
+            "varied",
             "--coarse-level",
             "3,4",
             "--method",
@@ -518,7 +531,7 @@ mod tests {
         .a;
         assert_eq!(
             knobs(&a),
-            " --framing upper --gt-mask --iso-level 0.5,0.55 --peak-level 0.5,0.2 --moment-fill 0.02,0.1,4 --coarse-level 3,4 --method hierarchical,mise --backend cpu,wgpu"
+            " --framing upper --hands varied --gt-mask --iso-level 0.5,0.55 --peak-level 0.5,0.2 --moment-fill 0.02,0.1,4 --coarse-level 3,4 --method hierarchical,mise --backend cpu,wgpu"
         );
     }
 }
