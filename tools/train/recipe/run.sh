@@ -4,7 +4,8 @@
 # light checkpoint (<= 16 MiB) and the log in RESULT.
 #
 #   run.sh RESULT [--subjects 48] [--poses 16] [--views 3] [--steps 6000] [--procs NPROC]
-#                 [--minutes-data D] [--minutes-train T] [--variant V] [--init CKPT] [--tiny]
+#                 [--minutes-data D] [--minutes-train T] [--variant V] [--init CKPT]
+#                 [--hands-every N] [--tiny]
 #                 [-- extra `volcap_train.train fourier` options]
 #
 # budget.json's `time_s` says where the training's wall time went (steps, checkpoints,
@@ -29,6 +30,10 @@
 # net feeding the series net, issue 34 part 3) starts both of its halves from the bundled
 # fourier-small checkpoint and needs `-- --geom-weight W`.
 #
+# --hands-every N: every Nth pose job draws its people's hands in varied poses (`volcap sim
+# dataset --hands varied`: forearm twists, wrist flexions, finger curls; the same bodies as at
+# rest); 0 (the default) leaves every hand at rest.
+#
 # --init: the light checkpoint training starts from (a path from where run.sh is called, e.g.
 # models/checkpoints/shape-fourier-small-seg2.pt with `-- --segment-passes 2` to go on with the
 # two-pass network) instead of the bundled fourier-small one.
@@ -43,7 +48,7 @@ b="$(cd "$(dirname "$0")" && pwd)"
 res="${1:?usage: run.sh RESULT [options]}"
 shift
 subjects=48 poses=16 views=3 steps=6000 procs=$(nproc) points=8000 batch=8 extra=()
-minutes_data=0 minutes_train=0 steps_given=0 variant=fourier-small init_given=""
+minutes_data=0 minutes_train=0 steps_given=0 variant=fourier-small init_given="" hands_every=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --subjects) subjects="$2"; shift 2 ;;
@@ -55,11 +60,13 @@ while [ $# -gt 0 ]; do
     --minutes-train) minutes_train="$2"; shift 2 ;;
     --variant) variant="$2"; shift 2 ;;
     --init) init_given="$2"; shift 2 ;;
+    --hands-every) hands_every="$2"; shift 2 ;;
     --tiny) subjects=2 poses=2 views=2 steps=3 steps_given=1 procs=2 points=4096 batch=2; shift ;;
     --) shift; extra=("$@"); break ;;
     *) echo "run.sh: unknown option $1" >&2; exit 2 ;;
   esac
 done
+case "$hands_every" in ''|*[!0-9]*) echo "run.sh: --hands-every $hands_every: not a count" >&2; exit 2 ;; esac
 # With a training clock and no --steps, the clock decides (the step count only bounds it).
 [ "$minutes_train" != 0 ] && [ "$steps_given" = 0 ] && steps=1000000
 # Progress bars into a log (not a terminal): a line every 15 s, not every step.
@@ -101,8 +108,10 @@ next=0 finished=0
 start_job() {
   local j=$1
   rm -rf "$res/ds-$j"
+  local hands=()
+  [ "$hands_every" -gt 0 ] && [ $(( (j + 1) % hands_every )) -eq 0 ] && hands=(--hands varied)
   "$res/volcap" sim dataset --subjects "$subjects" --poses 1 --views "$views" --points "$points" \
-    --val-fraction 0.15 --seed 11 --pose-seed $((100 + j)) --lighting varied --threads 1 "${assets[@]}" --out "$res/ds-$j" \
+    --val-fraction 0.15 --seed 11 --pose-seed $((100 + j)) --lighting varied --threads 1 "${hands[@]}" "${assets[@]}" --out "$res/ds-$j" \
     > "$res/ds-$j.log" 2>&1 &
   running[$j]=$!
 }

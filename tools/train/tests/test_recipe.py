@@ -95,7 +95,7 @@ def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
         subprocess.run(
             # The surface variant (issue 34 part 3), its halves started from fourier-small's
             # checkpoint as the bundle carries it.
-            [str(bundle / "run.sh"), str(res), "--tiny", "--poses", "3", "--minutes-data", "30", "--minutes-train", "0.0001", "--variant", "fourier-geom", "--", "--geom-weight", "1"],
+            [str(bundle / "run.sh"), str(res), "--tiny", "--poses", "3", "--hands-every", "2", "--minutes-data", "30", "--minutes-train", "0.0001", "--variant", "fourier-geom", "--", "--geom-weight", "1"],
             check=True, env=env, cwd=tmp_path,
         )
     finally:
@@ -113,6 +113,9 @@ def test_a_lean_bundle_in_the_checkout_runs_within_its_time_box(tmp_path):
         # Dressed from the whole wardrobe where it travelled, else the runtime pack's 3 outfits.
         outfits = json.loads((ds / "dataset.json").read_text())["wardrobe"]["outfits"]
         assert len(outfits) == (9 if wardrobe else 3), outfits
+        # --hands-every 2: the second job's hands drawn, the others' at rest.
+        hands = json.loads((ds / "dataset.json").read_text())["hands"]
+        assert hands == ("varied" if j == 1 else "rest"), (j, hands)
     assert "3 of 3 poses whole" in (res / "recipe.log").read_text()
     light = torch.load(res / "checkpoint.pt", weights_only=False)
     assert light["step"] == 1 and light["variant"] == "fourier-geom"
