@@ -289,7 +289,8 @@ pub fn factory(cfg: &Config) -> Result<(CameraFactory, String), String> {
                     volcap_sim::Simulator::new(s, Arc::new(assets))
                         .map_err(|e| format!("scene error: {e}"))
                 })?;
-            let cam = sim::SimCamera::new(sim, scene_path.display().to_string());
+            let with_truth = cfg.field() == crate::config::FieldMode::Oracle;
+            let cam = sim::SimCamera::new(sim, scene_path.display().to_string(), with_truth);
             let source = cam.describe();
             Ok((
                 Box::new(move || Ok(Box::new(cam) as Box<dyn Camera>)),

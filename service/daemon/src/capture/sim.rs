@@ -1,6 +1,8 @@
 //! The `sim` backend: the scene simulator as a camera, paced at the scene's fps. Frame
 //! indices follow the wall clock from the first open, so an unplug window in the scene is
-//! lived through in real time and the camera comes back when the scene says so.
+//! lived through in real time and the camera comes back when the scene says so. The ground
+//! truth rides with each frame only where the pipeline renders it (oracle mode): copying the
+//! posed meshes every frame is wasted work for the model and camera modes.
 
 use super::{Camera, Fault, Frame, Grab, SimTruth};
 use std::time::{Duration, Instant};
@@ -12,10 +14,12 @@ pub struct SimCamera {
     period: Duration,
     start: Option<Instant>,
     index: u64,
+    with_truth: bool,
 }
 
 impl SimCamera {
-    pub fn new(sim: Simulator, name: String) -> Self {
+    /// `with_truth`: attach the ground truth to every frame (the oracle field mode needs it).
+    pub fn new(sim: Simulator, name: String, with_truth: bool) -> Self {
         let fps = sim.scene().camera.fps.0.max(0.1) as f64;
         Self {
             sim,
@@ -23,6 +27,7 @@ impl SimCamera {
             period: Duration::from_secs_f64(1.0 / fps),
             start: None,
             index: 0,
+            with_truth,
         }
     }
 }
@@ -64,17 +69,17 @@ impl Camera for SimCamera {
         let at = Instant::now();
         match self.sim.render(index) {
             Ok(f) => {
-                let people = people_in_view(&f.ids, f.width, f.height);
+                let truth = self.with_truth.then(|| SimTruth {
+                    gt: self.sim.ground_truth(),
+                    people: people_in_view(&f.ids, f.width, f.height),
+                });
                 Ok(Grab::Frame(Frame {
                     rgb: f.rgb,
                     width: f.width,
                     height: f.height,
                     seq: index,
                     at,
-                    truth: Some(SimTruth {
-                        gt: self.sim.ground_truth(),
-                        people,
-                    }),
+                    truth,
                 }))
             }
             Err(SimError::Unplugged { frame }) => Err(Fault::Unplugged(format!(
@@ -92,4 +97,42 @@ impl Camera for SimCamera {
     }
 
     fn close(&mut self) {}
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    fn camera(with_truth: bool) -> SimCamera {
+        let text = "[camera]\nwidth = 64\nheight = 64\nfps = 1000\n[[subject]]\nid = \"a\"\n\
+                    motion = { kind = \"static\", pose = \"rest\" }\n";
+        let scene = volcap_sim::Scene::parse(text, std::path::Path::new("t.toml")).unwrap();
+        let assets = Arc::new(volcap_sim::HumanAssets::embedded().unwrap());
+        SimCamera::new(
+            Simulator::new(scene, assets).unwrap(),
+            "t".into(),
+            with_truth,
+        )
+    }
+
+    /// The truth rides with the frames only when asked for (oracle mode); the frames are the
+    /// same either way.
+    #[test]
+    fn frames_carry_the_truth_only_when_asked() {
+        let grab = |with_truth| {
+            let mut cam = camera(with_truth);
+            cam.open().unwrap();
+            match cam.next() {
+                Ok(Grab::Frame(f)) => f,
+                _ => panic!("no frame"),
+            }
+        };
+        let (with, without) = (grab(true), grab(false));
+        let truth = with.truth.as_ref().expect("truth attached");
+        assert_eq!(truth.people, 1);
+        assert_eq!(truth.gt.camera.width, 64);
+        assert!(without.truth.is_none());
+        assert_eq!(with.rgb, without.rgb);
+    }
 }
