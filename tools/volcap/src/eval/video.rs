@@ -14,26 +14,32 @@
 //! - **lag**: the shift (frames) that best lines the filtered silhouettes up with the
 //!   unfiltered run's earlier ones (0 when it follows at once).
 //!
+//! - **flicker by body part** ([`parts`]): the same consecutive pairs, split by the body
+//!   part each displayed pixel shows (is it the hands that flicker?).
+//!
 //! The silhouettes and depths are projections of the localized grid (orthographic, as the
 //! daemon's renderer), so they cost no extra field evaluation.
 
 use super::framing::{OracleInCrop, ToCamera};
 use super::{FrameArg, frame_of, surface_distances};
-use anyhow::{Context, anyhow, bail};
+use anyhow::{Context, anyhow};
 use clap::Args;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
+mod parts;
 mod report;
+mod setting;
 use report::{plot, report};
+use setting::parse_setting;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use volcap_engine::grid::{Grid, GridSpec, is_inside};
 use volcap_engine::localize::{Localizer, Method};
 use volcap_engine::mesh::Mesh;
 use volcap_engine::metrics::iou_bits;
-use volcap_engine::model::temporal::{Temporal, TemporalSettings};
+use volcap_engine::model::temporal::Temporal;
 use volcap_engine::model::{
     DepthFrame, FrameInfo, ModelView, Models, Precision, SegmentTrack, Tracked,
 };
@@ -101,87 +107,6 @@ pub struct TemporalArgs {
     pub replot: bool,
 }
 
-/// A `--setting` value: its label, the filter (none: off) and the segmentation's track
-/// (`segment_full_every`, the daemon's `[model]` key: 1 segments every frame whole).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Setting {
-    pub label: String,
-    pub filter: Option<TemporalSettings>,
-    pub segment_full_every: u32,
-}
-
-/// Parse a `--setting`: `off`, `default`, or `+`-joined `KEY=VALUE`s over the defaults
-/// (`[temporal]`'s keys, and `segment_full_every`), optionally with `off` among them (no
-/// filter: then only `segment_full_every` may follow).
-pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
-    let s = s.trim();
-    let mut t = TemporalSettings::default();
-    let (mut off, mut filter_keys, mut full_every) = (false, false, 1u32);
-    for kv in s.split('+') {
-        let kv = kv.trim();
-        match kv {
-            "off" => {
-                off = true;
-                continue;
-            }
-            "default" => continue,
-            _ => {}
-        }
-        let (k, v) = kv
-            .split_once('=')
-            .ok_or_else(|| anyhow!("--setting {s}: '{kv}' is not KEY=VALUE (or off, default)"))?;
-        let v: f32 = v
-            .trim()
-            .parse()
-            .map_err(|_| anyhow!("--setting {s}: {k} = '{v}' is not a number"))?;
-        let whole = |range: std::ops::RangeInclusive<f32>| {
-            if v.fract() != 0.0 || !range.contains(&v) {
-                bail!(
-                    "--setting {s}: {k} = {v} is not a whole number in {}..={}",
-                    range.start(),
-                    range.end()
-                );
-            }
-            Ok(v as u32)
-        };
-        match k.trim() {
-            "segment_full_every" => {
-                full_every = whole(1.0..=volcap_engine::model::SEGMENT_FULL_EVERY_MAX as f32)?;
-                continue;
-            }
-            "mask_hold_frames" => {
-                t.mask_hold_frames = whole(0.0..=255.0)?;
-                filter_keys = true;
-                continue;
-            }
-            _ => {}
-        }
-        let slot = match k.trim() {
-            "crop_min_cutoff_hz" => &mut t.crop_min_cutoff_hz,
-            "crop_beta" => &mut t.crop_beta,
-            "mask_low" => &mut t.mask_low,
-            "mask_high" => &mut t.mask_high,
-            "mask_motion" => &mut t.mask_motion,
-            "map_min_cutoff_hz" => &mut t.map_min_cutoff_hz,
-            "map_beta" => &mut t.map_beta,
-            "map_change_cutoff_hz" => &mut t.map_change_cutoff_hz,
-            "same_person_iou" => &mut t.same_person_iou,
-            other => bail!("--setting {s}: unknown key '{other}'"),
-        };
-        *slot = v;
-        filter_keys = true;
-    }
-    if off && filter_keys {
-        bail!("--setting {s}: 'off' (no filter) with the filter's keys");
-    }
-    t.check().map_err(|(_, e)| anyhow!("--setting {s}: {e}"))?;
-    Ok(Setting {
-        label: s.to_string(),
-        filter: (!off).then_some(t),
-        segment_full_every: full_every,
-    })
-}
-
 /// One scene's frame with its truth.
 struct VFrame {
     rgb: Vec<u8>,
@@ -192,6 +117,8 @@ struct VFrame {
     gt_mesh: Mesh,
     oracle: volcap_sim::oracle::SceneField,
     to_cam: ToCamera,
+    /// The first subject's body parts ([`parts`]).
+    parts: volcap_sim::parts::PartLabeler,
 }
 
 /// Coarsest level of the truth's localization (33^3: 0.06 NDC, thinner than any body part).
@@ -208,6 +135,10 @@ struct Views {
     side: Vec<i32>,
     cam_front: Vec<Option<f32>>,
     cam_side: Vec<Option<f32>>,
+    /// Per column of `front` / `side`, the body part of its hit ([`parts::label`]; empty
+    /// until labelled).
+    front_part: Vec<u8>,
+    side_part: Vec<u8>,
 }
 
 /// Metres per input-NDC unit across (x, y) and along depth (after `to_cam`).
@@ -286,6 +217,8 @@ fn views(
         side,
         cam_front,
         cam_side,
+        front_part: Vec::new(),
+        side_part: Vec::new(),
     }
 }
 
@@ -396,6 +329,20 @@ pub struct VideoRow {
     pub tracked_frames: usize,
     #[serde(default)]
     pub lost_frames: usize,
+    /// Flicker by body part (`volcap_sim::parts::Part::ALL`'s order: head, torso, arms,
+    /// hands, legs, feet), front and side together ([`parts`]): consecutive-frame IoU of
+    /// the pixels showing the part, mean and worst (none: the part never shown), and the
+    /// part's share of the pixels shown in one frame of a pair only.
+    #[serde(default)]
+    pub part_iou_mean: [Option<f64>; parts::PARTS],
+    #[serde(default)]
+    pub part_iou_min: [Option<f64>; parts::PARTS],
+    #[serde(default)]
+    pub part_change_share: [Option<f64>; parts::PARTS],
+    /// In the pair of the worst side IoU (`side_iou_min`), each part's share of the side
+    /// pixels that pair changed.
+    #[serde(default)]
+    pub part_worst_side_share: [Option<f64>; parts::PARTS],
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -424,6 +371,7 @@ fn render_scene(
     let fps = scene.camera.fps.0 as f64;
     let z_scale = scene.camera.height_m.0 / volcap_sim::dataset::WHOLE_HEIGHT_M;
     let assets = Arc::new(volcap_sim::HumanAssets::embedded().map_err(anyhow::Error::msg)?);
+    let vertex_parts = volcap_sim::parts::vertex_parts(&assets);
     let mut sim = Simulator::new(scene, assets).with_context(|| path.display().to_string())?;
     let mut out = Vec::new();
     for i in 0..frames {
@@ -442,6 +390,14 @@ fn render_scene(
         let truth_rgb: Vec<u8> = f.person_mask().iter().flat_map(|&m| [m; 3]).collect();
         let truth = volcap_engine::model::preprocess::letterbox(&truth_rgb, f.width, f.height);
         let plane = volcap_engine::model::preprocess::INPUT_SIZE.pow(2);
+        let parts = {
+            let meshes = sim.world_meshes();
+            let body = meshes
+                .first()
+                .and_then(|(closed, _)| closed.first())
+                .ok_or_else(|| anyhow!("{}: the scene has no subject", path.display()))?;
+            volcap_sim::parts::PartLabeler::new(body.verts, body.tris, &vertex_parts)
+        };
         out.push(VFrame {
             truth_mask: truth[..plane].iter().map(|&v| v > 0.5).collect(),
             gt_mesh: volcap_sim::dataset::clothed_surface(&sim),
@@ -450,6 +406,7 @@ fn render_scene(
             width: f.width,
             height: f.height,
             to_cam: ToCamera { dz, z_scale },
+            parts,
         });
     }
     Ok((out, fps, still))
@@ -572,13 +529,15 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                     chamfer.push(d.chamfer_cm);
                     p2s.push(d.p2s_cm);
                 }
-                let v = views(&grid, spec, crop, fr);
+                let mut v = views(&grid, spec, crop, fr);
+                parts::label(&mut v, spec, crop, fr);
                 per.push(Some((v, views(&truth, spec, crop, fr), crop.s)));
             }
             // Consecutive pairs of reconstructed frames.
             let cell = spec.spacing() as f64 * 100.0;
             let (mut fi, mut si, mut fd, mut sd, mut jf, mut js) =
                 (vec![], vec![], vec![], vec![], vec![], vec![]);
+            let mut by_part = parts::PartFlicker::default();
             for (k, w) in per.windows(2).enumerate() {
                 let (Some((m0, o0, s0)), Some((m1, o1, s1))) = (&w[0], &w[1]) else {
                     continue;
@@ -586,6 +545,7 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 if k + 1 < a.settle {
                     continue;
                 }
+                by_part.add(m0, m1);
                 let s = 0.5 * (*s0 + *s1) as f64;
                 let (a, d) = compare_hits(&m0.front, &m1.front);
                 fi.push(a);
@@ -612,6 +572,8 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
             } else {
                 lag_of(&per, &reference)
             };
+            let (part_iou_mean, part_iou_min, part_change_share, part_worst_side_share) =
+                by_part.figures();
             let row = VideoRow {
                 scene: label.clone(),
                 kind: if still { "still" } else { "moving" }.into(),
@@ -635,6 +597,10 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 segment_ms: mean(&segment_ms),
                 tracked_frames: tracked[0],
                 lost_frames: tracked[1],
+                part_iou_mean,
+                part_iou_min,
+                part_change_share,
+                part_worst_side_share,
             };
             if a.json {
                 println!("{}", serde_json::to_string(&row)?);

@@ -1,6 +1,7 @@
 //! `bench temporal`'s settings.
 
 use super::*;
+use volcap_engine::model::temporal::TemporalSettings;
 
 /// `--setting`: the filter's keys and the segmentation's track, `off` with the track
 /// only, and bad values named.
