@@ -12,8 +12,7 @@
 //! - **jitter** (camera frame, crop undone): the model's frame-to-frame depth change minus
 //!   the oracle's, so that real motion smoothed away is not counted as stability;
 //! - **lag**: the shift (frames) that best lines the filtered silhouettes up with the
-//!   unfiltered run's earlier ones (0 when it follows at once).
-//!
+//!   unfiltered run's earlier ones (0 when it follows at once);
 //! - **flicker by body part** ([`parts`]): the same consecutive pairs, split by the body
 //!   part each displayed pixel shows (is it the hands that flicker?).
 //!
