@@ -136,7 +136,8 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
 }
 
 /// Still scenes' flicker by body part ([`super::parts`]): per part the consecutive-frame
-/// IoU of its pixels, mean / worst, and its share of the changed pixels.
+/// IoU of its pixels, mean / worst, its share of the changed pixels, and its share of the
+/// side pixels changed in the scene's worst side pair.
 fn parts_table(md: &mut String, rows: &[VideoRow]) {
     let still: Vec<&VideoRow> = rows
         .iter()
