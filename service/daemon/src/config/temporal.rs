@@ -13,6 +13,7 @@ pub struct TemporalConfig {
     pub enabled: bool,
     pub crop_min_cutoff_hz: Option<f32>,
     pub crop_beta: Option<f32>,
+    pub crop_hold: Option<f32>,
     pub mask_low: Option<f32>,
     pub mask_high: Option<f32>,
     pub mask_motion: Option<f32>,
@@ -34,6 +35,7 @@ impl Default for TemporalConfig {
             enabled: true,
             crop_min_cutoff_hz: None,
             crop_beta: None,
+            crop_hold: None,
             mask_low: None,
             mask_high: None,
             mask_motion: None,
@@ -61,6 +63,7 @@ impl TemporalConfig {
         volcap_engine::model::temporal::TemporalSettings {
             crop_min_cutoff_hz: self.crop_min_cutoff_hz.unwrap_or(d.crop_min_cutoff_hz),
             crop_beta: self.crop_beta.unwrap_or(d.crop_beta),
+            crop_hold: self.crop_hold.unwrap_or(d.crop_hold),
             mask_low: self.mask_low.unwrap_or(d.mask_low),
             mask_high: self.mask_high.unwrap_or(d.mask_high),
             mask_motion: self.mask_motion.unwrap_or(d.mask_motion),
@@ -82,6 +85,7 @@ pub fn settings_json(s: &volcap_engine::model::temporal::TemporalSettings) -> se
     serde_json::json!({
         "crop_min_cutoff_hz": f(s.crop_min_cutoff_hz),
         "crop_beta": f(s.crop_beta),
+        "crop_hold": f(s.crop_hold),
         "mask_low": f(s.mask_low),
         "mask_high": f(s.mask_high),
         "mask_motion": f(s.mask_motion),

@@ -44,6 +44,12 @@ pub struct TemporalSettings {
     pub crop_min_cutoff_hz: f32,
     /// How the crop's cutoff opens with its speed: Hz per crop-NDC unit per second.
     pub crop_beta: f32,
+    /// The crop's play, a fraction of its half-side (`s`): the crop given out moves only
+    /// where the filtered one pulls it farther than this (a backlash), so that the One Euro
+    /// filter's slow wander under sensor noise (a third of a cell at 257^3 in a T-pose,
+    /// whose box the fingertips set) does not shift a still person on the display (the
+    /// display's frame is the crop), at the cost of this much lag when they move (0: off).
+    pub crop_hold: f32,
     /// The mask's hysteresis band: a pixel turns person above `mask_high` and stops being
     /// one below `mask_low` (`0 < low <= 0.5 <= high < 1`).
     pub mask_low: f32,
@@ -74,6 +80,10 @@ pub struct TemporalSettings {
     pub max_gap_s: f32,
 }
 
+/// `crop_hold`'s default: half a cell at 257^3 (a cell is `s / 128` there), a quarter at
+/// 129^3, a cell at 513^3 (docs/bench/main-job-medium, "The crop's play").
+pub const CROP_HOLD_DEFAULT: f32 = 0.004;
+
 /// Chosen with `volcap bench temporal` (docs/eval-video/temporal.md): low cutoffs while
 /// still (0.3 Hz); a map pixel's rate of change averaged below 0.7 Hz, so sensor noise
 /// (which changes sign each frame) leaves the filter closed while a real change (a pixel
@@ -85,6 +95,7 @@ impl Default for TemporalSettings {
         Self {
             crop_min_cutoff_hz: 0.3,
             crop_beta: 40.0,
+            crop_hold: CROP_HOLD_DEFAULT,
             mask_low: 0.2,
             mask_high: 0.8,
             mask_motion: 0.08,
@@ -120,6 +131,13 @@ impl TemporalSettings {
         for (name, v) in [("crop_beta", self.crop_beta), ("map_beta", self.map_beta)] {
             within(name, v, (0.0..=10_000.0).contains(&v), "[0, 10000]")?;
         }
+        let h = self.crop_hold;
+        within(
+            "crop_hold",
+            h,
+            (0.0..=0.05).contains(&h),
+            "[0, 0.05] (of the crop's half-side)",
+        )?;
         let (lo, hi) = (self.mask_low, self.mask_high);
         within("mask_low", lo, lo > 0.0 && lo <= 0.5, "(0, 0.5]")?;
         within("mask_high", hi, (0.5..1.0).contains(&hi), "[0.5, 1)")?;
@@ -177,6 +195,26 @@ fn moving_blocks(now: &[f32], last: &[f32], size: usize, fraction: f32) -> Vec<b
 fn one_euro_alpha(cutoff_hz: f32, dt: f32) -> f32 {
     let tau = 1.0 / (2.0 * std::f32::consts::PI * cutoff_hz);
     (1.0 / (1.0 + tau / dt)).clamp(0.0, 1.0)
+}
+
+/// The crop `held` moved only as far as `to` pulls it beyond `play` times `to`'s half-side
+/// (`s`), each of `tx`, `ty` and `s` on its own: within the play nothing moves; beyond it
+/// the crop trails `to` by the play. `to`'s `cut_by_frame` is kept.
+pub fn backlash(held: Crop, to: Crop, play: f32) -> Crop {
+    let band = (play * to.s.abs()).max(0.0);
+    let follow = |h: f32, x: f32| {
+        if h.is_finite() && band.is_finite() {
+            h.clamp(x - band, x + band)
+        } else {
+            x
+        }
+    };
+    Crop {
+        tx: follow(held.tx, to.tx),
+        ty: follow(held.ty, to.ty),
+        s: follow(held.s, to.s),
+        cut_by_frame: to.cut_by_frame,
+    }
 }
 
 /// A scalar One Euro filter (derivative cutoff 1 Hz).
@@ -270,6 +308,8 @@ pub enum ResetCause {
 pub struct Temporal {
     settings: TemporalSettings,
     crop: [OneEuro; 3],
+    /// The crop given out last (`crop_hold`'s backlash; `None` after a reset).
+    held: Option<Crop>,
     /// Per letterbox pixel: person by the hysteresis rule.
     on: Vec<bool>,
     /// Per letterbox pixel: frames in a row the segmenter put it on the other side of 0.5
@@ -298,6 +338,7 @@ impl Temporal {
         Self {
             settings,
             crop: [OneEuro::default(); 3],
+            held: None,
             on: Vec::new(),
             against: Vec::new(),
             out: Vec::new(),
@@ -321,6 +362,7 @@ impl Temporal {
     /// Forget every frame: the next one passes unfiltered.
     pub fn reset(&mut self) {
         self.crop = [OneEuro::default(); 3];
+        self.held = None;
         self.on.clear();
         self.against.clear();
         self.out.clear();
@@ -405,12 +447,17 @@ impl Temporal {
         let dt = self.dt;
         let s = &self.settings;
         let (c, b) = (s.crop_min_cutoff_hz, s.crop_beta);
-        let steady = Crop {
+        let filtered = Crop {
             tx: self.crop[0].filter(raw.tx, dt, c, b),
             ty: self.crop[1].filter(raw.ty, dt, c, b),
             s: self.crop[2].filter(raw.s, dt, c, b),
             cut_by_frame: crop.cut_by_frame,
         };
+        let steady = match self.held {
+            Some(held) => backlash(held, filtered, s.crop_hold),
+            None => filtered,
+        };
+        self.held = Some(steady);
         (Some(steady), step)
     }
 

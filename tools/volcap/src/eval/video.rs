@@ -14,7 +14,9 @@
 //! - **lag**: the shift (frames) that best lines the filtered silhouettes up with the
 //!   unfiltered run's earlier ones (0 when it follows at once);
 //! - **flicker by body part** ([`parts`]): the same consecutive pairs, split by the body
-//!   part each displayed pixel shows (is it the hands that flicker?).
+//!   part each displayed pixel shows (is it the hands that flicker?), and the pair of the
+//!   worst side IoU looked at closely ([`edges`]: near edge, far edge, holes or pieces, how
+//!   deep; its two side views drawn to OUT/worst-side/).
 //!
 //! The silhouettes and depths are projections of the localized grid (orthographic, as the
 //! daemon's renderer), so they cost no extra field evaluation.
@@ -27,9 +29,13 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
+mod compare;
+mod display;
+mod edges;
 mod parts;
 mod report;
 mod setting;
+use compare::{compare_hits, compare_raster, lag_of};
 use report::{plot, report};
 use setting::parse_setting;
 use std::path::{Path, PathBuf};
@@ -77,7 +83,7 @@ pub struct TemporalArgs {
     /// `KEY=VALUE+KEY=VALUE...` over the defaults (`off+segment_full_every=N` or
     /// `default+segment_full_every=N`: the segmentation's track, `[model]`'s key; keys of
     /// `[temporal]`: crop_min_cutoff_hz,
-    /// crop_beta, mask_low, mask_high, mask_motion, mask_hold_frames, map_min_cutoff_hz, map_beta,
+    /// crop_beta, crop_hold, mask_low, mask_high, mask_motion, mask_hold_frames, map_min_cutoff_hz, map_beta,
     /// map_change_cutoff_hz,
     /// same_person_iou).
     #[arg(
@@ -92,6 +98,11 @@ pub struct TemporalArgs {
     /// and go between frames).
     #[arg(long, default_value_t = volcap_engine::pieces::DEFAULT_GAP)]
     pub drop_apart: f32,
+    /// Display size (pixels a side) of the silhouettes "as displayed" ([`display`]: the
+    /// renderer's blend of the grid's columns; the main job's `render.display_size`); 0
+    /// leaves them out.
+    #[arg(long, default_value_t = 512)]
+    pub display_size: usize,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
@@ -138,6 +149,9 @@ struct Views {
     /// until labelled).
     front_part: Vec<u8>,
     side_part: Vec<u8>,
+    /// The silhouettes as displayed ([`display`]; empty unless drawn).
+    front_display: Vec<bool>,
+    side_display: Vec<bool>,
 }
 
 /// Metres per input-NDC unit across (x, y) and along depth (after `to_cam`).
@@ -218,72 +232,9 @@ fn views(
         cam_side,
         front_part: Vec::new(),
         side_part: Vec::new(),
+        front_display: Vec::new(),
+        side_display: Vec::new(),
     }
-}
-
-/// IoU of two hit maps (hit: index >= 0), and the mean |change| of the hit index where both
-/// hit.
-fn compare_hits(a: &[i32], b: &[i32]) -> (f64, f64) {
-    let (mut inter, mut union, mut dsum) = (0usize, 0usize, 0i64);
-    for (&x, &y) in a.iter().zip(b) {
-        inter += (x >= 0 && y >= 0) as usize;
-        union += (x >= 0 || y >= 0) as usize;
-        if x >= 0 && y >= 0 {
-            dsum += (x as i64 - y as i64).abs();
-        }
-    }
-    let iou = if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    };
-    let d = if inter == 0 {
-        0.0
-    } else {
-        dsum as f64 / inter as f64
-    };
-    (iou, d)
-}
-
-/// The same for camera-frame rasters (depth in metres).
-fn compare_raster(a: &[Option<f32>], b: &[Option<f32>]) -> (f64, f64) {
-    let (mut inter, mut union, mut dsum) = (0usize, 0usize, 0f64);
-    for (x, y) in a.iter().zip(b) {
-        union += (x.is_some() || y.is_some()) as usize;
-        if let (Some(x), Some(y)) = (x, y) {
-            inter += 1;
-            dsum += (*x as f64 - *y as f64).abs();
-        }
-    }
-    let iou = if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    };
-    let d = if inter == 0 { 0.0 } else { dsum / inter as f64 };
-    (iou, d)
-}
-
-/// The shift (0..=4 frames) that best lines a run's camera-frame silhouettes (front and
-/// side) up with the reference's earlier ones.
-fn lag_of(per: &[Option<(Views, Views, f32)>], reference: &[Option<&Views>]) -> usize {
-    (0..=4usize)
-        .map(|k| {
-            let mut v = Vec::new();
-            for t in 4..per.len().min(reference.len()) {
-                if let (Some((m, _, _)), Some(o)) = (&per[t], reference[t - k]) {
-                    let (a, _) = compare_raster(&m.cam_front, &o.cam_front);
-                    let (b, _) = compare_raster(&m.cam_side, &o.cam_side);
-                    v.push(0.5 * (a + b));
-                }
-            }
-            (k, mean(&v))
-        })
-        .filter(|(_, v)| v.is_finite())
-        .fold((0usize, f64::MIN), |best, (k, v)| {
-            if v > best.1 + 1e-9 { (k, v) } else { best }
-        })
-        .0
 }
 
 /// One (scene, setting) row.
@@ -342,6 +293,43 @@ pub struct VideoRow {
     /// pixels that pair changed.
     #[serde(default)]
     pub part_worst_side_share: [Option<f64>; parts::PARTS],
+    /// The worst side pair's first frame (from the scene's frame 0).
+    #[serde(default)]
+    pub worst_side_frame: Option<usize>,
+    /// In that pair, per part, the shares of its changed side pixels on the silhouette's
+    /// near edge, far edge, inside and apart ([`edges`]), and its changed runs' mean depth
+    /// (cm along the camera's axis).
+    #[serde(default)]
+    pub part_worst_side_edges: [Option<[f64; edges::CLASSES]>; parts::PARTS],
+    #[serde(default)]
+    pub part_worst_side_run_cm: [Option<f64>; parts::PARTS],
+    /// Each part's share of the first frame's side outline in that pair (the change's
+    /// yardstick: a part with half the outline and half the change flickers no more than
+    /// the rest).
+    #[serde(default)]
+    pub part_worst_side_outline: [Option<f64>; parts::PARTS],
+    /// The pair of the worst front IoU (`front_iou_min`): its first frame, and each part's
+    /// share of the front pixels it changed.
+    #[serde(default)]
+    pub worst_front_frame: Option<usize>,
+    #[serde(default)]
+    pub part_worst_front_share: [Option<f64>; parts::PARTS],
+    /// How far the crop (the display's frame) moved between consecutive frames, in cells
+    /// of the grid (the largest of its shift across, its shift down and its scale's move of
+    /// the cube's edge; [`compare::crop_move_cells`]): mean and largest over the pairs, and
+    /// in the worst side and worst front pairs.
+    #[serde(default)]
+    pub crop_move_cells: Option<(f64, f64)>,
+    #[serde(default)]
+    pub worst_side_crop_move: Option<f64>,
+    #[serde(default)]
+    pub worst_front_crop_move: Option<f64>,
+    /// Still scenes: consecutive-frame silhouette IoU as displayed ([`display`], at
+    /// `--display-size`), front and side: mean and worst (none: not drawn).
+    #[serde(default)]
+    pub front_display_iou: Option<(f64, f64)>,
+    #[serde(default)]
+    pub side_display_iou: Option<(f64, f64)>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -459,6 +447,9 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
             let mut temporal = ts.map(Temporal::new);
             let mut track = SegmentTrack::new(st.segment_full_every);
             let mut per: Vec<Option<(Views, Views, f32)>> = Vec::new();
+            // Each reconstructed frame's crop (the display's frame: a crop that moves moves
+            // the person on the display).
+            let mut crops = vec![None; frames.len()];
             let (mut chamfer, mut p2s, mut iou) = (Vec::new(), Vec::new(), Vec::new());
             let (mut mask_iou, mut segment_ms, mut tracked) = (Vec::new(), Vec::new(), [0usize; 2]);
             for (i, fr) in frames.iter().enumerate() {
@@ -530,6 +521,13 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 }
                 let mut v = views(&grid, spec, crop, fr);
                 parts::label(&mut v, spec, crop, fr);
+                if still {
+                    let size = a.display_size;
+                    v.front_display =
+                        display::silhouette(&grid, &v.front, display::Along::Depth, size);
+                    v.side_display = display::silhouette(&grid, &v.side, display::Along::X, size);
+                }
+                crops[i] = Some(crop);
                 per.push(Some((v, views(&truth, spec, crop, fr), crop.s)));
             }
             // Consecutive pairs of reconstructed frames.
@@ -537,6 +535,14 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
             let (mut fi, mut si, mut fd, mut sd, mut jf, mut js) =
                 (vec![], vec![], vec![], vec![], vec![], vec![]);
             let mut by_part = parts::PartFlicker::default();
+            let (mut fdi, mut sdi) = (vec![], vec![]);
+            let moved = |k: usize| match (crops.get(k), crops.get(k + 1)) {
+                (Some(Some(c0)), Some(Some(c1))) => {
+                    Some(compare::crop_move_cells(c0, c1, spec.n()))
+                }
+                _ => None,
+            };
+            let mut crop_moves = Vec::new();
             for (k, w) in per.windows(2).enumerate() {
                 let (Some((m0, o0, s0)), Some((m1, o1, s1))) = (&w[0], &w[1]) else {
                     continue;
@@ -544,7 +550,12 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 if k + 1 < a.settle {
                     continue;
                 }
-                by_part.add(m0, m1);
+                by_part.add(m0, m1, k);
+                crop_moves.extend(moved(k));
+                if !m0.side_display.is_empty() {
+                    fdi.push(display::iou(&m0.front_display, &m1.front_display));
+                    sdi.push(display::iou(&m0.side_display, &m1.side_display));
+                }
                 let s = 0.5 * (*s0 + *s1) as f64;
                 let (a, d) = compare_hits(&m0.front, &m1.front);
                 fi.push(a);
@@ -573,6 +584,39 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
             };
             let (part_iou_mean, part_iou_min, part_change_share, part_worst_side_share) =
                 by_part.figures();
+            let worst = by_part.worst_pair();
+            let (part_worst_side_edges, part_worst_side_run_cm, part_worst_side_outline) =
+                match worst {
+                    Some(w) => {
+                        let counts = edges::edge_split(&w.a, &w.a_part, &w.b, &w.b_part, spec.n());
+                        let (shares, cells, outline) = edges::edge_figures(&counts);
+                        // Cells along k to cm: the crop's scale of the pair, as the depth change.
+                        let s = per
+                            .get(w.frame)
+                            .and_then(|p| p.as_ref())
+                            .map_or(1.0, |p| p.2 as f64);
+                        let cm = cell * s * mz as f64 * frames[0].to_cam.z_scale as f64;
+                        (shares, cells.map(|c| c.map(|c| c * cm)), outline)
+                    }
+                    None => (
+                        [None; parts::PARTS],
+                        [None; parts::PARTS],
+                        [None; parts::PARTS],
+                    ),
+                };
+            if let (Some(w), true) = (worst, still) {
+                let dir = a.out.join("worst-side");
+                std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
+                let file = format!("{label}-{}.png", file_safe(setting));
+                edges::draw(&w.a, &w.b, spec.n(), &dir.join(file))?;
+            }
+            let worst_front = by_part.worst_front();
+            if let (Some((w, _)), true) = (worst_front, still) {
+                let dir = a.out.join("worst-front");
+                std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
+                let file = format!("{label}-{}.png", file_safe(setting));
+                edges::draw(&w.a, &w.b, spec.n(), &dir.join(file))?;
+            }
             let row = VideoRow {
                 scene: label.clone(),
                 kind: if still { "still" } else { "moving" }.into(),
@@ -600,6 +644,22 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 part_iou_min,
                 part_change_share,
                 part_worst_side_share,
+                worst_side_frame: worst.map(|w| w.frame),
+                part_worst_side_edges,
+                part_worst_side_run_cm,
+                part_worst_side_outline,
+                worst_front_frame: worst_front.map(|(w, _)| w.frame),
+                part_worst_front_share: worst_front.map_or([None; parts::PARTS], |(_, s)| s),
+                crop_move_cells: (!crop_moves.is_empty()).then(|| {
+                    (
+                        mean(&crop_moves),
+                        crop_moves.iter().copied().fold(0.0, f64::max),
+                    )
+                }),
+                worst_side_crop_move: worst.and_then(|w| moved(w.frame)),
+                worst_front_crop_move: worst_front.and_then(|(w, _)| moved(w.frame)),
+                front_display_iou: (!fdi.is_empty()).then(|| (mean(&fdi), min(&fdi))),
+                side_display_iou: (!sdi.is_empty()).then(|| (mean(&sdi), min(&sdi))),
             };
             if a.json {
                 println!("{}", serde_json::to_string(&row)?);
@@ -612,6 +672,20 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
     }
     pb.finish_and_clear();
     write(a, &rows)
+}
+
+/// A setting's label as a file name: anything but letters, digits, `.`, `-` and `_` as `_`.
+fn file_safe(label: &str) -> String {
+    label
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
 }
 
 /// temporal.md, temporal.json and temporal.png into `a.out`; the table on stdout unless

@@ -286,6 +286,15 @@ fn nothing_non_finite_comes_out_and_bad_settings_are_named() {
         ..Default::default()
     };
     assert_eq!(bad.check().unwrap_err().0, "map_beta");
+    let bad = TemporalSettings {
+        crop_hold: 0.5,
+        ..Default::default()
+    };
+    let (key, msg) = bad.check().unwrap_err();
+    assert!(
+        key == "crop_hold" && msg.contains("crop_hold = 0.5"),
+        "{msg}"
+    );
     assert!(TemporalSettings::default().check().is_ok());
 }
 
@@ -418,4 +427,87 @@ fn a_person_moving_as_a_whole_is_followed_everywhere() {
         last_gain > 0.75,
         "a person moving as a whole: only {last_gain} of the maps' change passed"
     );
+}
+
+#[test]
+fn a_still_crop_holds_and_a_moving_one_trails_by_the_play() {
+    // The backlash alone: within the play nothing moves, beyond it the crop trails by the
+    // play, `to`'s flag is kept, a held crop that is not finite gives way.
+    let held = Crop {
+        s: 1.0,
+        tx: 0.0,
+        ty: 0.0,
+        cut_by_frame: false,
+    };
+    let to = Crop {
+        s: 1.002,
+        tx: 0.003,
+        ty: -0.01,
+        cut_by_frame: true,
+    };
+    let b = backlash(held, to, 0.004);
+    let play = 0.004 * 1.002f64;
+    assert_eq!((b.tx, b.s, b.cut_by_frame), (0.0, 1.0, true));
+    assert!((b.ty as f64 - (-0.01 + play)).abs() < 1e-6, "{b:?}");
+    assert_eq!(backlash(held, to, 0.0), to);
+    assert_eq!(
+        backlash(
+            Crop {
+                tx: f32::NAN,
+                ..held
+            },
+            to,
+            0.004
+        )
+        .tx,
+        to.tx
+    );
+
+    // A still person whose box's right edge jitters by a pixel: with the play the crop
+    // given out stops moving once the filter settles; without it, it wanders.
+    let run = |hold: f32, moving: bool| -> Vec<Crop> {
+        let settings = TemporalSettings {
+            crop_hold: hold,
+            ..TemporalSettings::default()
+        };
+        let mut t = Temporal::new(settings);
+        (0..90usize)
+            .map(|k| {
+                let (x0, x1) = if moving {
+                    (40 + k, 92 + k)
+                } else {
+                    (40, 150 + k % 2)
+                };
+                let mut m = box_mask(x0, x1, 40, 220, 0.95);
+                let c = crop_of(&m);
+                t.steady_input(k as f64 / 30.0, 1, &mut m, c).0.unwrap()
+            })
+            .collect()
+    };
+    let spread = |c: &[Crop]| {
+        let (lo, hi) = c.iter().fold((f32::MAX, f32::MIN), |(lo, hi), c| {
+            (lo.min(c.tx), hi.max(c.tx))
+        });
+        hi - lo
+    };
+    let held = run(TemporalSettings::default().crop_hold, false);
+    assert_eq!(spread(&held[30..]), 0.0, "{:?}", &held[30..34]);
+    let free = run(0.0, false);
+    assert!(spread(&free[30..]) > 0.0);
+    // Moving a pixel a frame: followed, never farther behind the free crop than the play.
+    let (held, free) = (
+        run(TemporalSettings::default().crop_hold, true),
+        run(0.0, true),
+    );
+    assert!(
+        held[89].tx - held[10].tx > 0.5,
+        "{:?} -> {:?}",
+        held[10],
+        held[89]
+    );
+    for (h, f) in held.iter().zip(&free) {
+        let play = TemporalSettings::default().crop_hold * f.s;
+        assert!((h.tx - f.tx).abs() <= play + 1e-6, "{h:?} against {f:?}");
+        assert!((h.s - f.s).abs() <= play + 1e-6);
+    }
 }

@@ -26,7 +26,7 @@ const NONE: u8 = u8::MAX;
 pub(super) const PARTS: usize = Part::ALL.len();
 
 /// Index of a part in [`Part::ALL`].
-fn index(p: Part) -> u8 {
+pub(super) fn index(p: Part) -> u8 {
     Part::ALL.iter().position(|x| *x == p).unwrap_or(1) as u8
 }
 
@@ -90,6 +90,23 @@ pub(super) struct PartFlicker {
     changed: [usize; PARTS],
     /// The pair with the worst side-view IoU: that IoU and its side pixels changed per part.
     worst_side: Option<(f64, [usize; PARTS])>,
+    /// That pair's side views ([`super::edges`]).
+    worst_pair: Option<ViewPair>,
+    /// The same for the front view: the pair of its worst IoU, its front pixels changed per
+    /// part, and its front views.
+    worst_front: Option<(f64, [usize; PARTS])>,
+    worst_front_pair: Option<ViewPair>,
+}
+
+/// A pair's views of one direction (side or front) with their part labels, and the index
+/// of its first frame.
+#[derive(Debug, Clone)]
+pub(super) struct ViewPair {
+    pub frame: usize,
+    pub a: Vec<i32>,
+    pub a_part: Vec<u8>,
+    pub b: Vec<i32>,
+    pub b_part: Vec<u8>,
 }
 
 /// Per part: IoU mean, IoU worst, share of the changed pixels, and share of the changed side
@@ -108,9 +125,27 @@ fn shares(counts: &[usize; PARTS]) -> [Option<f64>; PARTS] {
     counts.map(|c| (total > 0).then(|| c as f64 / total as f64))
 }
 
+/// A view's pair (per part: shown in both, shown in either) as (its IoU over the parts, its
+/// pixels changed per part) where its IoU is below `worst`'s (or there is none yet).
+fn worse(
+    worst: Option<(f64, [usize; PARTS])>,
+    c: &[(usize, usize); PARTS],
+) -> Option<(f64, [usize; PARTS])> {
+    let (inter, union) = c.iter().fold((0, 0), |acc, x| (acc.0 + x.0, acc.1 + x.1));
+    let iou = if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    };
+    worst
+        .is_none_or(|(w, _)| iou < w)
+        .then(|| (iou, c.map(|(i, u)| u - i)))
+}
+
 impl PartFlicker {
-    /// One consecutive pair of labelled views, front and side counted together.
-    pub(super) fn add(&mut self, v0: &Views, v1: &Views) {
+    /// One consecutive pair of labelled views (`frame`: the index of `v0`'s frame), front
+    /// and side counted together.
+    pub(super) fn add(&mut self, v0: &Views, v1: &Views, frame: usize) {
         let f = compare_parts(&v0.front, &v0.front_part, &v1.front, &v1.front_part);
         let s = compare_parts(&v0.side, &v0.side_part, &v1.side, &v1.side_part);
         for p in 0..PARTS {
@@ -120,15 +155,34 @@ impl PartFlicker {
             }
             self.changed[p] += union - inter;
         }
-        let (inter, union) = s.iter().fold((0, 0), |acc, x| (acc.0 + x.0, acc.1 + x.1));
-        let side_iou = if union == 0 {
-            1.0
-        } else {
-            inter as f64 / union as f64
+        let pair = |a: &[i32], a_part: &[u8], b: &[i32], b_part: &[u8]| ViewPair {
+            frame,
+            a: a.to_vec(),
+            a_part: a_part.to_vec(),
+            b: b.to_vec(),
+            b_part: b_part.to_vec(),
         };
-        if self.worst_side.is_none_or(|(w, _)| side_iou < w) {
-            self.worst_side = Some((side_iou, s.map(|(i, u)| u - i)));
+        if let Some(w) = worse(self.worst_side, &s) {
+            self.worst_side = Some(w);
+            self.worst_pair = Some(pair(&v0.side, &v0.side_part, &v1.side, &v1.side_part));
         }
+        if let Some(w) = worse(self.worst_front, &f) {
+            self.worst_front = Some(w);
+            self.worst_front_pair =
+                Some(pair(&v0.front, &v0.front_part, &v1.front, &v1.front_part));
+        }
+    }
+
+    /// The pair of the worst side IoU (the first of equals), if any pair was added.
+    pub(super) fn worst_pair(&self) -> Option<&ViewPair> {
+        self.worst_pair.as_ref()
+    }
+
+    /// The pair of the worst front IoU, and each part's share of the front pixels it
+    /// changed (`None` for every part when it changed none).
+    pub(super) fn worst_front(&self) -> Option<(&ViewPair, [Option<f64>; PARTS])> {
+        let (_, changed) = self.worst_front?;
+        Some((self.worst_front_pair.as_ref()?, shares(&changed)))
     }
 
     pub(super) fn figures(&self) -> PartFigures {
@@ -176,6 +230,8 @@ mod tests {
         let view = |front: Vec<i32>, part: Vec<u8>| Views {
             side: vec![-1; front.len()],
             side_part: vec![NONE; front.len()],
+            front_display: vec![],
+            side_display: vec![],
             cam_front: vec![],
             cam_side: vec![],
             front,
@@ -185,8 +241,8 @@ mod tests {
         let v1 = view(vec![1, 1, 1, 1], vec![t, t, h, h]);
         let v2 = view(vec![1, 1, -1, -1], vec![t, t, NONE, NONE]);
         let mut f = PartFlicker::default();
-        f.add(&v0, &v1);
-        f.add(&v1, &v2);
+        f.add(&v0, &v1, 0);
+        f.add(&v1, &v2, 1);
         let (mean, worst, share, worst_side) = f.figures();
         let (hi, ti) = (h as usize, t as usize);
         // Hands: 1 of 2 shown in both, then 0 of 2.
@@ -196,11 +252,16 @@ mod tests {
         assert_eq!(share[hi], Some(1.0));
         assert_eq!(share[ti], Some(0.0));
         assert_eq!(mean[index(Part::Feet) as usize], None);
+        // The front's worst pair is the second (IoU 2/4 against 3/4), all of it hands.
+        let (w, front_share) = f.worst_front().unwrap();
+        assert_eq!((w.frame, &w.a, &w.b), (1, &v1.front, &v2.front));
+        assert_eq!(front_share[hi], Some(1.0));
+        assert_eq!(front_share[ti], Some(0.0));
         // The side views never changed: the worst side pair changed nothing.
         assert_eq!(worst_side, [None; PARTS]);
         // No change at all: no shares.
         let mut g = PartFlicker::default();
-        g.add(&v0, &v0);
+        g.add(&v0, &v0, 0);
         assert_eq!(g.figures().2, [None; PARTS]);
 
         // Side views: the first pair loses a torso pixel of four (IoU 0.75), the second a
@@ -210,6 +271,8 @@ mod tests {
         let side = |hits: Vec<i32>, part: Vec<u8>| Views {
             front: vec![-1; hits.len()],
             front_part: vec![NONE; hits.len()],
+            front_display: vec![],
+            side_display: vec![],
             cam_front: vec![],
             cam_side: vec![],
             side: hits,
@@ -219,9 +282,11 @@ mod tests {
         let s1 = side(vec![1, 1, 1, -1, -1], vec![h, fe, t, NONE, NONE]);
         let s2 = side(vec![-1, -1, 1, -1, -1], vec![NONE, NONE, t, NONE, NONE]);
         let mut k = PartFlicker::default();
-        k.add(&s0, &s1);
-        k.add(&s1, &s2);
+        k.add(&s0, &s1, 7);
+        k.add(&s1, &s2, 8);
         let (_, _, share, worst_side) = k.figures();
+        let w = k.worst_pair().unwrap();
+        assert_eq!((w.frame, &w.a, &w.b), (8, &s1.side, &s2.side));
         assert_eq!(worst_side[hi], Some(0.5), "{worst_side:?}");
         assert_eq!(worst_side[fe as usize], Some(0.5));
         assert_eq!(worst_side[ti], Some(0.0));

@@ -99,7 +99,9 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
             s.frames
         );
     }
+    display_table(&mut md, a, rows);
     parts_table(&mut md, rows);
+    edges_table(&mut md, rows);
     let _ = writeln!(md, "\n## Per scene\n");
     let _ = writeln!(
         md,
@@ -182,6 +184,127 @@ fn parts_table(md: &mut String, rows: &[VideoRow]) {
             r.scene,
             r.setting,
             cells.join(" | ")
+        );
+    }
+}
+
+/// Still scenes' flicker as the display draws it ([`super::display`]) beside the grid
+/// columns' (the figures above).
+fn display_table(md: &mut String, a: &TemporalArgs, rows: &[VideoRow]) {
+    let still: Vec<&VideoRow> = rows
+        .iter()
+        .filter(|r| r.kind == "still" && r.side_display_iou.is_some())
+        .collect();
+    if still.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "\n## Still scenes: flicker as displayed\n\n\
+         The figures above count the grid's columns (a column shows the person or not); the \
+         display draws {0} x {0} pixels from the same grid, each blending its four nearest \
+         columns' values along its ray (the renderer's rule), so its edges move with the \
+         values by fractions of a cell. Consecutive-frame silhouette IoU, mean / worst, and how \
+         far the crop (the display's frame: the person moves on the display where it moves) \
+         moved between frames, in the grid's cells (the largest of its shift across, down, and \
+         its scale's move of the cube's edge):\n",
+        a.display_size
+    );
+    let _ = writeln!(
+        md,
+        "| scene | setting | side: columns | side: as displayed | front: columns | front: as displayed | crop's move, cells: mean / largest |\n|---|---|---|---|---|---|---|"
+    );
+    let pair = |v: Option<(f64, f64)>| v.map_or("-".into(), |(m, w)| format!("{m:.4} / {w:.4}"));
+    for r in still {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.4} / {:.4} | {} | {:.4} / {:.4} | {} | {} |",
+            r.scene,
+            r.setting,
+            r.side_iou_mean,
+            r.side_iou_min,
+            pair(r.side_display_iou),
+            r.front_iou_mean,
+            r.front_iou_min,
+            pair(r.front_display_iou),
+            r.crop_move_cells
+                .map_or("-".into(), |(m, w)| format!("{m:.2} / {w:.2}"))
+        );
+    }
+}
+
+/// Still scenes' worst side pair ([`super::edges`]): per part with a tenth or more of its
+/// changed side pixels, where on the silhouette they lie and how deep the changed runs are.
+fn edges_table(md: &mut String, rows: &[VideoRow]) {
+    let still: Vec<&VideoRow> = rows
+        .iter()
+        .filter(|r| r.kind == "still" && r.worst_side_frame.is_some())
+        .collect();
+    if still.is_empty() {
+        return;
+    }
+    let classes = super::edges::CLASS_NAMES.join(" / ");
+    let _ = writeln!(
+        md,
+        "\n## Still scenes: the worst side pair, where it changed\n\n\
+         The pair of each scene's worst side IoU (frames t, t + 1), its side view (along x; \
+         larger depth nearer the camera): per part with 10 % or more of the pair's changed \
+         side pixels, that share beside the part's share of the first frame's side outline (the \
+         change's yardstick), its changed pixels' shares by where they lie on each row of the silhouette ({classes}: \
+         the edge toward the camera moved, the edge away from it, a hole, a span that came \
+         or went whole) and the changed runs' mean depth along the camera's axis. The pair's \
+         two side views are drawn to worst-side/SCENE-SETTING.png (both grey, t only red, \
+         t + 1 only blue, the camera to the right). After t, the crop's move in that pair (cells, \
+         as in the table above). The last column is the same scene's pair \
+         of the worst front IoU: its first frame, the crop's move, and the parts with 10 % or more of the front \
+         pixels it changed (its views drawn to worst-front/).\n"
+    );
+    let _ = writeln!(
+        md,
+        "| scene | setting | t | part: share of the pair's change ({classes} %), run depth cm | worst front pair: t, parts' shares of its change |\n|---|---|---|---|---|"
+    );
+    let names = volcap_sim::parts::Part::ALL.map(|p| p.name());
+    for r in still {
+        let mut cells = Vec::new();
+        for (p, name) in names.iter().enumerate() {
+            let (Some(share), Some(e)) = (r.part_worst_side_share[p], r.part_worst_side_edges[p])
+            else {
+                continue;
+            };
+            if share < 0.1 {
+                continue;
+            }
+            let e: Vec<String> = e.iter().map(|x| format!("{:.0}", 100.0 * x)).collect();
+            let depth = r.part_worst_side_run_cm[p].map_or("-".into(), |d| format!("{d:.2}"));
+            let outline =
+                r.part_worst_side_outline[p].map_or("-".into(), |o| format!("{:.0}", 100.0 * o));
+            cells.push(format!(
+                "{name} {:.0} % of the change, {outline} % of the outline ({}), {depth}",
+                100.0 * share,
+                e.join(" / ")
+            ));
+        }
+        let front: Vec<String> = names
+            .iter()
+            .zip(&r.part_worst_front_share)
+            .filter_map(|(name, share)| {
+                share
+                    .filter(|s| *s >= 0.1)
+                    .map(|s| format!("{name} {:.0} %", 100.0 * s))
+            })
+            .collect();
+        let moved = |m: Option<f64>| m.map_or("-".into(), |m| format!("{m:.2}"));
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} (crop {}) | {} | {} (crop {}): {} |",
+            r.scene,
+            r.setting,
+            r.worst_side_frame.map_or("-".into(), |t| t.to_string()),
+            moved(r.worst_side_crop_move),
+            cells.join("; "),
+            r.worst_front_frame.map_or("-".into(), |t| t.to_string()),
+            moved(r.worst_front_crop_move),
+            front.join(", ")
         );
     }
 }

@@ -62,6 +62,7 @@ pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
         let slot = match k.trim() {
             "crop_min_cutoff_hz" => &mut t.crop_min_cutoff_hz,
             "crop_beta" => &mut t.crop_beta,
+            "crop_hold" => &mut t.crop_hold,
             "mask_low" => &mut t.mask_low,
             "mask_high" => &mut t.mask_high,
             "mask_motion" => &mut t.mask_motion,
