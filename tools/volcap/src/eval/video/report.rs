@@ -137,17 +137,22 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
     md
 }
 
+/// The still scenes' rows that have what a table shows (`None` when there are none).
+fn still_rows(rows: &[VideoRow], has: impl Fn(&VideoRow) -> bool) -> Option<Vec<&VideoRow>> {
+    let still: Vec<&VideoRow> = rows
+        .iter()
+        .filter(|r| r.kind == "still" && has(r))
+        .collect();
+    (!still.is_empty()).then_some(still)
+}
+
 /// Still scenes' flicker by body part ([`super::parts`]): per part the consecutive-frame
 /// IoU of its pixels, mean / worst, its share of the changed pixels, and its share of the
 /// side pixels changed in the scene's worst side pair.
 fn parts_table(md: &mut String, rows: &[VideoRow]) {
-    let still: Vec<&VideoRow> = rows
-        .iter()
-        .filter(|r| r.kind == "still" && r.part_iou_mean.iter().any(Option::is_some))
-        .collect();
-    if still.is_empty() {
+    let Some(still) = still_rows(rows, |r| r.part_iou_mean.iter().any(Option::is_some)) else {
         return;
-    }
+    };
     let names = volcap_sim::parts::Part::ALL.map(|p| p.name());
     let _ = writeln!(
         md,
@@ -191,13 +196,9 @@ fn parts_table(md: &mut String, rows: &[VideoRow]) {
 /// Still scenes' flicker as the display draws it ([`super::display`]) beside the grid
 /// columns' (the figures above).
 fn display_table(md: &mut String, a: &TemporalArgs, rows: &[VideoRow]) {
-    let still: Vec<&VideoRow> = rows
-        .iter()
-        .filter(|r| r.kind == "still" && r.side_display_iou.is_some())
-        .collect();
-    if still.is_empty() {
+    let Some(still) = still_rows(rows, |r| r.side_display_iou.is_some()) else {
         return;
-    }
+    };
     let _ = writeln!(
         md,
         "\n## Still scenes: flicker as displayed\n\n\
@@ -236,13 +237,9 @@ fn display_table(md: &mut String, a: &TemporalArgs, rows: &[VideoRow]) {
 /// Still scenes' worst side pair ([`super::edges`]): per part with a tenth or more of its
 /// changed side pixels, where on the silhouette they lie and how deep the changed runs are.
 fn edges_table(md: &mut String, rows: &[VideoRow]) {
-    let still: Vec<&VideoRow> = rows
-        .iter()
-        .filter(|r| r.kind == "still" && r.worst_side_frame.is_some())
-        .collect();
-    if still.is_empty() {
+    let Some(still) = still_rows(rows, |r| r.worst_side_frame.is_some()) else {
         return;
-    }
+    };
     let classes = super::edges::CLASS_NAMES.join(" / ");
     let _ = writeln!(
         md,
