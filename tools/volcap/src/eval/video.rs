@@ -585,37 +585,25 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
             let (part_iou_mean, part_iou_min, part_change_share, part_worst_side_share) =
                 by_part.figures();
             let worst = by_part.worst_pair();
+            // The pair's cells along depth to cm: its crop's scale, as the depth change.
+            let cm = |frame: usize| {
+                let s = per
+                    .get(frame)
+                    .and_then(|p| p.as_ref())
+                    .map_or(1.0, |p| p.2 as f64);
+                cell * s * mz as f64 * frames[0].to_cam.z_scale as f64
+            };
             let (part_worst_side_edges, part_worst_side_run_cm, part_worst_side_outline) =
-                match worst {
-                    Some(w) => {
-                        let counts = edges::edge_split(&w.a, &w.a_part, &w.b, &w.b_part, spec.n());
-                        let (shares, cells, outline) = edges::edge_figures(&counts);
-                        // Cells along k to cm: the crop's scale of the pair, as the depth change.
-                        let s = per
-                            .get(w.frame)
-                            .and_then(|p| p.as_ref())
-                            .map_or(1.0, |p| p.2 as f64);
-                        let cm = cell * s * mz as f64 * frames[0].to_cam.z_scale as f64;
-                        (shares, cells.map(|c| c.map(|c| c * cm)), outline)
-                    }
-                    None => (
-                        [None; parts::PARTS],
-                        [None; parts::PARTS],
-                        [None; parts::PARTS],
-                    ),
-                };
-            if let (Some(w), true) = (worst, still) {
-                let dir = a.out.join("worst-side");
-                std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
-                let file = format!("{label}-{}.png", file_safe(setting));
-                edges::draw(&w.a, &w.b, spec.n(), &dir.join(file))?;
-            }
+                edges::pair_figures(worst, spec.n(), cm);
             let worst_front = by_part.worst_front();
-            if let (Some((w, _)), true) = (worst_front, still) {
-                let dir = a.out.join("worst-front");
-                std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
-                let file = format!("{label}-{}.png", file_safe(setting));
-                edges::draw(&w.a, &w.b, spec.n(), &dir.join(file))?;
+            if still {
+                let file = format!("{label}-{}.png", edges::file_safe(setting));
+                if let Some(w) = worst {
+                    edges::draw_pair(&a.out.join("worst-side"), &file, w, spec.n())?;
+                }
+                if let Some((w, _)) = worst_front {
+                    edges::draw_pair(&a.out.join("worst-front"), &file, w, spec.n())?;
+                }
             }
             let row = VideoRow {
                 scene: label.clone(),
@@ -672,20 +660,6 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
     }
     pb.finish_and_clear();
     write(a, &rows)
-}
-
-/// A setting's label as a file name: anything but letters, digits, `.`, `-` and `_` as `_`.
-fn file_safe(label: &str) -> String {
-    label
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
 }
 
 /// temporal.md, temporal.json and temporal.png into `a.out`; the table on stdout unless

@@ -18,7 +18,8 @@
 //! depth (cells along k) counts for the part of its nearest pixel. The pair's two side
 //! views are also drawn ([`draw`]).
 
-use super::parts::PARTS;
+use super::parts::{PARTS, ViewPair};
+use anyhow::Context;
 use std::path::Path;
 
 /// Near edge, far edge, inside, apart.
@@ -130,8 +131,44 @@ pub(super) fn edge_figures(counts: &[EdgeCounts; PARTS]) -> EdgeFigures {
     (shares, depth, outline)
 }
 
-/// Draws a pair's side views, twice the grid's size: shown in both frames grey, in the
-/// first only red, in the second only blue, the camera to the right (larger k).
+/// [`edge_figures`] of the worst side pair (`None`: no pair, nothing), its runs' depth in
+/// cm (`cm(frame)`: cm a cell along depth in the pair's first frame).
+pub(super) fn pair_figures(
+    pair: Option<&ViewPair>,
+    n: usize,
+    cm: impl Fn(usize) -> f64,
+) -> EdgeFigures {
+    let Some(w) = pair else {
+        return ([None; PARTS], [None; PARTS], [None; PARTS]);
+    };
+    let (shares, cells, outline) = edge_figures(&edge_split(&w.a, &w.a_part, &w.b, &w.b_part, n));
+    let per_cell = cm(w.frame);
+    (shares, cells.map(|c| c.map(|c| c * per_cell)), outline)
+}
+
+/// [`draw`] of a pair to `dir/file` (the folder made first).
+pub(super) fn draw_pair(dir: &Path, file: &str, pair: &ViewPair, n: usize) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
+    draw(&pair.a, &pair.b, n, &dir.join(file))
+}
+
+/// A setting's label as a file name: anything but letters, digits, `.`, `-` and `_` as `_`.
+pub(super) fn file_safe(label: &str) -> String {
+    label
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Draws a pair's hit maps (side or front views, row `j`), twice the grid's size: shown in
+/// both frames grey, in the first only red, in the second only blue (a side view has the
+/// camera to the right, larger k; a front view is as the camera sees it).
 pub(super) fn draw(a: &[i32], b: &[i32], n: usize, path: &Path) -> anyhow::Result<()> {
     anyhow::ensure!(
         n > 0 && a.len() == n * n && b.len() == n * n,
