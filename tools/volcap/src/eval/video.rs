@@ -16,7 +16,11 @@
 //! - **flicker by body part** ([`parts`]): the same consecutive pairs, split by the body
 //!   part each displayed pixel shows (is it the hands that flicker?), and the pair of the
 //!   worst side IoU looked at closely ([`edges`]: near edge, far edge, holes or pieces, how
-//!   deep; its two side views drawn to OUT/worst-side/).
+//!   deep, against each part's share of the outline; its two side views drawn to
+//!   OUT/worst-side/, the worst front pair's to OUT/worst-front/);
+//! - **as displayed** ([`display`]): the still scenes' silhouettes at `--display-size` by the
+//!   renderer's blend of the grid's columns, beside the per-column figures; and how far the
+//!   crop, the display's frame, moved between frames ([`compare::crop_move_cells`]).
 //!
 //! The silhouettes and depths are projections of the localized grid (orthographic, as the
 //! daemon's renderer), so they cost no extra field evaluation.
@@ -44,6 +48,7 @@ use volcap_engine::grid::{Grid, GridSpec, is_inside};
 use volcap_engine::localize::{Localizer, Method};
 use volcap_engine::mesh::Mesh;
 use volcap_engine::metrics::iou_bits;
+use volcap_engine::model::preprocess::Crop;
 use volcap_engine::model::temporal::Temporal;
 use volcap_engine::model::{
     DepthFrame, FrameInfo, ModelView, Models, Precision, SegmentTrack, Tracked,
@@ -164,12 +169,7 @@ fn metres_per_ndc(fr: &VFrame) -> (f32, f32) {
     )
 }
 
-fn views(
-    grid: &Grid,
-    spec: GridSpec,
-    crop: volcap_engine::model::preprocess::Crop,
-    fr: &VFrame,
-) -> Views {
+fn views(grid: &Grid, spec: GridSpec, crop: Crop, fr: &VFrame) -> Views {
     let n = spec.n();
     let plane = n * n;
     let (mut front, mut side) = (vec![-1i32; plane], vec![-1i32; plane]);
@@ -446,10 +446,9 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
             pb.set_message(format!("{label}: {setting}"));
             let mut temporal = ts.map(Temporal::new);
             let mut track = SegmentTrack::new(st.segment_full_every);
-            let mut per: Vec<Option<(Views, Views, f32)>> = Vec::new();
-            // Each reconstructed frame's crop (the display's frame: a crop that moves moves
-            // the person on the display).
-            let mut crops = vec![None; frames.len()];
+            // Per frame: the model's views, the truth's, and the crop (the display's frame:
+            // a crop that moves moves the person on the display).
+            let mut per: Vec<Option<(Views, Views, Crop)>> = Vec::new();
             let (mut chamfer, mut p2s, mut iou) = (Vec::new(), Vec::new(), Vec::new());
             let (mut mask_iou, mut segment_ms, mut tracked) = (Vec::new(), Vec::new(), [0usize; 2]);
             for (i, fr) in frames.iter().enumerate() {
@@ -527,8 +526,7 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                         display::silhouette(&grid, &v.front, display::Along::Depth, size);
                     v.side_display = display::silhouette(&grid, &v.side, display::Along::X, size);
                 }
-                crops[i] = Some(crop);
-                per.push(Some((v, views(&truth, spec, crop, fr), crop.s)));
+                per.push(Some((v, views(&truth, spec, crop, fr), crop)));
             }
             // Consecutive pairs of reconstructed frames.
             let cell = spec.spacing() as f64 * 100.0;
@@ -536,15 +534,15 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 (vec![], vec![], vec![], vec![], vec![], vec![]);
             let mut by_part = parts::PartFlicker::default();
             let (mut fdi, mut sdi) = (vec![], vec![]);
-            let moved = |k: usize| match (crops.get(k), crops.get(k + 1)) {
-                (Some(Some(c0)), Some(Some(c1))) => {
+            let moved = |k: usize| match (per.get(k), per.get(k + 1)) {
+                (Some(Some((_, _, c0))), Some(Some((_, _, c1)))) => {
                     Some(compare::crop_move_cells(c0, c1, spec.n()))
                 }
                 _ => None,
             };
             let mut crop_moves = Vec::new();
             for (k, w) in per.windows(2).enumerate() {
-                let (Some((m0, o0, s0)), Some((m1, o1, s1))) = (&w[0], &w[1]) else {
+                let (Some((m0, o0, c0)), Some((m1, o1, c1))) = (&w[0], &w[1]) else {
                     continue;
                 };
                 if k + 1 < a.settle {
@@ -553,10 +551,13 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 by_part.add(m0, m1, k);
                 crop_moves.extend(moved(k));
                 if !m0.side_display.is_empty() {
-                    fdi.push(display::iou(&m0.front_display, &m1.front_display));
-                    sdi.push(display::iou(&m0.side_display, &m1.side_display));
+                    let iou = |a: &[bool], b: &[bool]| {
+                        volcap_engine::metrics::mask_iou(a.iter().copied().zip(b.iter().copied()))
+                    };
+                    fdi.push(iou(&m0.front_display, &m1.front_display));
+                    sdi.push(iou(&m0.side_display, &m1.side_display));
                 }
-                let s = 0.5 * (*s0 + *s1) as f64;
+                let s = 0.5 * (c0.s + c1.s) as f64;
                 let (a, d) = compare_hits(&m0.front, &m1.front);
                 fi.push(a);
                 fd.push(d * cell * s * mz as f64 * frames[0].to_cam.z_scale as f64);
@@ -590,7 +591,7 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 let s = per
                     .get(frame)
                     .and_then(|p| p.as_ref())
-                    .map_or(1.0, |p| p.2 as f64);
+                    .map_or(1.0, |p| p.2.s as f64);
                 cell * s * mz as f64 * frames[0].to_cam.z_scale as f64
             };
             let (part_worst_side_edges, part_worst_side_run_cm, part_worst_side_outline) =

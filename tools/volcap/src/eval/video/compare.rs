@@ -64,7 +64,7 @@ pub(super) fn compare_raster(a: &[Option<f32>], b: &[Option<f32>]) -> (f64, f64)
 
 /// The shift (0..=4 frames) that best lines a run's camera-frame silhouettes (front and
 /// side) up with the reference's earlier ones.
-pub(super) fn lag_of(per: &[Option<(Views, Views, f32)>], reference: &[Option<&Views>]) -> usize {
+pub(super) fn lag_of(per: &[Option<(Views, Views, Crop)>], reference: &[Option<&Views>]) -> usize {
     (0..=4usize)
         .map(|k| {
             let mut v = Vec::new();

@@ -80,24 +80,14 @@ pub(super) fn silhouette(grid: &Grid, hits: &[i32], along: Along, size: usize) -
     out
 }
 
-/// IoU of two silhouettes (1 where neither shows anything).
-pub(super) fn iou(a: &[bool], b: &[bool]) -> f64 {
-    let (mut inter, mut union) = (0usize, 0usize);
-    for (&x, &y) in a.iter().zip(b) {
-        inter += usize::from(x && y);
-        union += usize::from(x || y);
-    }
-    if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use volcap_engine::grid::GridSpec;
+
+    fn iou(a: &[bool], b: &[bool]) -> f64 {
+        volcap_engine::metrics::mask_iou(a.iter().copied().zip(b.iter().copied()))
+    }
 
     /// The silhouette follows the values by fractions of a cell where the hit map moves by
     /// whole columns: a slab whose edge value crosses 0.5 (0.49 -> 0.51) turns a whole column
