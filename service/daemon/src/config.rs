@@ -167,6 +167,16 @@ pub struct RenderConfig {
     /// floaters, e.g. a rear leg placed where no limb reaches); 0 keeps them.
     #[serde(default = "d_drop_apart")]
     pub drop_apart: f32,
+    /// Draw the person's outline with partial pixels, composited over the background
+    /// (`volcap_engine::render::edge_coverage`): no staircase at the display's two pixels a
+    /// cell, and a value crossing 0.5 fades an outline pixel instead of switching it; false:
+    /// whole pixels (the grid image at `display_size = 0`).
+    #[serde(default = "d_antialias")]
+    pub antialias: bool,
+}
+
+fn d_antialias() -> bool {
+    true
 }
 
 fn d_drop_apart() -> f32 {
@@ -197,6 +207,7 @@ impl Default for RenderConfig {
             oracle_voxel_m: d_voxel(),
             display_size: d_display(),
             drop_apart: d_drop_apart(),
+            antialias: d_antialias(),
         }
     }
 }

@@ -553,6 +553,7 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
     let mut cpu = Renderer::new();
     let mut on_gpu = Renderer::new();
     let (mut close, mut channels) = (0usize, 0usize);
+    let (mut antialiased, mut displays) = (0usize, 0usize);
     let timed0 = gpu.counters();
     let (mut depth_off, mut pixels) = (0usize, 0usize);
     // The last row tiles the grid's values over five bindings (as 513^3 on lavapipe): the
@@ -628,28 +629,42 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
             assert_eq!(dz, None, "{what}: depths");
             assert_eq!(on_gpu.rgba(), cpu.rgba(), "{what}: images");
             let size = 2 * res + 7;
-            let a = cpu.render_display(size, opts.background).to_vec();
-            let b = on_gpu
-                .render_display_gpu(&mut gr, size, opts.background)
-                .unwrap()
-                .to_vec();
-            assert_eq!(a.len(), b.len());
-            close += a
-                .iter()
-                .zip(&b)
-                .filter(|(x, y)| x.abs_diff(**y) <= 1)
-                .count();
-            channels += a.len();
-            // The blend of four columns is summed on the adapter, which may fuse its
-            // multiply-adds: where the blend lies within rounding of 0.5 (the noise
-            // scene's field hovers there) a ray can stop one node earlier or later.
-            let off = on_gpu
-                .display_depth()
-                .iter()
-                .zip(cpu.display_depth())
-                .filter(|(x, y)| (*x - *y).abs() > 1e-5)
-                .count();
-            depth_off += off;
+            // The binary outline and the antialiased one (which differ where the outline
+            // leaves partial pixels: not along a plate's grid-aligned sides).
+            let mut binary = Vec::new();
+            for aa in [false, true] {
+                cpu.set_antialias(aa);
+                on_gpu.set_antialias(aa);
+                let a = cpu.render_display(size, opts.background).to_vec();
+                let b = on_gpu
+                    .render_display_gpu(&mut gr, size, opts.background)
+                    .unwrap()
+                    .to_vec();
+                assert_eq!(a.len(), b.len());
+                if aa {
+                    antialiased += usize::from(a != binary);
+                    displays += 1;
+                } else {
+                    binary.clone_from(&a);
+                }
+                close += a
+                    .iter()
+                    .zip(&b)
+                    .filter(|(x, y)| x.abs_diff(**y) <= 1)
+                    .count();
+                channels += a.len();
+                // The blend of four columns is summed on the adapter, which may fuse its
+                // multiply-adds: where the blend lies within rounding of 0.5 (the noise
+                // scene's field hovers there) a ray can stop one node earlier or later.
+                let off = on_gpu
+                    .display_depth()
+                    .iter()
+                    .zip(cpu.display_depth())
+                    .filter(|(x, y)| (*x - *y).abs() > 1e-5)
+                    .count();
+                depth_off += off;
+                pixels += size * size;
+            }
             pixels += size * size;
         }
     }
@@ -689,8 +704,10 @@ fn the_renderer_on_the_adapter_matches_the_cpu_on_every_analytic_scene() {
     );
     let share = close as f64 / channels as f64;
     println!(
-        "display images within 1/255 on {:.4} % of channels",
+        "display images within 1/255 on {:.4} % of channels; {antialiased} of {displays} \
+         antialiased ones with partial pixels",
         share * 100.0
     );
+    assert!(2 * antialiased > displays, "{antialiased} of {displays}");
     assert!(share >= 0.999, "display images agree on {share}");
 }

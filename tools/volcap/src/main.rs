@@ -115,6 +115,10 @@ pub struct PipelineArgs {
     /// resolution, 64..=1024 renders at that display size (the daemon's default is 512).
     #[arg(long = "display-size", value_delimiter = ',', default_value = "0")]
     pub display_sizes: Vec<usize>,
+    /// `render.antialias` on and/or off (comma-separated booleans; the daemon's default is
+    /// on): the outline's partial pixels against whole ones, what they cost the display part.
+    #[arg(long, value_delimiter = ',', default_value = "true")]
+    pub antialias: Vec<bool>,
     /// The `[temporal]` filter off and/or on (comma-separated booleans; the daemon's default
     /// is on).
     #[arg(long, value_delimiter = ',', default_value = "true")]

@@ -37,6 +37,9 @@ pub struct Row {
     pub segment_thread_up_to: usize,
     /// `render.display_size` of the run (0: the grid's resolution).
     pub display_size: usize,
+    /// `render.antialias` of the run (rows written before it: whole pixels).
+    #[serde(default)]
+    pub antialias: bool,
     /// `[temporal] enabled` of the run.
     pub temporal: bool,
     /// `render.yaw` of the run, degrees (0: the camera's view).
@@ -143,7 +146,7 @@ type Setup = (
     u32,
     usize,
     usize,
-    usize,
+    (usize, bool),
     bool,
     f32,
     (
@@ -167,7 +170,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         coarse,
         threads,
         split,
-        display,
+        (display, antialias),
         temporal,
         yaw,
         (rounds, waits, device, (passes, full_every), apart, (workers, seg_workers)),
@@ -176,7 +179,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
     let waits = waits.name();
     let text = format!(
         "description = \"volcap bench pipeline\"\n[camera]\nbackend = \"sim\"\nscene = {scene:?}\n\
-         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nyaw = {yaw:?}\ndrop_apart = {apart:?}\n\
+         [render]\nresolution = {res}\ncoarse_level = {coarse}\nfield = \"model\"\ndisplay_size = {display}\nantialias = {antialias}\nyaw = {yaw:?}\ndrop_apart = {apart:?}\n\
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\nsegment_full_every = {full_every}\n\
          [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\nrender_workers = {workers}\nsegment_workers = {seg_workers}\n\
          [dbus]\nbus = \"none\"\n\
@@ -252,6 +255,7 @@ fn measure(
         threads: cfg.compute.threads,
         segment_thread_up_to: cfg.compute.segment_thread_up_to,
         display_size: cfg.render.display_size,
+        antialias: cfg.render.antialias,
         temporal: cfg.temporal.enabled,
         yaw_deg: cfg.render.yaw,
         fps: published as f64 / wall,
@@ -396,7 +400,11 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
         for &res in &a.res {
             for &c in &a.coarse_levels {
                 for &split in &a.segment_split {
-                    for &d in &a.display_sizes {
+                    for d in a
+                        .display_sizes
+                        .iter()
+                        .flat_map(|&d| a.antialias.iter().map(move |&aa| (d, aa)))
+                    {
                         for &tf in &a.temporal {
                             for &yaw in &a.yaws {
                                 for (&rounds, &waits) in a
@@ -522,6 +530,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.coarse_level == r.coarse_level
                     && b.segment_thread_up_to == r.segment_thread_up_to
                     && b.display_size == r.display_size
+                    && b.antialias == r.antialias
                     && b.temporal == r.temporal
                     && b.yaw_deg == r.yaw_deg
                     && b.rounds_per_wait == r.rounds_per_wait

@@ -22,6 +22,8 @@ pub struct Live {
     /// out of the render and the meshes (`render.drop_apart`, [`volcap_engine::pieces`]);
     /// 0: kept.
     pub drop_apart: f32,
+    /// The outline drawn with partial pixels (`render.antialias`).
+    pub antialias: bool,
 }
 
 impl Live {
@@ -36,6 +38,7 @@ impl Live {
             paused: false,
             display_size: cfg.render.display_size,
             drop_apart: cfg.render.drop_apart,
+            antialias: cfg.render.antialias,
         }
     }
 

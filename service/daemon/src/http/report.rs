@@ -106,6 +106,7 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         },
         "resolution": live.resolution,
         "display_size": live.out_size(),
+        "antialias": live.antialias,
         "paused": live.paused,
         "frames_published": published,
         "fps": if up > 0.0 { published as f64 / up } else { 0.0 },

@@ -129,8 +129,9 @@ impl AdapterRenderer {
             .map(|st| (st, renderer.last_times()))
             .map_err(|e| e.to_string());
         let gpu = &mut self.gpu;
+        renderer.set_antialias(live.antialias);
         finish_render(sh, t, live, r, |size| {
-            if size == live.resolution {
+            if size == live.resolution && !live.antialias {
                 Ok(renderer.rgba().to_vec())
             } else {
                 renderer

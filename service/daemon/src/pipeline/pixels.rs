@@ -10,8 +10,9 @@ pub fn composite_over(rgba: &[u8], bg: [f32; 4], pad: bool, out: &mut Vec<u8>) {
     out.reserve(rgba.len() / 4 * n);
     let mix =
         |p: &[u8], c: usize, a: f32| (p[c] as f32 * a + bg[c] * 255.0 * (1.0 - a)).round() as u8;
-    // A render's pixels are opaque (the person) or clear (the background): those two take
-    // the pixel or the background as the rule gives them, without its arithmetic per channel.
+    // A render's pixels are opaque (the person) or clear (the background), but for the
+    // outline's partial ones (`render.antialias`): those two take the pixel or the
+    // background as the rule gives them, without its arithmetic per channel.
     let clear = [0, 1, 2].map(|c| mix(&[0, 0, 0], c, 0.0));
     for p in rgba.chunks_exact(4) {
         let rgb = match p[3] {

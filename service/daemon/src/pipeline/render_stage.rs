@@ -223,8 +223,10 @@ pub(super) fn render_field(
     let r = renderer.render(field, colors, spec, &opts);
     let r = r.map_err(|e| e.to_string());
     let times = renderer.last_times();
+    renderer.set_antialias(live.antialias);
     finish_render(sh, t, live, r.map(|st| (st, times)), |size| {
-        Ok(if size == live.resolution {
+        // The grid image is the display image at the grid's size without the partial pixels.
+        Ok(if size == live.resolution && !live.antialias {
             renderer.rgba().to_vec()
         } else {
             renderer.render_display(size, live.background).to_vec()
@@ -333,5 +335,58 @@ mod tests {
             "{per_worker:?}"
         );
         assert!(shared.worker_beats().iter().all(|(_, b)| *b > 0));
+    }
+
+    /// `render.antialias` reaches the published frames: with it (the default) the person's
+    /// outline has partial pixels (a transparent background: alpha strictly between 0 and
+    /// 255), at the display size and at the grid's own; without it every pixel is the person
+    /// or the background, and the pixels more than half covered are the same ones.
+    #[test]
+    fn the_antialiased_outline_reaches_the_published_frames() {
+        let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/scenes/front-walk.toml");
+        let frame = |antialias: bool, display: usize| {
+            let cfg = Config::parse(
+                &format!(
+                    "[camera]\nbackend = \"sim\"\nscene = {:?}\n[render]\nfield = \"oracle\"\n\
+                     resolution = 65\ndisplay_size = {display}\nantialias = {antialias}\n\
+                     background = [0.0, 0.0, 0.0, 0.0]\n[dbus]\nbus = \"none\"\n",
+                    scene.display().to_string()
+                ),
+                std::path::Path::new("aa.toml"),
+            )
+            .unwrap();
+            let (factory, _) = crate::capture::factory(&cfg).unwrap();
+            let (tx, mut rx) = tokio::sync::watch::channel(None);
+            let shared = Arc::new(Shared::new(&cfg, "test".into(), tx));
+            let threads = start(&cfg, factory, shared.clone(), None);
+            let seen = published_indices(&mut rx, 1, Duration::from_secs(60));
+            let rgba = rx.borrow().as_ref().map(|p| p.rgba.clone());
+            shared.stop.store(true, Ordering::Relaxed);
+            for t in threads {
+                t.join().unwrap();
+            }
+            assert_eq!(seen.len(), 1, "no frame in 60 s");
+            let alpha: Vec<u8> = rgba.unwrap().chunks_exact(4).map(|p| p[3]).collect();
+            alpha
+        };
+        for display in [0, 128] {
+            let whole = frame(false, display);
+            let aa = frame(true, display);
+            assert!(whole.iter().all(|&a| a == 0 || a == 255), "{display}");
+            let partial = aa.iter().filter(|&&a| a > 0 && a < 255).count();
+            let shown = whole.iter().filter(|&&a| a == 255).count();
+            eprintln!("{display}: {partial} partial, {shown} shown");
+            assert!(
+                partial > shown.isqrt(),
+                "{display}: {partial} partial of {shown}"
+            );
+            // The sim's person walks: the frames differ, but both shown about as much.
+            let half = aa.iter().filter(|&&a| a > 127).count();
+            assert!(
+                half.abs_diff(shown) * 10 < shown,
+                "{display}: {half} vs {shown}"
+            );
+        }
     }
 }

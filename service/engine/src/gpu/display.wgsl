@@ -4,8 +4,11 @@
 // nearest of their hits (one node in front) and the farthest (one behind), and the surface
 // is placed where the blend crosses 0.5; its colour is the blend of the neighbouring columns'
 // surface colours within two grid spacings of its depth (all of them where none is).
+// Antialiased (d[1].y = 1): where a column of the four has no hit, the pixel is covered by
+// `edge_coverage` of the largest blended value and its gradient across the image, and
+// composited over the background (render/display.rs).
 //
-// d: [n, size, plane, background RGBA8, spacing (f32 bits), -, -, -]
+// d: [n, size, plane, background RGBA8, spacing (f32 bits), antialias, -, -]
 // hits: hit + 1 per column (0: none), then three more regions the kernel does not read.
 // cols: per column [depth, r, g, b], then the grid's coordinates (n values).
 // out: RGBA8 per pixel, then the depth per pixel (f32 bits; -1 where there is none).
@@ -20,6 +23,18 @@
 fn to_u8(x: f32) -> u32 {
     // Rust's f32::round (half away from zero) on a value in [0, 255].
     return u32(floor(clamp(x, 0.0, 1.0) * 255.0 + 0.5));
+}
+
+// render.rs `edge_coverage`.
+fn edge_coverage(v: f32, grad: f32) -> f32 {
+    let inside = v > 0.5;
+    // `v == v` and the bound: finite (NaN and infinities fail one of them).
+    if !(grad > 1e-6 && grad <= 3.4028235e38 && v == v && abs(v) <= 3.4028235e38) {
+        return select(0.0, 1.0, inside);
+    }
+    let c = clamp(0.5 + (v - 0.5) / grad, 0.0, 1.0);
+    if inside { return max(c, 0.5 + 1.1920929e-7); }
+    return min(c, 0.5);
 }
 
 fn coord(k: u32) -> f32 {
@@ -64,13 +79,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
     if top + 1u < n {
         for (var t = 0u; t < 4u; t = t + 1u) { v_out = v_out + w[t] * vget(c[t] + (top + 1u) * plane); }
     }
+    var edge = false;
+    if d[1].y != 0u {
+        for (var t = 0u; t < 4u; t = t + 1u) { if h[t] < 0 { edge = true; } }
+    }
     var found = false;
     var z = 0.0;
+    var v_max = -3.4028235e38;
+    var k_max = top;
     for (var k = top + 1u; k > bottom; k = k - 1u) {
         let kk = k - 1u;
         var v_in = 0.0;
         for (var t = 0u; t < 4u; t = t + 1u) { v_in = v_in + w[t] * vget(c[t] + kk * plane); }
-        if v_in > 0.5 {
+        if v_in > v_max {
+            v_max = v_in;
+            k_max = kk;
+        }
+        if !found && v_in > 0.5 {
             if kk + 1u < n {
                 let dv = v_in - v_out;
                 var s = 0.5;
@@ -82,10 +107,24 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
                 z = 1.0;
             }
             found = true;
-            break;
+            if !edge { break; }
         }
         v_out = v_in;
     }
+    var cover = 1.0;
+    if edge {
+        var a = array<f32, 4>(0.0, 0.0, 0.0, 0.0);
+        for (var t = 0u; t < 4u; t = t + 1u) { a[t] = vget(c[t] + k_max * plane); }
+        let gx = (1.0 - fy) * (a[1] - a[0]) + fy * (a[3] - a[2]);
+        let gy = (1.0 - fx) * (a[2] - a[0]) + fx * (a[3] - a[1]);
+        let per_px = f32(n - 1u) / f32(den);
+        cover = edge_coverage(v_max, per_px * sqrt(gx * gx + gy * gy));
+        if !found && cover > 0.0 {
+            z = coord(k_max);
+            found = true;
+        }
+    }
+    if cover <= 0.0 { return; }
     if !found { return; }
     let spacing = bitcast<f32>(d[1].x);
     var acc = vec3<f32>(0.0);
@@ -101,7 +140,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec3
         if wsum > 0.0 { break; }
     }
     if wsum <= 0.0 { return; }
-    let rgb = acc / wsum;
-    out[p] = to_u8(rgb.x) | (to_u8(rgb.y) << 8u) | (to_u8(rgb.z) << 16u) | (255u << 24u);
+    var rgb = acc / wsum;
+    var alpha = 1.0;
+    if cover < 1.0 {
+        // Over the background (straight alpha), as render/display.rs.
+        let b = d[0].w;
+        let bg = vec4<f32>(f32(b & 255u), f32((b >> 8u) & 255u), f32((b >> 16u) & 255u),
+                           f32(b >> 24u)) / 255.0;
+        let rest = bg.w * (1.0 - cover);
+        alpha = cover + rest;
+        rgb = (cover * rgb + rest * bg.xyz) / alpha;
+    }
+    out[p] = to_u8(rgb.x) | (to_u8(rgb.y) << 8u) | (to_u8(rgb.z) << 16u) | (to_u8(alpha) << 24u);
     out[size * size + p] = bitcast<u32>(z);
 }

@@ -89,6 +89,14 @@ struct DisplayBufs {
     timer: Option<super::Timer>,
 }
 
+/// How [`GpuRenderer::display`] draws: the background (RGBA8) and whether the outline is
+/// antialiased (`Renderer::set_antialias`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DisplayLook {
+    pub background: [u8; 4],
+    pub antialias: bool,
+}
+
 /// The renderer's state on the adapter, reused frame to frame.
 pub struct GpuRenderer {
     gpu: Arc<Gpu>,
@@ -451,12 +459,12 @@ impl GpuRenderer {
     }
 
     /// The last frame at `size x size` pixels (`render.rs` `render_display`'s rule, from the
-    /// values on the adapter): RGBA8 into `rgba` and depth into `z`. `depth` and `color` are
+    /// values on the adapter) over `look`'s background: RGBA8 into `rgba` and depth into `z`. `depth` and `color` are
     /// the frame's per column (as the host placed and coloured them).
     pub fn display(
         &mut self,
         size: usize,
-        background: [u8; 4],
+        look: DisplayLook,
         depth: &[f32],
         color: &[[f32; 3]],
         rgba: &mut Vec<u8>,
@@ -538,14 +546,14 @@ impl GpuRenderer {
                 layout: &self.pipes.display_layout,
                 entries: &entries,
             });
-        let bg = u32::from_le_bytes(background);
+        let bg = u32::from_le_bytes(look.background);
         let params = [
             n as u32,
             size as u32,
             plane as u32,
             bg,
             spec.spacing().to_bits(),
-            0,
+            u32::from(look.antialias),
             0,
             0,
         ];

@@ -2,9 +2,20 @@
 //! bands of rows on up to `threads` threads: each display pixel reads only the grid and the
 //! columns' hits, depths and colours, so the bands are independent and the image does not
 //! depend on the thread count.
+//!
+//! **Antialiased edges** ([`super::Renderer::set_antialias`]): where one of a pixel's four
+//! columns has no hit (the person's outline against the background), the pixel is covered
+//! by the fraction [`super::edge_coverage`] gives: the largest blended value along its ray
+//! (the one the binary rule tests against 0.5), its distance from 0.5 over the blend's
+//! gradient across the image at that ray index (in display pixels), read as a signed
+//! distance to the outline; the pixel's colour is composited over the background by it.
+//! A pixel is covered more than half exactly where the binary rule draws it, so the outline
+//! is where it was, drawn with partial pixels instead of a staircase, and a value crossing
+//! 0.5 fades a pixel in or out by a fraction instead of switching it. Pixels whose four
+//! columns all hit (an arm in front of the body) stay whole.
 
 use super::columns::crossing_depth;
-use super::to_u8;
+use super::{edge_coverage, to_u8};
 use crate::grid::{Grid, is_inside};
 
 /// What the display image is drawn from: the localized grid and, per grid column, its hit
@@ -14,6 +25,8 @@ pub(super) struct Columns<'a> {
     pub hit: &'a [i32],
     pub depth: &'a [f32],
     pub color: &'a [[f32; 3]],
+    /// Partial pixels along the outline (the module's doc).
+    pub antialias: bool,
 }
 
 /// Display rows per band at least: a band's work should outweigh starting its thread.
@@ -57,6 +70,8 @@ fn rows_into(c: &Columns<'_>, size: usize, v0: usize, rgba: &mut [u8], depth: &m
     let plane = n * n;
     let den = size - 1;
     let spacing = spec.spacing();
+    // Grid columns per display pixel.
+    let per_px = (n - 1) as f32 / den as f32;
     let axis = |u: usize| {
         let num = u * (n - 1);
         let i0 = num / den;
@@ -89,27 +104,49 @@ fn rows_into(c: &Columns<'_>, size: usize, v0: usize, rgba: &mut [u8], depth: &m
                 .unwrap_or(hmax);
             let top = (hmax as usize + 1).min(n - 1);
             let bottom = (hmin as usize).saturating_sub(1);
-            let blend = |k: usize| -> f32 {
-                cols.iter()
-                    .zip(&w)
-                    .map(|(&col, &wi)| wi * grid.values[col + k * plane])
-                    .sum()
-            };
+            let at = |col: usize, k: usize| grid.values[col + k * plane];
+            let blend =
+                |k: usize| -> f32 { cols.iter().zip(&w).map(|(&col, &wi)| wi * at(col, k)).sum() };
+            // The outline: a column without a hit among the four (antialiased there).
+            let edge = c.antialias && hits.iter().any(|&h| h < 0);
             let mut v_out = if top + 1 < n { blend(top + 1) } else { 0.0 };
             let mut found = None;
+            let (mut v_max, mut k_max) = (f32::NEG_INFINITY, top);
             for k in (bottom..=top).rev() {
                 let v_in = blend(k);
-                if is_inside(v_in) {
+                if v_in > v_max {
+                    (v_max, k_max) = (v_in, k);
+                }
+                if found.is_none() && is_inside(v_in) {
                     found = Some(if k + 1 < n {
                         crossing_depth(spec, k, v_in, v_out)
                     } else {
                         1.0
                     });
-                    break;
+                    if !edge {
+                        break;
+                    }
                 }
                 v_out = v_in;
             }
-            let Some(z) = found else { continue };
+            let cover = if edge {
+                // The blend's gradient across the image at the largest value's ray index,
+                // per display pixel (`per_px` grid columns a pixel).
+                let a = cols.map(|col| at(col, k_max));
+                let gx = (1.0 - fy) * (a[1] - a[0]) + fy * (a[3] - a[2]);
+                let gy = (1.0 - fx) * (a[2] - a[0]) + fx * (a[3] - a[1]);
+                edge_coverage(v_max, per_px * (gx * gx + gy * gy).sqrt())
+            } else if found.is_some() {
+                1.0
+            } else {
+                0.0
+            };
+            if cover <= 0.0 {
+                continue;
+            }
+            // Where the binary rule draws nothing, a partial pixel sits at the depth of its
+            // largest value.
+            let z = found.unwrap_or_else(|| spec.coord(k_max));
             let mut acc = [0.0f32; 3];
             let mut wsum = 0.0f32;
             for near_only in [true, false] {
@@ -131,10 +168,22 @@ fn rows_into(c: &Columns<'_>, size: usize, v0: usize, rgba: &mut [u8], depth: &m
                 continue;
             }
             let px = &mut row_px[u * 4..u * 4 + 4];
-            for (p, a) in px.iter_mut().zip(acc) {
-                *p = to_u8(a / wsum);
+            let rgb = acc.map(|a| a / wsum);
+            if cover >= 1.0 {
+                for (p, x) in px.iter_mut().zip(rgb) {
+                    *p = to_u8(x);
+                }
+                px[3] = 255;
+            } else {
+                // Over the background (straight alpha): a = c + a_bg (1 - c).
+                let bg = [px[0], px[1], px[2], px[3]].map(|b| b as f32 / 255.0);
+                let rest = bg[3] * (1.0 - cover);
+                let alpha = cover + rest;
+                for (i, x) in rgb.into_iter().enumerate() {
+                    px[i] = to_u8((cover * x + rest * bg[i]) / alpha);
+                }
+                px[3] = to_u8(alpha);
             }
-            px[3] = 255;
             row_z[u] = z;
         }
     }

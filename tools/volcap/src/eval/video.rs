@@ -154,9 +154,10 @@ struct Views {
     /// until labelled).
     front_part: Vec<u8>,
     side_part: Vec<u8>,
-    /// The silhouettes as displayed ([`display`]; empty unless drawn).
-    front_display: Vec<bool>,
-    side_display: Vec<bool>,
+    /// The silhouettes as displayed, each pixel's coverage with the outline antialiased
+    /// ([`display::coverage`]; empty unless drawn).
+    front_display: Vec<f32>,
+    side_display: Vec<f32>,
 }
 
 /// Metres per input-NDC unit across (x, y) and along depth (after `to_cam`).
@@ -330,6 +331,12 @@ pub struct VideoRow {
     pub front_display_iou: Option<(f64, f64)>,
     #[serde(default)]
     pub side_display_iou: Option<(f64, f64)>,
+    /// The same with the outline antialiased (`render.antialias`): the overlap of
+    /// consecutive coverage maps ([`display::soft_iou`]).
+    #[serde(default)]
+    pub front_display_aa_iou: Option<(f64, f64)>,
+    #[serde(default)]
+    pub side_display_aa_iou: Option<(f64, f64)>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -523,8 +530,8 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 if still {
                     let size = a.display_size;
                     v.front_display =
-                        display::silhouette(&grid, &v.front, display::Along::Depth, size);
-                    v.side_display = display::silhouette(&grid, &v.side, display::Along::X, size);
+                        display::coverage(&grid, &v.front, display::Along::Depth, size);
+                    v.side_display = display::coverage(&grid, &v.side, display::Along::X, size);
                 }
                 per.push(Some((v, views(&truth, spec, crop, fr), crop)));
             }
@@ -533,7 +540,7 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
             let (mut fi, mut si, mut fd, mut sd, mut jf, mut js) =
                 (vec![], vec![], vec![], vec![], vec![], vec![]);
             let mut by_part = parts::PartFlicker::default();
-            let (mut fdi, mut sdi) = (vec![], vec![]);
+            let (mut fdi, mut sdi, mut fda, mut sda) = (vec![], vec![], vec![], vec![]);
             let moved = |k: usize| match (per.get(k), per.get(k + 1)) {
                 (Some(Some((_, _, c0))), Some(Some((_, _, c1)))) => {
                     Some(compare::crop_move_cells(c0, c1, spec.n()))
@@ -551,11 +558,14 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 by_part.add(m0, m1, k);
                 crop_moves.extend(moved(k));
                 if !m0.side_display.is_empty() {
-                    let iou = |a: &[bool], b: &[bool]| {
-                        volcap_engine::metrics::mask_iou(a.iter().copied().zip(b.iter().copied()))
+                    let iou = |a: &[f32], b: &[f32]| {
+                        let (a, b) = (display::shown(a), display::shown(b));
+                        volcap_engine::metrics::mask_iou(a.into_iter().zip(b))
                     };
                     fdi.push(iou(&m0.front_display, &m1.front_display));
                     sdi.push(iou(&m0.side_display, &m1.side_display));
+                    fda.push(display::soft_iou(&m0.front_display, &m1.front_display));
+                    sda.push(display::soft_iou(&m0.side_display, &m1.side_display));
                 }
                 let s = 0.5 * (c0.s + c1.s) as f64;
                 let (a, d) = compare_hits(&m0.front, &m1.front);
@@ -649,6 +659,8 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
                 worst_front_crop_move: worst_front.and_then(|(w, _)| moved(w.frame)),
                 front_display_iou: (!fdi.is_empty()).then(|| (mean(&fdi), min(&fdi))),
                 side_display_iou: (!sdi.is_empty()).then(|| (mean(&sdi), min(&sdi))),
+                front_display_aa_iou: (!fda.is_empty()).then(|| (mean(&fda), min(&fda))),
+                side_display_aa_iou: (!sda.is_empty()).then(|| (mean(&sda), min(&sda))),
             };
             if a.json {
                 println!("{}", serde_json::to_string(&row)?);

@@ -18,6 +18,21 @@ fn apart_note(g: f32) -> String {
     }
 }
 
+/// The published image's side, "whole px" where its outline is not antialiased
+/// (`render.antialias` off, or a row written before the setting).
+fn display_label(r: &Row) -> String {
+    let side = if r.display_size == 0 {
+        r.resolution
+    } else {
+        r.display_size
+    };
+    if r.antialias {
+        side.to_string()
+    } else {
+        format!("{side} whole px")
+    }
+}
+
 pub(super) fn table(rows: &[Row]) -> String {
     let mut s = String::from(
         "| model | runtime | res | display px | coarse | threads | segment thread | temporal | yaw | fps | x1 | latency p50 / p99 ms | capture | segment | field | render | encode | evaluations | note |\n\
@@ -36,11 +51,7 @@ pub(super) fn table(rows: &[Row]) -> String {
             apart_note(r.drop_apart),
             r.runtime,
             r.resolution,
-            if r.display_size == 0 {
-                r.resolution
-            } else {
-                r.display_size
-            },
+            display_label(r),
             r.coarse_level,
             r.threads,
             if r.resolution <= r.segment_thread_up_to {
@@ -166,6 +177,9 @@ pub(super) fn parts_table(rows: &[Row]) -> String {
                 if r.segment_passes > 1 && r.segment_full_every > 1 {
                     notes.push(format!("whole every {}", r.segment_full_every));
                 }
+                if !r.antialias {
+                    notes.push("whole px".into());
+                }
                 notes.retain(|n| !n.is_empty());
                 match notes.join(", ") {
                     n if n.is_empty() => n,
@@ -203,7 +217,7 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
             // The GPU backend's knobs, where a row sets them: without them in the key the
             // rows of `--render-device shared,own` or `--rounds-per-wait 1,8` drew one line.
             format!(
-                "{}{} {}{}{}{}{}",
+                "{}{} {}{}{}{}{}{}",
                 r.model,
                 apart_note(r.drop_apart),
                 r.runtime,
@@ -225,7 +239,8 @@ pub(super) fn plot(rows: &[Row], path: &Path) -> anyhow::Result<()> {
                 match workers_label(r) {
                     w if w.is_empty() => w,
                     w => format!(" {w}"),
-                }
+                },
+                if r.antialias { "" } else { " whole px" }
             ),
             r.coarse_level,
             r.threads,

@@ -11,6 +11,7 @@
 //! fractions of a cell. Consecutive frames compared this way give the flicker a viewer sees.
 
 use volcap_engine::grid::{Grid, is_inside};
+use volcap_engine::render::edge_coverage;
 
 /// The direction a view looks along.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -35,7 +36,23 @@ fn axis(u: usize, n: usize, size: usize) -> (usize, usize, f32) {
 /// which bounds the search: a blended value is inside only at a ray index where one of its
 /// four columns is, so never before their first hit, and never in a pixel none of them
 /// hits. `size` < 2 gives an empty map.
+#[cfg(test)]
 pub(super) fn silhouette(grid: &Grid, hits: &[i32], along: Along, size: usize) -> Vec<bool> {
+    shown(&coverage(grid, hits, along, size))
+}
+
+/// Shown by the binary rule: covered more than half.
+pub(super) fn shown(cover: &[f32]) -> Vec<bool> {
+    cover.iter().map(|&c| c > 0.5).collect()
+}
+
+/// [`silhouette`] with the outline antialiased as the renderer draws it
+/// (`Renderer::set_antialias`, the main job's `render.antialias`): where one of a pixel's
+/// four columns has no hit, its coverage is `volcap_engine::render::edge_coverage` of the
+/// largest blended value along its ray and that value's gradient across the image at its
+/// ray index; elsewhere 0 or 1. More than half exactly where [`silhouette`] shows the
+/// person.
+pub(super) fn coverage(grid: &Grid, hits: &[i32], along: Along, size: usize) -> Vec<f32> {
     let n = grid.spec().n();
     let plane = n * n;
     if size < 2 || hits.len() != plane || grid.values.len() != plane * n {
@@ -46,7 +63,8 @@ pub(super) fn silhouette(grid: &Grid, hits: &[i32], along: Along, size: usize) -
         Along::Depth => c + n * j + plane * r,
         Along::X => r + n * j + plane * c,
     };
-    let mut out = vec![false; size * size];
+    let per_px = (n - 1) as f32 / (size - 1) as f32;
+    let mut out = vec![0.0; size * size];
     for v in 0..size {
         let (j0, j1, fy) = axis(v, n, size);
         for u in 0..size {
@@ -67,17 +85,47 @@ pub(super) fn silhouette(grid: &Grid, hits: &[i32], along: Along, size: usize) -
             else {
                 continue;
             };
-            out[v * size + u] = (first..n).any(|r| {
-                let blend: f32 = cols
-                    .iter()
+            let blend = |r: usize| -> f32 {
+                cols.iter()
                     .zip(&w)
                     .map(|(&(c, j), &wi)| wi * grid.values[at(c, j, r)])
-                    .sum();
-                is_inside(blend)
-            });
+                    .sum()
+            };
+            let edge = cols.iter().any(|&(c, j)| hits[j * n + c] < 0);
+            let (mut v_max, mut r_max) = (f32::NEG_INFINITY, first);
+            for r in first..n {
+                let b = blend(r);
+                if b > v_max {
+                    (v_max, r_max) = (b, r);
+                }
+                if !edge && is_inside(b) {
+                    break;
+                }
+            }
+            out[v * size + u] = if edge {
+                let a = cols.map(|(c, j)| grid.values[at(c, j, r_max)]);
+                let gx = (1.0 - fy) * (a[1] - a[0]) + fy * (a[3] - a[2]);
+                let gy = (1.0 - fx) * (a[2] - a[0]) + fx * (a[3] - a[1]);
+                edge_coverage(v_max, per_px * (gx * gx + gy * gy).sqrt())
+            } else if is_inside(v_max) {
+                1.0
+            } else {
+                0.0
+            };
         }
     }
     out
+}
+
+/// The overlap of two coverage maps, the sum of the smaller over the sum of the larger (the
+/// IoU of binary maps; 1 for two empty ones).
+pub(super) fn soft_iou(a: &[f32], b: &[f32]) -> f64 {
+    let (mut lo, mut hi) = (0.0f64, 0.0f64);
+    for (&x, &y) in a.iter().zip(b) {
+        lo += x.min(y) as f64;
+        hi += x.max(y) as f64;
+    }
+    if hi > 0.0 { lo / hi } else { 1.0 }
 }
 
 #[cfg(test)]
@@ -167,6 +215,19 @@ mod tests {
             }
             let d = iou(&sa, &sb);
             assert!(d > 0.94, "{along:?}: displayed IoU {d}, hit maps {hit_iou}");
+            // Antialiased, the edge pixels fade: partial coverage, in [0, 1], and the two
+            // frames overlap more than their whole pixels do.
+            let (ca, cb) = (
+                coverage(&ga, &ha, along, size),
+                coverage(&gb, &hb, along, size),
+            );
+            assert!(ca.iter().chain(&cb).all(|c| (0.0..=1.0).contains(c)));
+            assert!(cb.iter().any(|&c| c > 0.0 && c < 1.0), "{along:?}");
+            let soft = soft_iou(&ca, &cb);
+            assert!(
+                soft > d && soft < 1.0,
+                "{along:?}: antialiased {soft}, whole {d}"
+            );
             // At the grid's size the display is the hit map.
             let hb_bits: Vec<bool> = hb.iter().map(|&h| h >= 0).collect();
             assert_eq!(silhouette(&gb, &hb, along, n), hb_bits, "{along:?}");

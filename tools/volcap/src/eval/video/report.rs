@@ -208,26 +208,31 @@ fn display_table(md: &mut String, a: &TemporalArgs, rows: &[VideoRow]) {
          values by fractions of a cell. Consecutive-frame silhouette IoU, mean / worst, and how \
          far the crop (the display's frame: the person moves on the display where it moves) \
          moved between frames, in the grid's cells (the largest of its shift across, down, and \
-         its scale's move of the cube's edge):\n",
+         its scale's move of the cube's edge). Antialiased: the outline drawn with partial \
+         pixels (`render.antialias`, the main job's), the overlap of consecutive coverage maps \
+         (the sum of the smaller coverage over the sum of the larger; the IoU of whole \
+         pixels):\n",
         a.display_size
     );
     let _ = writeln!(
         md,
-        "| scene | setting | side: columns | side: as displayed | front: columns | front: as displayed | crop's move, cells: mean / largest |\n|---|---|---|---|---|---|---|"
+        "| scene | setting | side: columns | side: as displayed | side: antialiased | front: columns | front: as displayed | front: antialiased | crop's move, cells: mean / largest |\n|---|---|---|---|---|---|---|---|---|"
     );
     let pair = |v: Option<(f64, f64)>| v.map_or("-".into(), |(m, w)| format!("{m:.4} / {w:.4}"));
     for r in still {
         let _ = writeln!(
             md,
-            "| {} | {} | {:.4} / {:.4} | {} | {:.4} / {:.4} | {} | {} |",
+            "| {} | {} | {:.4} / {:.4} | {} | {} | {:.4} / {:.4} | {} | {} | {} |",
             r.scene,
             r.setting,
             r.side_iou_mean,
             r.side_iou_min,
             pair(r.side_display_iou),
+            pair(r.side_display_aa_iou),
             r.front_iou_mean,
             r.front_iou_min,
             pair(r.front_display_iou),
+            pair(r.front_display_aa_iou),
             r.crop_move_cells
                 .map_or("-".into(), |(m, w)| format!("{m:.2} / {w:.2}"))
         );
