@@ -272,6 +272,7 @@ fn temporal_section_defaults_bounds_and_off() {
         ("mask_hold_frames = 0", "temporal.mask_hold_frames"),
         ("map_change_cutoff_hz = 0", "temporal.map_change_cutoff_hz"),
         ("crop_hold = 0.2", "temporal.crop_hold"),
+        ("mask_dead_band = 0.6", "temporal.mask_dead_band"),
     ] {
         let e = Config::parse(&format!("{base}[temporal]\n{extra}\n"), Path::new("b.toml"))
             .unwrap_err();

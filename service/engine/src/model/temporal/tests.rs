@@ -511,3 +511,57 @@ fn a_still_crop_holds_and_a_moving_one_trails_by_the_play() {
         assert!((h.s - f.s).abs() <= play + 1e-6);
     }
 }
+
+/// `mask_dead_band`: a still person's outline pixels that tremble on their side of 0.5
+/// (0.6 <-> 0.7, 0.3 <-> 0.4) are given out exactly as on the first frame, so the mask's
+/// 0.5 contour (the field's gate) does not slide; without the band they pass through; a
+/// value leaving the band (0.6 -> 0.95) passes at once, and where a block of pixels changes
+/// side (a raised arm) the new values pass on their first frame.
+#[test]
+fn the_mask_dead_band_holds_a_trembling_outline_and_lets_motion_through() {
+    let edge = |inner: f32, outer: f32| {
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        for y in 40..220 {
+            m[y * S + 149] = inner;
+            m[y * S + 150] = outer;
+        }
+        m
+    };
+    for dead in [0.0f32, 0.15] {
+        let mut t = Temporal::new(TemporalSettings {
+            mask_dead_band: dead,
+            ..TemporalSettings::default()
+        });
+        let mut first = edge(0.6, 0.3);
+        let c = crop_of(&first);
+        t.steady_input(0.0, 1, &mut first, c);
+        for k in 1..12 {
+            let (inner, outer) = if k % 2 == 0 { (0.6, 0.3) } else { (0.7, 0.4) };
+            let mut m = edge(inner, outer);
+            t.steady_input(k as f64 / 30.0, 1, &mut m, c);
+            let (got_in, got_out) = (m[100 * S + 149], m[100 * S + 150]);
+            if dead > 0.0 {
+                assert_eq!((got_in, got_out), (0.6, 0.3), "frame {k}: held");
+                assert_eq!(m, first, "frame {k}: the whole mask as on the first frame");
+            } else {
+                assert_eq!((got_in, got_out), (inner, outer), "frame {k}: off");
+            }
+        }
+        // A value leaving the band passes at once.
+        let mut m = edge(0.95, 0.3);
+        t.steady_input(12.0 / 30.0, 1, &mut m, c);
+        assert_eq!(m[100 * S + 149], 0.95, "dead band {dead}");
+        // A block of pixels changing side (an arm out of the body's side): followed, and
+        // the pixels beside it that stay on their side but change (0.95 -> 0.9) with it.
+        let mut m = edge(0.95, 0.3);
+        for y in 60..120 {
+            m[y * S + 149] = 0.9;
+            for x in 150..170 {
+                m[y * S + x] = 0.62;
+            }
+        }
+        t.steady_input(13.0 / 30.0, 1, &mut m, c);
+        assert_eq!(m[80 * S + 160], 0.62, "dead band {dead}: the arm");
+        assert_eq!(m[80 * S + 149], 0.9, "dead band {dead}: beside the arm");
+    }
+}
