@@ -31,6 +31,7 @@ use crate::grid::{BitSet, Grid, GridSpec};
 use crate::localize::{Hierarchical, HierarchicalMode, LocalizeError, check_coarse};
 pub use bytes::{rgb8, to_u8};
 use columns::{col_k, crossing_depth, first_hits, update_hits};
+pub use display::{edge_coverage, outline_coverage};
 use glam::Vec3;
 
 mod bytes;
@@ -128,28 +129,6 @@ pub struct Renderer {
     on_gpu: bool,
     /// Partial pixels along the outline in the display image ([`Self::set_antialias`]).
     antialias: bool,
-}
-
-/// The fraction of a display pixel an outline covers, from the largest blended occupancy
-/// `v` along its ray and the size of that value's gradient across the image, `grad`, in
-/// occupancy per display pixel: `(v - 0.5) / grad` is the pixel centre's signed distance to
-/// the outline (inside positive) in pixels, and a pixel-wide ramp around it gives
-/// `clamp(0.5 + distance, 0, 1)`. Above one half exactly where `v` is inside
-/// ([`crate::grid::is_inside`]), so the binary rule's outline stays where it was; a flat
-/// value (`grad` ~ 0) or one that is not finite gives the binary rule's 0 or 1, and the
-/// result is always finite.
-pub fn edge_coverage(v: f32, grad: f32) -> f32 {
-    let inside = if crate::grid::is_inside(v) { 1.0 } else { 0.0 };
-    if !(grad > 1e-6 && grad.is_finite() && v.is_finite()) {
-        return inside;
-    }
-    let c = (0.5 + (v - crate::grid::ISO) / grad).clamp(0.0, 1.0);
-    // At exactly 0.5 the binary rule says outside: keep the halves on its side.
-    if inside == 0.0 {
-        c.min(0.5)
-    } else {
-        c.max(0.5 + f32::EPSILON)
-    }
 }
 
 impl Renderer {
@@ -616,55 +595,6 @@ mod tests {
     use super::*;
     use crate::analytic::AnalyticScene;
     use crate::grid::IndexBox;
-
-    /// `edge_coverage` against its f64 reference on a lattice of values and gradients, and
-    /// on what input can bring (NaN, infinities, a zero, negative or tiny gradient, values
-    /// far outside [0, 1]): always finite and in [0, 1], above one half exactly where the
-    /// value is inside, monotone in the value.
-    #[test]
-    fn edge_coverage_is_finite_and_keeps_the_binary_side() {
-        let reference = |v: f64, g: f64| (0.5 + (v - 0.5) / g).clamp(0.0, 1.0);
-        let specials = [
-            f32::NAN,
-            f32::INFINITY,
-            f32::NEG_INFINITY,
-            0.0,
-            -1.0,
-            1e-30,
-            1e-7,
-            f32::MAX,
-            -f32::MAX,
-            0.5,
-            0.5 + f32::EPSILON,
-            1e30,
-            -1e30,
-        ];
-        let grads = [0.0, 1e-3, 0.05, 0.25, 0.5, 1.0, 4.0];
-        for &v in specials.iter().chain(
-            (0..=200)
-                .map(|i| i as f32 / 200.0)
-                .collect::<Vec<_>>()
-                .iter(),
-        ) {
-            for &g in specials.iter().chain(&grads) {
-                let c = edge_coverage(v, g);
-                assert!(c.is_finite() && (0.0..=1.0).contains(&c), "{v} {g}: {c}");
-                assert_eq!(c > 0.5, crate::grid::is_inside(v), "{v} {g}: {c}");
-                if v.is_finite() && g.is_finite() && g > 1e-3 {
-                    let want = reference(v as f64, g as f64);
-                    // The guard keeps an inside value's half above 0.5 by an ulp.
-                    assert!((c as f64 - want).abs() < 1e-6, "{v} {g}: {c} vs {want}");
-                }
-            }
-        }
-        // Monotone in the value at a fixed gradient.
-        for g in grads.into_iter().skip(1) {
-            let cs: Vec<f32> = (0..=1000)
-                .map(|i| edge_coverage(i as f32 / 1000.0, g))
-                .collect();
-            assert!(cs.windows(2).all(|w| w[0] <= w[1]), "{g}");
-        }
-    }
 
     /// The incremental hit update equals a full scan of the final grid, on scenes with thin
     /// parts, several bodies and refuted hits.

@@ -25,7 +25,7 @@ fn to_u8(x: f32) -> u32 {
     return u32(floor(clamp(x, 0.0, 1.0) * 255.0 + 0.5));
 }
 
-// render.rs `edge_coverage`.
+// render/display.rs `edge_coverage`.
 fn edge_coverage(v: f32, grad: f32) -> f32 {
     let inside = v > 0.5;
     // `v == v` and the bound: finite (NaN and infinities fail one of them).

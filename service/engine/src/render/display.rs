@@ -5,7 +5,7 @@
 //!
 //! **Antialiased edges** ([`super::Renderer::set_antialias`]): where one of a pixel's four
 //! columns has no hit (the person's outline against the background), the pixel is covered
-//! by the fraction [`super::edge_coverage`] gives: the largest blended value along its ray
+//! by the fraction [`edge_coverage`] gives: the largest blended value along its ray
 //! (the one the binary rule tests against 0.5), its distance from 0.5 over the blend's
 //! gradient across the image at that ray index (in display pixels), read as a signed
 //! distance to the outline; the pixel's colour is composited over the background by it.
@@ -15,7 +15,7 @@
 //! columns all hit (an arm in front of the body) stay whole.
 
 use super::columns::crossing_depth;
-use super::{edge_coverage, to_u8};
+use super::to_u8;
 use crate::grid::{Grid, is_inside};
 
 /// What the display image is drawn from: the localized grid and, per grid column, its hit
@@ -27,6 +27,39 @@ pub(super) struct Columns<'a> {
     pub color: &'a [[f32; 3]],
     /// Partial pixels along the outline (the module's doc).
     pub antialias: bool,
+}
+
+/// The fraction of a display pixel an outline covers, from the largest blended occupancy
+/// `v` along its ray and the size of that value's gradient across the image, `grad`, in
+/// occupancy per display pixel: `(v - 0.5) / grad` is the pixel centre's signed distance to
+/// the outline (inside positive) in pixels, and a pixel-wide ramp around it gives
+/// `clamp(0.5 + distance, 0, 1)`. Above one half exactly where `v` is inside
+/// ([`is_inside`]), so the binary rule's outline stays where it was; a flat
+/// value (`grad` ~ 0) or one that is not finite gives the binary rule's 0 or 1, and the
+/// result is always finite.
+pub fn edge_coverage(v: f32, grad: f32) -> f32 {
+    let inside = if is_inside(v) { 1.0 } else { 0.0 };
+    if !(grad > 1e-6 && grad.is_finite() && v.is_finite()) {
+        return inside;
+    }
+    let c = (0.5 + (v - crate::grid::ISO) / grad).clamp(0.0, 1.0);
+    // At exactly 0.5 the binary rule says outside: keep the halves on its side.
+    if inside == 0.0 {
+        c.min(0.5)
+    } else {
+        c.max(0.5 + f32::EPSILON)
+    }
+}
+
+/// [`edge_coverage`] of a display pixel between four grid columns: `v` the largest blended
+/// value along its ray, `corners` the four columns' values at that ray index (in the order
+/// `(i0, j0), (i1, j0), (i0, j1), (i1, j1)`), `(fx, fy)` the pixel's fractions between them
+/// and `per_px` grid columns a display pixel: the bilinear blend's gradient there, per pixel.
+pub fn outline_coverage(v: f32, corners: [f32; 4], fx: f32, fy: f32, per_px: f32) -> f32 {
+    let a = corners;
+    let gx = (1.0 - fy) * (a[1] - a[0]) + fy * (a[3] - a[2]);
+    let gy = (1.0 - fx) * (a[2] - a[0]) + fx * (a[3] - a[1]);
+    edge_coverage(v, per_px * (gx * gx + gy * gy).sqrt())
 }
 
 /// Display rows per band at least: a band's work should outweigh starting its thread.
@@ -132,10 +165,7 @@ fn rows_into(c: &Columns<'_>, size: usize, v0: usize, rgba: &mut [u8], depth: &m
             let cover = if edge {
                 // The blend's gradient across the image at the largest value's ray index,
                 // per display pixel (`per_px` grid columns a pixel).
-                let a = cols.map(|col| at(col, k_max));
-                let gx = (1.0 - fy) * (a[1] - a[0]) + fy * (a[3] - a[2]);
-                let gy = (1.0 - fx) * (a[2] - a[0]) + fx * (a[3] - a[1]);
-                edge_coverage(v_max, per_px * (gx * gx + gy * gy).sqrt())
+                outline_coverage(v_max, cols.map(|col| at(col, k_max)), fx, fy, per_px)
             } else if found.is_some() {
                 1.0
             } else {
@@ -185,6 +215,60 @@ fn rows_into(c: &Columns<'_>, size: usize, v0: usize, rgba: &mut [u8], depth: &m
                 px[3] = to_u8(alpha);
             }
             row_z[u] = z;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `edge_coverage` against its f64 reference on a lattice of values and gradients, and
+    /// on what input can bring (NaN, infinities, a zero, negative or tiny gradient, values
+    /// far outside [0, 1]): always finite and in [0, 1], above one half exactly where the
+    /// value is inside, monotone in the value.
+    #[test]
+    fn edge_coverage_is_finite_and_keeps_the_binary_side() {
+        let reference = |v: f64, g: f64| (0.5 + (v - 0.5) / g).clamp(0.0, 1.0);
+        let specials = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -1.0,
+            1e-30,
+            1e-7,
+            f32::MAX,
+            -f32::MAX,
+            0.5,
+            0.5 + f32::EPSILON,
+            1e30,
+            -1e30,
+        ];
+        let grads = [0.0, 1e-3, 0.05, 0.25, 0.5, 1.0, 4.0];
+        for &v in specials.iter().chain(
+            (0..=200)
+                .map(|i| i as f32 / 200.0)
+                .collect::<Vec<_>>()
+                .iter(),
+        ) {
+            for &g in specials.iter().chain(&grads) {
+                let c = edge_coverage(v, g);
+                assert!(c.is_finite() && (0.0..=1.0).contains(&c), "{v} {g}: {c}");
+                assert_eq!(c > 0.5, is_inside(v), "{v} {g}: {c}");
+                if v.is_finite() && g.is_finite() && g > 1e-3 {
+                    let want = reference(v as f64, g as f64);
+                    // The guard keeps an inside value's half above 0.5 by an ulp.
+                    assert!((c as f64 - want).abs() < 1e-6, "{v} {g}: {c} vs {want}");
+                }
+            }
+        }
+        // Monotone in the value at a fixed gradient.
+        for g in grads.into_iter().skip(1) {
+            let cs: Vec<f32> = (0..=1000)
+                .map(|i| edge_coverage(i as f32 / 1000.0, g))
+                .collect();
+            assert!(cs.windows(2).all(|w| w[0] <= w[1]), "{g}");
         }
     }
 }

@@ -149,3 +149,27 @@ pub fn values(n: usize, seed: usize) -> Vec<f32> {
         .map(|i| (((i + seed) * 37 % 101) as f32 / 50.0) - 1.0)
         .collect()
 }
+
+/// Every analytic scene with its values at every point of `spec`'s grid (evaluated on the
+/// host: the table field the adapter's localizer and renderer read).
+pub fn analytic_tables(
+    spec: volcap_engine::grid::GridSpec,
+) -> Vec<(
+    &'static str,
+    volcap_engine::analytic::AnalyticScene,
+    Vec<f32>,
+)> {
+    use volcap_engine::field::OccupancyField;
+    let pts: Vec<glam::Vec3> = (0..spec.len())
+        .map(|q| spec.world(spec.unlinear(q)))
+        .collect();
+    volcap_engine::analytic::SCENES
+        .iter()
+        .map(|&name| {
+            let scene = volcap_engine::analytic::AnalyticScene::by_name(name).unwrap();
+            let mut table = vec![0.0f32; spec.len()];
+            scene.occupancy(&pts, &mut table).unwrap();
+            (name, scene, table)
+        })
+        .collect()
+}

@@ -11,7 +11,7 @@
 //! fractions of a cell. Consecutive frames compared this way give the flicker a viewer sees.
 
 use volcap_engine::grid::{Grid, is_inside};
-use volcap_engine::render::edge_coverage;
+use volcap_engine::render::outline_coverage;
 
 /// The direction a view looks along.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -48,7 +48,7 @@ pub(super) fn shown(cover: &[f32]) -> Vec<bool> {
 
 /// [`silhouette`] with the outline antialiased as the renderer draws it
 /// (`Renderer::set_antialias`, the main job's `render.antialias`): where one of a pixel's
-/// four columns has no hit, its coverage is `volcap_engine::render::edge_coverage` of the
+/// four columns has no hit, its coverage is `volcap_engine::render::outline_coverage` of the
 /// largest blended value along its ray and that value's gradient across the image at its
 /// ray index; elsewhere 0 or 1. More than half exactly where [`silhouette`] shows the
 /// person.
@@ -103,10 +103,8 @@ pub(super) fn coverage(grid: &Grid, hits: &[i32], along: Along, size: usize) -> 
                 }
             }
             out[v * size + u] = if edge {
-                let a = cols.map(|(c, j)| grid.values[at(c, j, r_max)]);
-                let gx = (1.0 - fy) * (a[1] - a[0]) + fy * (a[3] - a[2]);
-                let gy = (1.0 - fx) * (a[2] - a[0]) + fx * (a[3] - a[1]);
-                edge_coverage(v_max, per_px * (gx * gx + gy * gy).sqrt())
+                let corners = cols.map(|(c, j)| grid.values[at(c, j, r_max)]);
+                outline_coverage(v_max, corners, fx, fy, per_px)
             } else if is_inside(v_max) {
                 1.0
             } else {
