@@ -161,6 +161,10 @@ pub struct Shared {
     /// ...and how often it started again (a new person, a people count change, a gap, a
     /// close-range switch, a frame without a person).
     pub temporal_resets: AtomicU64,
+    /// The grid points the render stage gave out on last frame's side (`[temporal]
+    /// surface_dead_band`, `volcap_engine::sides`), and the frames it held any in.
+    pub held_sides: AtomicU64,
+    pub held_frames: AtomicU64,
     /// Model mode: the segmentation's track between frames (`[model] segment_full_every`),
     /// shared by the segment threads (each takes a copy, segments, and puts it back)...
     pub segment_track: Mutex<volcap_engine::model::SegmentTrack>,
@@ -234,6 +238,8 @@ impl Shared {
                 .then(|| cfg.temporal.settings())
                 .flatten(),
             temporal_resets: AtomicU64::new(0),
+            held_sides: AtomicU64::new(0),
+            held_frames: AtomicU64::new(0),
             // Model mode only (the other modes segment nothing); one pass turns it off
             // (`set_segment_passes`).
             segment_track: Mutex::new(volcap_engine::model::SegmentTrack::new(

@@ -48,7 +48,11 @@ fn the_main_job_shows_the_reconstruction() {
             .unwrap();
     let given = shipped["temporal"].as_table().unwrap();
     let settings = s["temporal"]["settings"].as_object().unwrap();
-    assert_eq!(settings.len(), 13, "{s}");
+    assert_eq!(settings.len(), 14, "{s}");
+    // The surface's dead band counts what it held (the walk's crop moves: maybe nothing).
+    let held = &s["temporal"]["held_sides"];
+    let (frames, points) = (held["frames"].as_u64(), held["points"].as_u64());
+    assert!(frames.is_some() && points >= frames, "{s}");
     assert!(given.len() > 1, "sim.toml sets a filter key: {given:?}");
     for (key, value) in given.iter().filter(|(k, _)| *k != "enabled") {
         let file = value.as_float().or(value.as_integer().map(|v| v as f64));

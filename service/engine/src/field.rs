@@ -75,6 +75,8 @@ pub struct Evaluator<'f> {
     /// `spec.coord(i)` for every `i` of the last grid evaluated (the same values, without a
     /// division per point).
     coords: Vec<f32>,
+    /// The surface's dead band ([`crate::sides`]), applied to every grid value written.
+    sides: Option<&'f mut crate::sides::HeldSides>,
 }
 
 /// Smallest batch part worth a thread of its own (below it, one thread evaluates).
@@ -127,7 +129,16 @@ impl<'f> Evaluator<'f> {
             threads: 1,
             field_time: std::time::Duration::ZERO,
             coords: Vec::new(),
+            sides: None,
         }
+    }
+
+    /// Give the grid points out through `sides` ([`crate::sides::HeldSides`], begun for this
+    /// frame): a point within its band of the level on the other side of last frame's keeps
+    /// that side.
+    pub fn with_sides(mut self, sides: &'f mut crate::sides::HeldSides) -> Self {
+        self.sides = Some(sides);
+        self
     }
 
     /// Evaluate each batch on up to `threads` threads (1: the calling thread only).
@@ -201,9 +212,19 @@ impl<'f> Evaluator<'f> {
             self.count += chunk.len() as u64;
             let out = &self.out[..chunk.len()];
             self.check(out, Some(spec), chunk)?;
-            for (&l, &v) in chunk.iter().zip(out) {
-                grid.values[l as usize] = v;
-                grid.evaluated.set(l as usize);
+            match self.sides.as_deref_mut() {
+                Some(sides) => {
+                    for (&l, &v) in chunk.iter().zip(out) {
+                        grid.values[l as usize] = sides.apply(l as usize, v);
+                        grid.evaluated.set(l as usize);
+                    }
+                }
+                None => {
+                    for (&l, &v) in chunk.iter().zip(out) {
+                        grid.values[l as usize] = v;
+                        grid.evaluated.set(l as usize);
+                    }
+                }
             }
         }
         Ok(())

@@ -83,6 +83,8 @@ pub struct RenderStats {
     /// Level `L - 1` points of pieces apart from the body, set outside
     /// ([`RenderOptions::drop_apart`]).
     pub dropped_apart: u64,
+    /// Grid points given out as last frame ([`Renderer::hold_sides`]).
+    pub held_sides: u64,
 }
 
 /// Where the last frame's time went (wall ms on the calling thread): the parts the pipeline
@@ -129,6 +131,9 @@ pub struct Renderer {
     on_gpu: bool,
     /// Partial pixels along the outline in the display image ([`Self::set_antialias`]).
     antialias: bool,
+    /// The surface's dead band ([`crate::sides`]) and the next frame's band and alignment.
+    sides: crate::sides::HeldSides,
+    hold: (f32, Option<u64>),
 }
 
 impl Renderer {
@@ -148,6 +153,14 @@ impl Renderer {
     /// is the grid image). The same on the adapter ([`Self::render_display_gpu`]).
     pub fn set_antialias(&mut self, on: bool) {
         self.antialias = on;
+    }
+
+    /// Hold grid values within `band` of those given out last frame, and sides within `band`
+    /// of the level, in the next frame ([`crate::sides`]) when its alignment `key` (what puts
+    /// a grid point at the same place in the field: the view and the crop) is the last
+    /// frame's; given for one frame (a frame without it forgets them).
+    pub fn hold_sides(&mut self, band: f32, key: Option<u64>) {
+        self.hold = (band, key);
     }
 
     /// Render `field` coloured by `colors` on a grid of level `spec.level()`.
@@ -171,7 +184,12 @@ impl Renderer {
         let mut stats = RenderStats::default();
 
         // 1. Localize to L - 1 inside the level-L grid.
+        let (band, key) = std::mem::take(&mut self.hold);
+        self.sides.begin(band, key, spec.len());
         let mut ev = Evaluator::new(field).with_threads(self.threads);
+        if self.sides.active() {
+            ev = ev.with_sides(&mut self.sides);
+        }
         self.hier
             .run(&mut ev, grid, coarse, big_l - 1, HierarchicalMode::Paper)?;
         stats.coarse_evaluations = ev.count();
@@ -274,6 +292,8 @@ impl Renderer {
         }
         stats.culled = self.culled.len() as u64;
         stats.final_evaluations = ev.count() - before;
+        drop(ev);
+        stats.held_sides = self.sides.held();
 
         // 4. Surface by interpolation at the first hit (computed above).
         self.depth.clear();
@@ -314,6 +334,9 @@ impl Renderer {
         opts: &RenderOptions,
     ) -> Result<RenderStats, LocalizeError> {
         let t = std::time::Instant::now();
+        // No dead band on the adapter yet: a CPU frame after this one starts afresh.
+        self.hold = Default::default();
+        self.sides.forget();
         let fine = spec
             .coarser()
             .ok_or(crate::grid::GridError::BadResolution(spec.n()))?;

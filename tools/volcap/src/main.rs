@@ -123,6 +123,10 @@ pub struct PipelineArgs {
     /// is on).
     #[arg(long, value_delimiter = ',', default_value = "true")]
     pub temporal: Vec<bool>,
+    /// `[temporal] surface_dead_band` with the filter on (comma-separated; the daemon's
+    /// default when not given): what holding the grid's values costs the render stage.
+    #[arg(long = "surface-dead-band", value_delimiter = ',')]
+    pub surface_dead_band: Vec<f32>,
     /// The render view's yaw about the person (`render.yaw`, degrees, comma-separated): 0 is
     /// the camera's own view, where the surface takes the input pixel's colour; any other
     /// runs the colour networks on the surface points (what turning the view costs).

@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
+use volcap_engine::model::temporal::TemporalSettings;
 use volcap_engine::model::{Models, Precision, Runtime, RuntimeChoice};
 use volcapd::capture::Camera;
 use volcapd::capture::replay::{ReplayCamera, Still};
@@ -42,6 +43,10 @@ pub struct Row {
     pub antialias: bool,
     /// `[temporal] enabled` of the run.
     pub temporal: bool,
+    /// `[temporal] surface_dead_band` of the run (0 with the filter off; rows written
+    /// before the setting: 0, none).
+    #[serde(default)]
+    pub surface_dead_band: f32,
     /// `render.yaw` of the run, degrees (0: the camera's view).
     pub yaw_deg: f32,
     /// Frames published per second over the measured window.
@@ -138,7 +143,7 @@ fn frames(scene: &Path, n: usize) -> anyhow::Result<Vec<Still>> {
 }
 
 /// One configuration: model, precision, resolution, coarse level, threads, segment split,
-/// display size, temporal filter on, view yaw.
+/// display size, temporal filter on (and its surface dead band), view yaw.
 type Setup = (
     String,
     Precision,
@@ -147,7 +152,7 @@ type Setup = (
     usize,
     usize,
     (usize, bool),
-    bool,
+    (bool, f32),
     f32,
     (
         usize,
@@ -171,7 +176,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
         threads,
         split,
         (display, antialias),
-        temporal,
+        (temporal, band),
         yaw,
         (rounds, waits, device, (passes, full_every), apart, (workers, seg_workers)),
     ) = setup;
@@ -183,7 +188,7 @@ fn config(scene: &Path, models_dir: &Path, setup: &Setup, runtime: &str) -> anyh
          [model]\nname = {name:?}\nprecision = \"{}\"\ndir = {models_dir:?}\nsegment_passes = {passes}\nsegment_full_every = {full_every}\n\
          [compute]\nthreads = {threads}\nsegment_thread_up_to = {split}\nruntime = {runtime:?}\nrounds_per_wait = {rounds}\nround_waits = {waits:?}\nrender_device = {device:?}\nrender_workers = {workers}\nsegment_workers = {seg_workers}\n\
          [dbus]\nbus = \"none\"\n\
-         [temporal]\nenabled = {temporal}\n",
+         [temporal]\nenabled = {temporal}\nsurface_dead_band = {band:?}\n",
         match prec {
             Precision::F32 => "f32",
             Precision::Int8 => "int8",
@@ -257,6 +262,7 @@ fn measure(
         display_size: cfg.render.display_size,
         antialias: cfg.render.antialias,
         temporal: cfg.temporal.enabled,
+        surface_dead_band: cfg.temporal.settings().map_or(0.0, |t| t.surface_dead_band),
         yaw_deg: cfg.render.yaw,
         fps: published as f64 / wall,
         latency_p50_ms: l50,
@@ -405,7 +411,17 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                         .iter()
                         .flat_map(|&d| a.antialias.iter().map(move |&aa| (d, aa)))
                     {
-                        for &tf in &a.temporal {
+                        let bands = if a.surface_dead_band.is_empty() {
+                            vec![TemporalSettings::default().surface_dead_band]
+                        } else {
+                            a.surface_dead_band.clone()
+                        };
+                        // The band only with the filter on.
+                        let filters = a.temporal.iter().flat_map(|&on| {
+                            let bands = if on { bands.clone() } else { vec![0.0] };
+                            bands.into_iter().map(move |b| (on, b))
+                        });
+                        for tf in filters {
                             for &yaw in &a.yaws {
                                 for (&rounds, &waits) in a
                                     .rounds_per_wait
@@ -532,6 +548,7 @@ pub fn run(a: &PipelineArgs) -> anyhow::Result<()> {
                     && b.display_size == r.display_size
                     && b.antialias == r.antialias
                     && b.temporal == r.temporal
+                    && b.surface_dead_band == r.surface_dead_band
                     && b.yaw_deg == r.yaw_deg
                     && b.rounds_per_wait == r.rounds_per_wait
                     && b.render_device == r.render_device

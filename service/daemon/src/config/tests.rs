@@ -273,6 +273,7 @@ fn temporal_section_defaults_bounds_and_off() {
         ("map_change_cutoff_hz = 0", "temporal.map_change_cutoff_hz"),
         ("crop_hold = 0.2", "temporal.crop_hold"),
         ("mask_dead_band = 0.6", "temporal.mask_dead_band"),
+        ("surface_dead_band = -0.1", "temporal.surface_dead_band"),
     ] {
         let e = Config::parse(&format!("{base}[temporal]\n{extra}\n"), Path::new("b.toml"))
             .unwrap_err();

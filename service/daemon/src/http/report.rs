@@ -95,6 +95,11 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
         "temporal": sh.temporal.as_ref().map(|settings| serde_json::json!({
             "resets": sh.temporal_resets.load(Ordering::Relaxed),
             "settings": crate::config::temporal_json(settings),
+            "held_sides": {
+                "points": sh.held_sides.load(Ordering::Relaxed),
+                "frames": sh.held_frames.load(Ordering::Relaxed),
+                "note": "temporal.surface_dead_band: grid points given out as in the last frame (their occupancy moved by less than the band, or crossed the level by less than it, while the crop was held and the view not turned), in all, and the rendered frames with any (the CPU renderer's: frames drawn on the GPU backend's adapter hold nothing yet)",
+            },
         })),
         "segment_track": segment_track(sh),
         "drop_apart": {

@@ -113,6 +113,9 @@ pub(super) fn spawn(
                         let field = Arc::new(field);
                         *sh.latest_field.lock().unwrap_or_else(|p| p.into_inner()) =
                             Some(field.clone());
+                        // The surface's dead band, while the crop and the view stay put.
+                        let band = sh.temporal.map_or(0.0, |t| t.surface_dead_band);
+                        renderer.hold_sides(band, Some(field.alignment_key()));
                         let rgba = match on_adapter.as_mut() {
                             Some(a) => a.render(&mut renderer, &sh, field.as_ref(), &live),
                             None => render_field(
@@ -257,6 +260,10 @@ pub(super) fn finish_render(
         Ok((st, times)) => {
             let n = st.coarse_evaluations + st.final_evaluations + st.normal_evaluations;
             sh.evaluations.fetch_add(n, Ordering::Relaxed);
+            if st.held_sides > 0 {
+                sh.held_frames.fetch_add(1, Ordering::Relaxed);
+                sh.held_sides.fetch_add(st.held_sides, Ordering::Relaxed);
+            }
             if st.dropped_apart > 0 {
                 sh.apart_frames.fetch_add(1, Ordering::Relaxed);
                 sh.apart_points

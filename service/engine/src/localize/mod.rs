@@ -186,6 +186,9 @@ pub struct Localizer {
     scratch: Scratch,
     threads: usize,
     field_time: std::time::Duration,
+    /// The surface's dead band ([`crate::sides`]) and the next run's band and alignment.
+    sides: crate::sides::HeldSides,
+    hold: (f32, Option<u64>),
 }
 
 /// Reusable scratch shared by the baseline methods.
@@ -207,6 +210,23 @@ impl Localizer {
     /// and the evaluated set do not depend on it.
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
+    }
+
+    /// Hold grid values within `band` of those given out last run, and sides within `band` of
+    /// the level, in the next [`Localizer::run`] ([`crate::sides`]) when that run's
+    /// alignment `key` is the last run's; given for one run (a run without it forgets them).
+    pub fn hold_sides(&mut self, band: f32, key: Option<u64>) {
+        self.hold = (band, key);
+    }
+
+    /// Forget the values held ([`Localizer::hold_sides`]): the next run starts from none.
+    pub fn forget_sides(&mut self) {
+        self.sides.forget();
+    }
+
+    /// Grid points the last run gave out as the run before it ([`Localizer::hold_sides`]).
+    pub fn held_sides(&self) -> u64 {
+        self.sides.held()
     }
 
     /// Wall time the last [`Localizer::run`] spent inside the field (the rest of its time is
@@ -243,7 +263,12 @@ impl Localizer {
         } else {
             field
         };
+        let (band, key) = std::mem::take(&mut self.hold);
+        self.sides.begin(band, key, spec.len());
         let mut ev = Evaluator::new(field).with_threads(self.threads);
+        if self.sides.active() {
+            ev = ev.with_sides(&mut self.sides);
+        }
         let mut stats = LocalizeStats::default();
         match method {
             Method::Dense => dense::run(&mut ev, grid, &mut self.scratch)?,

@@ -113,6 +113,23 @@ impl ModelField {
         self.color.is_some()
     }
 
+    /// What puts a render-grid point at the same place in this field: the render view's
+    /// transform into the input view and the crop, hashed bit for bit. Two frames with the
+    /// same key (the temporal filter holds the crop while the person is still, and the view
+    /// was not turned) sample their maps at the same pixels and depths for every grid point,
+    /// which the surface's dead band needs ([`crate::sides`]).
+    pub fn alignment_key(&self) -> u64 {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        for v in self.to_crop.to_cols_array() {
+            v.to_bits().hash(&mut h);
+        }
+        for v in [self.crop.s, self.crop.tx, self.crop.ty] {
+            v.to_bits().hash(&mut h);
+        }
+        h.finish()
+    }
+
     /// Where this field's encoding spent its time (all zero for a field not made by
     /// [`super::Models::encode`]).
     pub fn timings(&self) -> EncodeTimings {

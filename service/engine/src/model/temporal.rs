@@ -74,6 +74,11 @@ pub struct TemporalSettings {
     /// 0.9944 at no cost in moving Chamfer or lag (docs/bench/main-job-medium, "The mask's
     /// dead band").
     pub mask_dead_band: f32,
+    /// The surface's dead band ([`crate::sides`], applied by the render stage's localization):
+    /// while the crop and view stay put, a grid value within this of last frame's is given
+    /// out as last frame's, and a side crossed by less than this is kept (0: off; at most
+    /// [`crate::sides::MAX_BAND`]; docs/bench/main-job-medium, "The surface's dead band").
+    pub surface_dead_band: f32,
     /// The maps' cutoff when still, Hz.
     pub map_min_cutoff_hz: f32,
     /// How a map pixel's cutoff opens with its change: Hz per unit of relative change per
@@ -111,6 +116,7 @@ impl Default for TemporalSettings {
             mask_motion: 0.08,
             mask_hold_frames: 2,
             mask_dead_band: 0.1,
+            surface_dead_band: 0.06,
             map_min_cutoff_hz: 0.3,
             map_beta: 1.0,
             map_change_cutoff_hz: 0.7,
@@ -168,6 +174,9 @@ impl TemporalSettings {
         }
         let md = self.mask_dead_band;
         within("mask_dead_band", md, (0.0..=0.5).contains(&md), "[0, 0.5]")?;
+        let sd = self.surface_dead_band;
+        let ok = (0.0..=crate::sides::MAX_BAND).contains(&sd);
+        within("surface_dead_band", sd, ok, "[0, 0.25]")?;
         let iou = self.same_person_iou;
         within("same_person_iou", iou, (0.0..=1.0).contains(&iou), "[0, 1]")?;
         Ok(())

@@ -5,6 +5,7 @@ use anyhow::anyhow;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::Path;
+use volcap_engine::model::temporal::TemporalSettings;
 use volcapd::config::{RenderDevice, RoundWaits};
 
 /// The label's note on `render.drop_apart` where it is not the daemon's default.
@@ -30,6 +31,15 @@ fn display_label(r: &Row) -> String {
         side.to_string()
     } else {
         format!("{side} whole px")
+    }
+}
+
+/// The temporal filter, with its surface dead band when it has one.
+fn temporal_label(r: &Row) -> String {
+    match (r.temporal, r.surface_dead_band) {
+        (false, _) => "off".into(),
+        (true, b) if b > 0.0 => format!("on, surface band {b}"),
+        (true, _) => "on".into(),
     }
 }
 
@@ -59,7 +69,7 @@ pub(super) fn table(rows: &[Row]) -> String {
             } else {
                 "no"
             },
-            if r.temporal { "on" } else { "off" },
+            temporal_label(r),
             r.yaw_deg,
             r.fps,
             r.speedup_vs_1_thread
@@ -179,6 +189,11 @@ pub(super) fn parts_table(rows: &[Row]) -> String {
                 }
                 if !r.antialias {
                     notes.push("whole px".into());
+                }
+                if r.temporal
+                    && r.surface_dead_band != TemporalSettings::default().surface_dead_band
+                {
+                    notes.push(format!("surface band {}", r.surface_dead_band));
                 }
                 notes.retain(|n| !n.is_empty());
                 match notes.join(", ") {

@@ -295,6 +295,15 @@ fn nothing_non_finite_comes_out_and_bad_settings_are_named() {
         key == "crop_hold" && msg.contains("crop_hold = 0.5"),
         "{msg}"
     );
+    let bad = TemporalSettings {
+        surface_dead_band: 0.3,
+        ..Default::default()
+    };
+    let (key, msg) = bad.check().unwrap_err();
+    assert!(
+        key == "surface_dead_band" && msg.contains("surface_dead_band = 0.3"),
+        "{msg}"
+    );
     assert!(TemporalSettings::default().check().is_ok());
 }
 

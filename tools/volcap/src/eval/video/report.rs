@@ -67,7 +67,8 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
          (before the filter) against the true mask in the networks' input; segment ms the \
          segment stage's wall time a frame (one thread here, beside nothing else); tracked / \
          lost count the frames segmented in the last frame's crop alone and those where the \
-         track lost the person (`segment_full_every`, the daemon's `[model]` key).\n",
+         track lost the person (`segment_full_every`, the daemon's `[model]` key); held points \
+         the grid points a frame given out as the last frame's (`surface_dead_band`).\n",
         a.res,
         a.coarse_level,
         a.model,
@@ -105,12 +106,12 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
     let _ = writeln!(md, "\n## Per scene\n");
     let _ = writeln!(
         md,
-        "| scene | kind | setting | front IoU mean / worst | side IoU mean / worst | depth change front / side cm | Chamfer cm | P2S cm | IoU | jitter front / side cm | lag | resets | failed | mask IoU | segment ms | tracked / lost |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| scene | kind | setting | front IoU mean / worst | side IoU mean / worst | depth change front / side cm | Chamfer cm | P2S cm | IoU | jitter front / side cm | lag | resets | failed | mask IoU | segment ms | tracked / lost | held points a frame |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {:.4} / {:.4} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} | {:.3} | {:.4} | {:+.3} / {:+.3} | {} | {} | {} | {:.4} | {:.1} | {} / {} |",
+            "| {} | {} | {} | {:.4} / {:.4} | {:.4} / {:.4} | {:.3} / {:.3} | {:.3} | {:.3} | {:.4} | {:+.3} / {:+.3} | {} | {} | {} | {:.4} | {:.1} | {} / {} | {:.0} |",
             r.scene,
             r.kind,
             r.setting,
@@ -131,7 +132,8 @@ pub(super) fn report(a: &TemporalArgs, rows: &[VideoRow]) -> String {
             r.mask_iou,
             r.segment_ms,
             r.tracked_frames,
-            r.lost_frames
+            r.lost_frames,
+            r.held_sides
         );
     }
     md

@@ -67,6 +67,7 @@ pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
             "mask_high" => &mut t.mask_high,
             "mask_motion" => &mut t.mask_motion,
             "mask_dead_band" => &mut t.mask_dead_band,
+            "surface_dead_band" => &mut t.surface_dead_band,
             "map_min_cutoff_hz" => &mut t.map_min_cutoff_hz,
             "map_beta" => &mut t.map_beta,
             "map_change_cutoff_hz" => &mut t.map_change_cutoff_hz,
