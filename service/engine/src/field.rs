@@ -134,8 +134,8 @@ impl<'f> Evaluator<'f> {
     }
 
     /// Give the grid points out through `sides` ([`crate::sides::HeldSides`], begun for this
-    /// frame): a point within its band of the level on the other side of last frame's keeps
-    /// that side.
+    /// frame): a value within the band of last frame's is given out as that, a side crossed
+    /// by less than the band is kept.
     pub fn with_sides(mut self, sides: &'f mut crate::sides::HeldSides) -> Self {
         self.sides = Some(sides);
         self

@@ -28,8 +28,9 @@
 //!
 //! Every evaluation path writes grid values through [`crate::field::Evaluator::eval_grid`],
 //! which applies the memory when one is attached ([`crate::field::Evaluator::with_sides`]):
-//! every localization level, the render's final level and its conflict loop alike. A byte a
-//! grid point (17 MB at 257^3), cleared point by point from the list of those written.
+//! every localization level, the render's final level and its conflict loop alike. Two bytes a
+//! grid point while the band is on (last frame's and this one's: 34 MB at 257^3), cleared
+//! point by point from the lists of those written.
 
 use crate::grid::{ISO, is_inside};
 
