@@ -72,7 +72,9 @@ fn the_main_job_shows_the_reconstruction() {
     let metrics = String::from_utf8(metrics).unwrap();
     assert!(
         metrics.contains("volcap_render_apart_frames_total ")
-            && metrics.contains("volcap_render_apart_points_total "),
+            && metrics.contains("volcap_render_apart_points_total ")
+            && metrics.contains("volcap_render_held_frames_total ")
+            && metrics.contains("volcap_render_held_points_total "),
         "{metrics}"
     );
     let (_, _, viewer) = request(&d.addr, "GET", "/", "");

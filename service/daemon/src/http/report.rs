@@ -226,6 +226,14 @@ pub(super) async fn metrics(State(app): State<Arc<App>>) -> Response {
         sh.apart_frames.load(Ordering::Relaxed),
         sh.apart_points.load(Ordering::Relaxed)
     ));
+    if sh.temporal.is_some() {
+        s.push_str(&format!(
+            "# HELP volcap_render_held_frames_total rendered frames with grid points held by temporal.surface_dead_band\n# TYPE volcap_render_held_frames_total counter\nvolcap_render_held_frames_total {}\n\
+             # HELP volcap_render_held_points_total grid points given out as in the last frame (temporal.surface_dead_band)\n# TYPE volcap_render_held_points_total counter\nvolcap_render_held_points_total {}\n",
+            sh.held_frames.load(Ordering::Relaxed),
+            sh.held_sides.load(Ordering::Relaxed)
+        ));
+    }
     if sh.segment_tracking().is_some() {
         s.push_str("# HELP volcap_segment_track_frames_total frames segmented with model.segment_full_every's track: whole (the whole frame too), crop (the last person's crop alone), lost (the person reached the crop's edge)\n# TYPE volcap_segment_track_frames_total counter\n");
         for (i, kind) in ["whole", "crop", "lost"].iter().enumerate() {
