@@ -134,10 +134,10 @@ impl<'f> Evaluator<'f> {
     }
 
     /// Give the grid points out through `sides` ([`crate::sides::HeldSides`], begun for this
-    /// frame): a value within the band of last frame's is given out as that, a side crossed
-    /// by less than the band is kept.
+    /// frame; nothing changes where it holds nothing): a value within the band of last
+    /// frame's is given out as that, a side crossed by less than the band is kept.
     pub fn with_sides(mut self, sides: &'f mut crate::sides::HeldSides) -> Self {
-        self.sides = Some(sides);
+        self.sides = sides.active().then_some(sides);
         self
     }
 
@@ -212,19 +212,12 @@ impl<'f> Evaluator<'f> {
             self.count += chunk.len() as u64;
             let out = &self.out[..chunk.len()];
             self.check(out, Some(spec), chunk)?;
-            match self.sides.as_deref_mut() {
-                Some(sides) => {
-                    for (&l, &v) in chunk.iter().zip(out) {
-                        grid.values[l as usize] = sides.apply(l as usize, v);
-                        grid.evaluated.set(l as usize);
-                    }
-                }
-                None => {
-                    for (&l, &v) in chunk.iter().zip(out) {
-                        grid.values[l as usize] = v;
-                        grid.evaluated.set(l as usize);
-                    }
-                }
+            for (&l, &v) in chunk.iter().zip(out) {
+                grid.values[l as usize] = match self.sides.as_deref_mut() {
+                    Some(sides) => sides.apply(l as usize, v),
+                    None => v,
+                };
+                grid.evaluated.set(l as usize);
             }
         }
         Ok(())

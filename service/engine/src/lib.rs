@@ -6,7 +6,7 @@
 //! * [`localize`]: dense, MISE, PIFu threshold octree, the paper's hierarchical method and
 //!   our variants.
 //! * [`render`]: mesh-free rendering with shadow-node culling.
-//! * [`sides`]: grid points held on their side across frames (the surface's dead band).
+//! * [`sides`]: grid values held across frames (the surface's dead band).
 //! * [`mesh`]: marching cubes, binary PLY and glTF (.glb) export.
 //! * [`metrics`]: IoU, connected components, band bound, Chamfer and point-to-surface.
 //! * [`softz`]: the SoftZ depth encoding.

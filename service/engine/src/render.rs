@@ -131,9 +131,8 @@ pub struct Renderer {
     on_gpu: bool,
     /// Partial pixels along the outline in the display image ([`Self::set_antialias`]).
     antialias: bool,
-    /// The surface's dead band ([`crate::sides`]) and the next frame's band and alignment.
+    /// The surface's dead band ([`crate::sides`]) with the next frame's band and alignment.
     sides: crate::sides::HeldSides,
-    hold: (f32, Option<u64>),
 }
 
 impl Renderer {
@@ -160,7 +159,7 @@ impl Renderer {
     /// a grid point at the same place in the field: the view and the crop) is the last
     /// frame's; given for one frame (a frame without it forgets them).
     pub fn hold_sides(&mut self, band: f32, key: Option<u64>) {
-        self.hold = (band, key);
+        self.sides.hold(band, key);
     }
 
     /// Render `field` coloured by `colors` on a grid of level `spec.level()`.
@@ -184,12 +183,10 @@ impl Renderer {
         let mut stats = RenderStats::default();
 
         // 1. Localize to L - 1 inside the level-L grid.
-        let (band, key) = std::mem::take(&mut self.hold);
-        self.sides.begin(band, key, spec.len());
-        let mut ev = Evaluator::new(field).with_threads(self.threads);
-        if self.sides.active() {
-            ev = ev.with_sides(&mut self.sides);
-        }
+        self.sides.begin_pending(spec.len());
+        let mut ev = Evaluator::new(field)
+            .with_threads(self.threads)
+            .with_sides(&mut self.sides);
         self.hier
             .run(&mut ev, grid, coarse, big_l - 1, HierarchicalMode::Paper)?;
         stats.coarse_evaluations = ev.count();
@@ -335,7 +332,6 @@ impl Renderer {
     ) -> Result<RenderStats, LocalizeError> {
         let t = std::time::Instant::now();
         // No dead band on the adapter yet: a CPU frame after this one starts afresh.
-        self.hold = Default::default();
         self.sides.forget();
         let fine = spec
             .coarser()

@@ -48,6 +48,8 @@ pub struct HeldSides {
     last_written: Vec<u32>,
     next_written: Vec<u32>,
     held: u64,
+    /// The next frame's band and alignment ([`HeldSides::hold`]).
+    pending: (f32, Option<u64>),
 }
 
 /// The smallest occupancy that is inside.
@@ -87,22 +89,12 @@ impl HeldSides {
             0.0
         };
         let same = key.is_some() && key == self.key && len == self.len && band == self.band;
-        for &q in &self.last_written {
-            if let Some(x) = self.last.get_mut(q as usize) {
-                *x = 0;
-            }
-        }
-        self.last_written.clear();
+        clear_written(&mut self.last, &mut self.last_written);
         if same {
             std::mem::swap(&mut self.last, &mut self.next);
             std::mem::swap(&mut self.last_written, &mut self.next_written);
         } else {
-            for &q in &self.next_written {
-                if let Some(x) = self.next.get_mut(q as usize) {
-                    *x = 0;
-                }
-            }
-            self.next_written.clear();
+            clear_written(&mut self.next, &mut self.next_written);
             let want = if band > 0.0 { len } else { 0 };
             for b in [&mut self.last, &mut self.next] {
                 if b.len() != want {
@@ -115,6 +107,18 @@ impl HeldSides {
         self.key = key.filter(|_| band > 0.0);
         self.len = len;
         self.held = 0;
+    }
+
+    /// The band and alignment of the next frame [`HeldSides::begin_pending`] starts (given
+    /// for one frame: a frame begun without it forgets).
+    pub fn hold(&mut self, band: f32, key: Option<u64>) {
+        self.pending = (band, key);
+    }
+
+    /// [`HeldSides::begin`] with what [`HeldSides::hold`] gave for this frame (nothing: off).
+    pub fn begin_pending(&mut self, len: usize) {
+        let (band, key) = std::mem::take(&mut self.pending);
+        self.begin(band, key, len);
     }
 
     /// Whether frames are held at all (a band above 0 and a key).
@@ -157,15 +161,21 @@ impl HeldSides {
         self.held
     }
 
-    /// The band (0: off).
-    pub fn band(&self) -> f32 {
-        self.band
-    }
-
-    /// Forget every frame (the next one starts empty).
+    /// Forget every frame and what [`HeldSides::hold`] gave (the next one starts empty).
     pub fn forget(&mut self) {
         self.key = None;
+        self.pending = Default::default();
     }
+}
+
+/// Zero the entries `written` names and empty it.
+fn clear_written(values: &mut [u8], written: &mut Vec<u32>) {
+    for &q in written.iter() {
+        if let Some(x) = values.get_mut(q as usize) {
+            *x = 0;
+        }
+    }
+    written.clear();
 }
 
 #[cfg(test)]

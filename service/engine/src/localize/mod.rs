@@ -186,9 +186,8 @@ pub struct Localizer {
     scratch: Scratch,
     threads: usize,
     field_time: std::time::Duration,
-    /// The surface's dead band ([`crate::sides`]) and the next run's band and alignment.
+    /// The surface's dead band ([`crate::sides`]) with the next run's band and alignment.
     sides: crate::sides::HeldSides,
-    hold: (f32, Option<u64>),
 }
 
 /// Reusable scratch shared by the baseline methods.
@@ -216,7 +215,7 @@ impl Localizer {
     /// the level, in the next [`Localizer::run`] ([`crate::sides`]) when that run's
     /// alignment `key` is the last run's; given for one run (a run without it forgets them).
     pub fn hold_sides(&mut self, band: f32, key: Option<u64>) {
-        self.hold = (band, key);
+        self.sides.hold(band, key);
     }
 
     /// Forget the values held ([`Localizer::hold_sides`]): the next run starts from none.
@@ -263,12 +262,10 @@ impl Localizer {
         } else {
             field
         };
-        let (band, key) = std::mem::take(&mut self.hold);
-        self.sides.begin(band, key, spec.len());
-        let mut ev = Evaluator::new(field).with_threads(self.threads);
-        if self.sides.active() {
-            ev = ev.with_sides(&mut self.sides);
-        }
+        self.sides.begin_pending(spec.len());
+        let mut ev = Evaluator::new(field)
+            .with_threads(self.threads)
+            .with_sides(&mut self.sides);
         let mut stats = LocalizeStats::default();
         match method {
             Method::Dense => dense::run(&mut ev, grid, &mut self.scratch)?,

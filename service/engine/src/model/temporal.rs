@@ -174,9 +174,9 @@ impl TemporalSettings {
         }
         let md = self.mask_dead_band;
         within("mask_dead_band", md, (0.0..=0.5).contains(&md), "[0, 0.5]")?;
-        let sd = self.surface_dead_band;
-        let ok = (0.0..=crate::sides::MAX_BAND).contains(&sd);
-        within("surface_dead_band", sd, ok, "[0, 0.25]")?;
+        let (sd, max) = (self.surface_dead_band, crate::sides::MAX_BAND);
+        let range = format!("[0, {max}]");
+        within("surface_dead_band", sd, (0.0..=max).contains(&sd), &range)?;
         let iou = self.same_person_iou;
         within("same_person_iou", iou, (0.0..=1.0).contains(&iou), "[0, 1]")?;
         Ok(())
