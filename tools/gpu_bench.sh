@@ -155,6 +155,12 @@ case "$mode" in
     # levels (more waits), 17^3 (4) more points and fewer levels.
     "$bin" bench pipeline --backend wgpu --model fourier-small --res "${res%%,*}" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --coarse-level 2,3,4 --out "$out/coarse"
+    echo "== the surface's dead band on the adapter ([temporal] surface_dead_band 0 against 0.06)"
+    # A word a grid point read and written by every evaluation (gpu/localize/hold.rs): what
+    # holding a still person's grid costs the render stage there (the sim's walk holds
+    # stretches of frames; 0 is the renderer of the runs before 2026-12-03).
+    "$bin" bench pipeline --backend wgpu --model fourier-medium --res "$res" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --surface-dead-band 0,0.06 --out "$out/held"
     echo "== localization on the model's field"
     # The adapter's rows twice: a read-back per conflict round, and the rounds predicted.
     "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \

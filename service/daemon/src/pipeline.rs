@@ -165,6 +165,9 @@ pub struct Shared {
     /// surface_dead_band`, `volcap_engine::sides`), and the frames it held any in.
     pub held_sides: AtomicU64,
     pub held_frames: AtomicU64,
+    /// Why the GPU backend's renderer did not hold its last frame though the band is on (the
+    /// grid's memory does not fit one storage binding of the adapter), or `None`.
+    pub held_refused: Mutex<Option<String>>,
     /// Model mode: the segmentation's track between frames (`[model] segment_full_every`),
     /// shared by the segment threads (each takes a copy, segments, and puts it back)...
     pub segment_track: Mutex<volcap_engine::model::SegmentTrack>,
@@ -240,6 +243,7 @@ impl Shared {
             temporal_resets: AtomicU64::new(0),
             held_sides: AtomicU64::new(0),
             held_frames: AtomicU64::new(0),
+            held_refused: Mutex::new(None),
             // Model mode only (the other modes segment nothing); one pass turns it off
             // (`set_segment_passes`).
             segment_track: Mutex::new(volcap_engine::model::SegmentTrack::new(

@@ -11,12 +11,17 @@ use common::{serial, start, wait_for};
 use std::time::Duration;
 
 fn config(dir: &std::path::Path, compute: &str) -> std::path::PathBuf {
+    config_scene(dir, "front-walk", compute)
+}
+
+/// [`config`] on `tests/scenes/{scene}.toml`; `compute` may go on with further sections.
+fn config_scene(dir: &std::path::Path, scene: &str, compute: &str) -> std::path::PathBuf {
     let p = dir.join("gpu.toml");
     std::fs::write(
         &p,
         format!(
             "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\ndisplay_size = 0\n[model]\ndir = \"{}\"\n[dbus]\nbus = \"none\"\n[compute]\n{compute}\n",
-            root().join("tests/scenes/front-walk.toml").display(),
+            root().join(format!("tests/scenes/{scene}.toml")).display(),
             root().join("models").display()
         ),
     )
@@ -168,6 +173,50 @@ fn model_mode_runs_its_networks_on_the_adapter() {
     assert!(runs >= 6.0, "{m}");
     assert!(m.contains("volcap_adapter_render_runs_total "), "{m}");
     assert_eq!(s["people"], 1, "{s}");
+}
+
+/// The surface's dead band on the adapter (`[temporal] surface_dead_band`, its default): a
+/// still person's frames rendered there hold grid points, counted in `/state` and
+/// `/metrics` as the CPU renderer's are; nothing refused at 65^3.
+#[cfg(feature = "wgpu")]
+#[test]
+fn a_still_persons_frames_are_held_on_the_adapter() {
+    let _serial = serial();
+    if !have_adapter() {
+        return;
+    }
+    let dir = tmp("gpu-held");
+    let cfg = config_scene(
+        &dir,
+        "still-rest-noise",
+        "backend = \"wgpu\"\n[temporal]\nenabled = true",
+    );
+    let d = start(&cfg);
+    let s = wait_for(
+        &d.addr,
+        "frames held on the adapter",
+        Duration::from_secs(120),
+        |s| s["temporal"]["held_sides"]["frames"].as_u64() > Some(1),
+    );
+    let held = &s["temporal"]["held_sides"];
+    let rendered = s["compute"]["adapter_work"]["render_runs"]
+        .as_u64()
+        .unwrap();
+    assert!(
+        rendered >= 2,
+        "{rendered} frames rendered on the adapter: {s}"
+    );
+    assert!(held["points"].as_u64() > Some(0), "{s}");
+    assert!(held["adapter_refused"].is_null(), "{s}");
+    let (st, _, body) = common::request(&d.addr, "GET", "/metrics", "");
+    let m = String::from_utf8_lossy(&body);
+    assert_eq!(st, 200);
+    let frames: f64 = m
+        .lines()
+        .find_map(|l| l.strip_prefix("volcap_render_held_frames_total "))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.0);
+    assert!(frames >= 2.0, "{m}");
 }
 
 /// `compute.render_device = "own"`: the render stage on a second device of the adapter, the

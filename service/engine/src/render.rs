@@ -331,8 +331,14 @@ impl Renderer {
         opts: &RenderOptions,
     ) -> Result<RenderStats, LocalizeError> {
         let t = std::time::Instant::now();
-        // No dead band on the adapter yet: a CPU frame after this one starts afresh.
+        // The dead band's memory on the adapter (the same rule: `gpu/localize/hold.rs`),
+        // continued only from a frame drawn there; a CPU frame after this one starts afresh.
+        let (band, key) = self.sides.take_pending();
         self.sides.forget();
+        if !self.on_gpu {
+            gpu.forget_sides();
+        }
+        gpu.hold_sides(band, key);
         let fine = spec
             .coarser()
             .ok_or(crate::grid::GridError::BadResolution(spec.n()))?;
@@ -346,6 +352,7 @@ impl Renderer {
             final_evaluations: cols.final_evaluations,
             culled: cols.culled,
             dropped_apart: cols.dropped_apart,
+            held_sides: cols.held_sides,
             ..Default::default()
         };
         self.depth.clear();

@@ -30,7 +30,8 @@
 //! which applies the memory when one is attached ([`crate::field::Evaluator::with_sides`]):
 //! every localization level, the render's final level and its conflict loop alike. Two bytes a
 //! grid point while the band is on (last frame's and this one's: 34 MB at 257^3), cleared
-//! point by point from the lists of those written.
+//! point by point from the lists of those written. The GPU backend applies the same rule bit
+//! for bit where its kernels write grid values (`gpu/localize/hold.rs`).
 
 use crate::grid::{ISO, is_inside};
 
@@ -119,6 +120,12 @@ impl HeldSides {
     pub fn begin_pending(&mut self, len: usize) {
         let (band, key) = std::mem::take(&mut self.pending);
         self.begin(band, key, len);
+    }
+
+    /// What [`HeldSides::hold`] gave for the next frame, taken (the GPU backend's renderer
+    /// holds that frame on the adapter: `gpu/localize/hold.rs`).
+    pub fn take_pending(&mut self) -> (f32, Option<u64>) {
+        std::mem::take(&mut self.pending)
     }
 
     /// Whether frames are held at all (a band above 0 and a key).

@@ -98,7 +98,8 @@ pub(super) fn state_json(app: &App, details: bool) -> serde_json::Value {
             "held_sides": {
                 "points": sh.held_sides.load(Ordering::Relaxed),
                 "frames": sh.held_frames.load(Ordering::Relaxed),
-                "note": "temporal.surface_dead_band: grid points given out as in the last frame (their occupancy moved by less than the band, or crossed the level by less than it, while the crop was held and the view not turned), in all, and the rendered frames with any (the CPU renderer's: frames drawn on the GPU backend's adapter hold nothing yet)",
+                "adapter_refused": sh.held_refused.lock().map(|r| r.clone()).unwrap_or(None),
+                "note": "temporal.surface_dead_band: grid points given out as in the last frame (their occupancy moved by less than the band, or crossed the level by less than it, while the crop was held and the view not turned), in all, and the rendered frames with any (on the CPU and on the GPU backend's adapter alike, by the same rule); adapter_refused: why the adapter's last frame was not held (its grid's memory, four bytes a point, does not fit one storage binding there), else null",
             },
         })),
         "segment_track": segment_track(sh),

@@ -128,6 +128,17 @@ impl AdapterRenderer {
             .render_gpu(&mut self.gpu, &on_gpu, field, field, spec, &opts)
             .map(|st| (st, renderer.last_times()))
             .map_err(|e| e.to_string());
+        // The dead band refused on the adapter (a grid too large for its memory): said once
+        // in the log, and in /state while it lasts.
+        let refused = self.gpu.hold_refused().map(str::to_string);
+        if let Ok(mut r) = sh.held_refused.lock()
+            && *r != refused
+        {
+            if let Some(w) = &refused {
+                tracing::warn!("{w}");
+            }
+            *r = refused;
+        }
         let gpu = &mut self.gpu;
         renderer.set_antialias(live.antialias);
         finish_render(sh, t, live, r, |size| {

@@ -28,6 +28,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 mod field;
+mod hold;
 mod plan;
 mod record;
 mod tiling;
@@ -62,7 +63,9 @@ pub(super) const MISS: usize = 9;
 pub(super) const MARK: usize = 10;
 /// Conflict rounds per level ([`LEVEL_KEYS`] slots, `plan::level_key`).
 pub(super) const LEVEL_ROUNDS: usize = 11;
-pub(super) const COUNTS: usize = LEVEL_ROUNDS + LEVEL_KEYS;
+/// Grid points given out as last frame's (the surface's dead band: `hold.rs`).
+pub(super) const HELD: usize = LEVEL_ROUNDS + LEVEL_KEYS;
+pub(super) const COUNTS: usize = HELD + 1;
 /// Parameter blocks per level: lists 0 and 1 read (the other written), the renderer's log
 /// read, its culled list 0 or 1 counted.
 const ORIENTATIONS: usize = 5;
@@ -97,6 +100,8 @@ pub(super) struct Pipes {
 pub(super) struct Bufs {
     spec: GridSpec,
     pub(super) cap: usize,
+    /// Whether `queued` holds the dead band's memory after the bits (`hold.rs`).
+    held: bool,
     /// The values, one buffer per tile (`Pipes::tiling`).
     pub(super) values: Vec<wgpu::Buffer>,
     queued: wgpu::Buffer,
@@ -140,6 +145,8 @@ pub struct GpuLocalizer {
     rounds_per_wait: usize,
     /// The last frame's rounds per level, when they are predicted ([`Self::with_round_waits`]).
     pub(super) predictor: Predictor,
+    /// The surface's dead band (`hold.rs`).
+    hold: hold::Hold,
     /// Maps on the adapter to copy into the field's buffer, recorded ahead of the next
     /// localization's work ([`Self::recorder`]).
     pending_copy: Option<(wgpu::Buffer, u64)>,
@@ -186,7 +193,11 @@ impl Pipes {
         let scope = d.push_error_scope(wgpu::ErrorFilter::Validation);
         let values = tiling.wgsl(true);
         let book = module(d, "localize", &format!("{values}{BOOK}"));
-        let eval = module(d, "localize eval", &format!("{values}{EVAL}"));
+        let eval = module(
+            d,
+            "localize eval",
+            &format!("const HELD: u32 = {HELD}u;\n{values}{EVAL}"),
+        );
         let plain = pipeline_layout(d, &[&layout0]);
         let with_args = pipeline_layout(d, &[&layout0, &layout_args]);
         let with_field = pipeline_layout(d, &[&layout0, &layout_field]);
@@ -241,6 +252,7 @@ impl GpuLocalizer {
             params_for: None,
             rounds_per_wait: DEFAULT_ROUNDS_PER_WAIT,
             predictor: Predictor::default(),
+            hold: Default::default(),
             pending_copy: None,
             tile_floats: None,
             max_list: None,
@@ -280,26 +292,32 @@ impl GpuLocalizer {
     fn buffers(&mut self, spec: GridSpec) -> Result<&Bufs, String> {
         let cap = self.cap.min(spec.len()).min(self.list_bound());
         let render = self.render;
+        let held = self.hold.frame_stamp != 0;
         let tiling = self.tiling(spec);
-        let fits = self
-            .bufs
-            .as_ref()
-            .is_some_and(|b| b.spec == spec && b.cap == cap && (b.render || !render))
-            && self.pipes.tiling == tiling;
+        let fits = self.bufs.as_ref().is_some_and(|b| {
+            b.spec == spec && b.cap == cap && (b.render || !render) && (b.held || !held)
+        }) && self.pipes.tiling == tiling;
         if !fits {
-            self.bufs = None;
+            let old = self.bufs.take();
             if self.pipes.tiling != tiling {
                 // Kernels for this tiling (a grid size of another tiling than the last).
                 self.pipes = Pipes::new(&self.gpu, tiling, Some(&self.pipes.layout_field))?;
             }
-            let b = self.make_bufs(spec, cap, render);
+            let b = self.make_bufs(spec, cap, render, held);
+            // The dead band's memory carried over (lists grown, the renderer's made).
+            if let Some(o) = old.filter(|o| o.held && b.held && o.spec == spec) {
+                let at = Self::bit_words(spec) as u64 * 4;
+                let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+                enc.copy_buffer_to_buffer(&o.queued, at, &b.queued, at, spec.len() as u64 * 4);
+                self.gpu.queue.submit([enc.finish()]);
+            }
             self.generation += 1;
             self.bufs = Some(b);
         }
         Ok(self.bufs.as_ref().expect("made above"))
     }
 
-    fn make_bufs(&self, spec: GridSpec, cap: usize, render: bool) -> Bufs {
+    fn make_bufs(&self, spec: GridSpec, cap: usize, render: bool, held: bool) -> Bufs {
         use wgpu::BufferUsages as U;
         let d = &self.gpu.device;
         let buf = |label, bytes: u64, usage| {
@@ -315,7 +333,8 @@ impl GpuLocalizer {
         let values: Vec<wgpu::Buffer> = (0..tiling.tiles)
             .map(|t| buf("grid values", tiling.tile_len(t, spec.len()) as u64 * 4, rw))
             .collect();
-        let words = spec.len().div_ceil(32) as u64;
+        // The bits, then the dead band's memory (a word a point) where it is held.
+        let words = (Self::bit_words(spec) + if held { spec.len() } else { 0 }) as u64;
         let queued = buf("grid handled bits", words * 4, rw);
         let cand = buf("candidates", cap as u64 * 4, U::STORAGE);
         // (point, value before evaluation) pairs.
@@ -367,6 +386,7 @@ impl GpuLocalizer {
         Bufs {
             spec,
             cap,
+            held,
             values,
             queued,
             counts,
@@ -401,6 +421,7 @@ impl GpuLocalizer {
             match retry.or(Retry::of(&counts)) {
                 None => {
                     self.done = true;
+                    self.finish_hold(&counts);
                     self.predictor.learn(spec, coarse, mode, &counts);
                     return Ok(LocalizeStats {
                         evaluations: counts[EVALS] as u64,
@@ -411,6 +432,11 @@ impl GpuLocalizer {
                 Some(r) => self.retry(r, spec)?,
             }
         }
+    }
+
+    /// What a completed frame's counters say of the dead band.
+    pub(super) fn finish_hold(&mut self, counts: &[u32; COUNTS]) {
+        self.hold.held = counts[HELD] as u64;
     }
 
     /// Before a frame is run again: lists four times larger after an overflow, a plan with
@@ -457,6 +483,7 @@ impl GpuLocalizer {
         self.done = false;
         self.render = render;
         self.eval_fourier = matches!(field, GpuField::Fourier { .. });
+        self.begin_hold(spec);
         self.upload_field(field, spec)
     }
 
@@ -515,7 +542,13 @@ impl GpuLocalizer {
         for v in &b.values {
             enc.clear_buffer(v, 0, None);
         }
-        enc.clear_buffer(&b.queued, 0, None);
+        // The bits (the dead band's memory after them is cleared only when its stamps run
+        // out: `hold.rs`).
+        let bits = Self::bit_words(spec) as u64 * 4;
+        enc.clear_buffer(&b.queued, 0, Some(bits));
+        if std::mem::take(&mut self.hold.clear) && b.held {
+            enc.clear_buffer(&b.queued, bits, None);
+        }
         enc.clear_buffer(&b.counts, 0, None);
         Ok(Rec {
             gpu: &self.gpu,

@@ -46,6 +46,9 @@ pub struct Columns {
     /// Level `L - 1` points of pieces apart from the body, set outside (`render.rs`'s
     /// `RenderStats::dropped_apart`).
     pub dropped_apart: u64,
+    /// Grid points given out as last frame's (the surface's dead band:
+    /// [`GpuRenderer::hold_sides`]).
+    pub held_sides: u64,
 }
 
 struct RenderPipes {
@@ -207,6 +210,21 @@ impl GpuRenderer {
     pub fn with_tile_floats(mut self, n: usize) -> Self {
         self.loc = self.loc.with_tile_floats(n);
         self
+    }
+
+    /// The surface's dead band in the next frame ([`GpuLocalizer::hold_sides`]).
+    pub fn hold_sides(&mut self, band: f32, key: Option<u64>) {
+        self.loc.hold_sides(band, key);
+    }
+
+    /// Forget the values held ([`GpuLocalizer::forget_sides`]).
+    pub fn forget_sides(&mut self) {
+        self.loc.forget_sides();
+    }
+
+    /// Why the last frame was not held though asked to ([`GpuLocalizer::hold_refused`]).
+    pub fn hold_refused(&self) -> Option<&str> {
+        self.loc.hold_refused()
     }
 
     /// Whether a grid of `spec` fits the adapter (see [`GpuLocalizer::check_size`]).
@@ -434,6 +452,7 @@ impl GpuRenderer {
             return Ok(Some(r));
         }
         self.loc.predictor.learn(spec, coarse, mode, &counts);
+        self.loc.finish_hold(&counts);
         let c = self.gpu.count();
         c.dispatches.fetch_add(dispatches, Ordering::Relaxed);
         c.render_runs.fetch_add(1, Ordering::Relaxed);
@@ -455,6 +474,7 @@ impl GpuRenderer {
         o.final_evaluations = (counts[EVALS] as u64).saturating_sub(counts[MARK] as u64);
         o.culled = counts[CULLED[x]] as u64;
         o.dropped_apart = dropped_apart;
+        o.held_sides = self.loc.held_sides();
         Ok(None)
     }
 

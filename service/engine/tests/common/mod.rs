@@ -173,3 +173,22 @@ pub fn analytic_tables(
         })
         .collect()
 }
+
+/// A box of half-side `half` (faces on grid planes of the 65^3 grid for multiples of
+/// 1/32), occupancy a steep logistic of its signed distance, plus noise of amplitude
+/// `noise` drawn per point and frame.
+pub fn noisy_box(half: f32, noise: f32, frame: u32) -> impl Fn(Vec3) -> f32 + Sync {
+    move |p: Vec3| {
+        let q = p.abs() - Vec3::splat(half);
+        let d = q.max(Vec3::ZERO).length() + q.max_element().min(0.0);
+        let base = 1.0 / (1.0 + (d / 0.02).exp());
+        let mut h = p.x.to_bits() ^ p.y.to_bits().rotate_left(11) ^ p.z.to_bits().rotate_left(22);
+        h ^= frame.wrapping_mul(0x9e37_79b9);
+        h = h.wrapping_mul(0x85eb_ca6b);
+        h ^= h >> 13;
+        h = h.wrapping_mul(0xc2b2_ae35);
+        h ^= h >> 16;
+        let n = (h >> 8) as f32 / (1u32 << 24) as f32 * 2.0 - 1.0;
+        (base + noise * n).clamp(0.0, 1.0)
+    }
+}

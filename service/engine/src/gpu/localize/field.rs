@@ -1,7 +1,7 @@
 //! The field the localizer evaluates on the adapter ([`GpuField`]: a host table, or the
 //! Fourier head with its maps on the host or already on the adapter) and its upload.
 
-use super::GpuLocalizer;
+use super::{GpuLocalizer, hold};
 use crate::gpu::kit::entry;
 use crate::grid::GridSpec;
 use crate::model::fourier::FourierMaps;
@@ -169,7 +169,17 @@ impl GpuLocalizer {
                     mapped_at_creation: false,
                 })
             };
-            let params = buf("field params", 20, U::UNIFORM);
+            let params = buf("field params", hold::PARAM_WORDS, U::UNIFORM);
+            // The dead band's table of quantized values, once.
+            self.gpu.queue.write_buffer(
+                &params,
+                (hold::TABLE_AT * 4) as u64,
+                bytemuck::cast_slice(&hold::table()),
+            );
+            self.gpu
+                .count()
+                .bytes_up
+                .fetch_add(256 * 4, Ordering::Relaxed);
             let maps_b = buf("field data", maps_cap, U::STORAGE);
             let aux_b = buf("grid coords and mask", aux_cap, U::STORAGE);
             let bind = d.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -226,11 +236,14 @@ impl GpuLocalizer {
                     .fetch_add(up.len() as u64 * 4, Ordering::Relaxed);
             }
         }
-        let mut params = [0u32; 20];
+        let mut params = [0u32; hold::TABLE_AT];
         params[..6].copy_from_slice(&head);
         for (i, v) in to_crop.to_cols_array().iter().enumerate() {
             params[8 + i] = v.to_bits();
         }
+        params[hold::BAND_AT] = self.hold.band.to_bits();
+        params[hold::STAMP_AT] = self.hold.frame_stamp;
+        params[hold::MEMORY_AT] = Self::bit_words(spec) as u32;
         let q = &self.gpu.queue;
         q.write_buffer(&f.params, 0, bytemuck::cast_slice(&params));
         let mut up = std::mem::size_of_val(mask) + 80;

@@ -134,7 +134,7 @@ impl Tiling {
 
 impl GpuLocalizer {
     /// The most bytes one storage binding holds here (a buffer's size bounds it too).
-    fn binding_bytes(&self) -> u64 {
+    pub(super) fn binding_bytes(&self) -> u64 {
         let limits = self.gpu.device.limits();
         limits
             .max_storage_buffer_binding_size
