@@ -18,6 +18,7 @@ pub struct TemporalConfig {
     pub mask_high: Option<f32>,
     pub mask_motion: Option<f32>,
     pub mask_hold_frames: Option<u32>,
+    pub mask_still_hold_frames: Option<u32>,
     pub mask_dead_band: Option<f32>,
     pub surface_dead_band: Option<f32>,
     pub map_min_cutoff_hz: Option<f32>,
@@ -42,6 +43,7 @@ impl Default for TemporalConfig {
             mask_high: None,
             mask_motion: None,
             mask_hold_frames: None,
+            mask_still_hold_frames: None,
             mask_dead_band: None,
             surface_dead_band: None,
             map_min_cutoff_hz: None,
@@ -72,6 +74,9 @@ impl TemporalConfig {
             mask_high: self.mask_high.unwrap_or(d.mask_high),
             mask_motion: self.mask_motion.unwrap_or(d.mask_motion),
             mask_hold_frames: self.mask_hold_frames.unwrap_or(d.mask_hold_frames),
+            mask_still_hold_frames: self
+                .mask_still_hold_frames
+                .unwrap_or(d.mask_still_hold_frames),
             mask_dead_band: self.mask_dead_band.unwrap_or(d.mask_dead_band),
             surface_dead_band: self.surface_dead_band.unwrap_or(d.surface_dead_band),
             map_min_cutoff_hz: self.map_min_cutoff_hz.unwrap_or(d.map_min_cutoff_hz),
@@ -96,6 +101,7 @@ pub fn settings_json(s: &volcap_engine::model::temporal::TemporalSettings) -> se
         "mask_high": f(s.mask_high),
         "mask_motion": f(s.mask_motion),
         "mask_hold_frames": s.mask_hold_frames,
+        "mask_still_hold_frames": s.mask_still_hold_frames,
         "mask_dead_band": f(s.mask_dead_band),
         "surface_dead_band": f(s.surface_dead_band),
         "map_min_cutoff_hz": f(s.map_min_cutoff_hz),

@@ -270,6 +270,10 @@ fn temporal_section_defaults_bounds_and_off() {
         ("map_beta = -1", "temporal.map_beta"),
         ("max_gap_s = nan", "temporal.max_gap_s"),
         ("mask_hold_frames = 0", "temporal.mask_hold_frames"),
+        (
+            "mask_still_hold_frames = 256",
+            "temporal.mask_still_hold_frames",
+        ),
         ("map_change_cutoff_hz = 0", "temporal.map_change_cutoff_hz"),
         ("crop_hold = 0.2", "temporal.crop_hold"),
         ("mask_dead_band = 0.6", "temporal.mask_dead_band"),

@@ -9,7 +9,10 @@
 //    closure (tight: the sign-change closure), tight (no dilation)]
 // counts: [cand, list A, list B, overflow, evaluations, -, -, -, conflict rounds, miss,
 //          evaluations before the final level, conflict rounds per level (16: by the level's
-//          stride exponent, 0 the finest)]
+//          stride exponent, 0 the finest), points held by the surface's dead band
+//          (localize_eval.wgsl, gpu/localize/hold.rs)]
+// queued: the "already handled" bits (a bit a point), then, while the dead band holds, its
+//         memory (a word a point: localize_eval.wgsl `memory`).
 // args: indirect dispatch arguments [x, y, z] of the next list-driven kernel.
 
 // The lists hold pairs (point, its value before evaluation as bits). Eight storage buffers

@@ -88,9 +88,9 @@ pub struct TemporalArgs {
     /// Filter settings (comma-separated): `off`, `default` (volcapd's defaults), or
     /// `KEY=VALUE+KEY=VALUE...` over the defaults (`off+segment_full_every=N` or
     /// `default+segment_full_every=N`: the segmentation's track, `[model]`'s key; keys of
-    /// `[temporal]`: crop_min_cutoff_hz,
-    /// crop_beta, crop_hold, mask_low, mask_high, mask_motion, mask_hold_frames, map_min_cutoff_hz, map_beta,
-    /// map_change_cutoff_hz,
+    /// `[temporal]`: crop_min_cutoff_hz, crop_beta, crop_hold, mask_low, mask_high,
+    /// mask_motion, mask_hold_frames, mask_still_hold_frames, mask_dead_band,
+    /// surface_dead_band, map_min_cutoff_hz, map_beta, map_change_cutoff_hz,
     /// same_person_iou).
     #[arg(
         long = "setting",

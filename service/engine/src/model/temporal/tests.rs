@@ -87,11 +87,18 @@ fn flickering_edge_pixels_hold_and_a_real_change_passes() {
 fn a_slow_change_inside_the_band_is_followed_after_the_hold() {
     // An edge column that crosses 0.5 and stays (an arm near the top of its swing: too
     // few pixels for a moving block, never out of the band) is held for
-    // `mask_hold_frames - 1` frames, then followed; it is not held back for good.
+    // `mask_hold_frames - 1` frames, then followed; it is not held back for good. While
+    // the crop given out stays put (a person still as a whole), for
+    // `mask_still_hold_frames - 1` frames.
     let settings = TemporalSettings::default();
-    let hold = settings.mask_hold_frames as usize;
-    assert!(hold >= 2, "the test needs a hold of two frames or more");
-    let mut t = Temporal::new(settings);
+    let (hold, still_hold) = (
+        settings.mask_hold_frames as usize,
+        settings.mask_still_hold_frames as usize,
+    );
+    assert!(
+        hold >= 2 && still_hold > hold + 1,
+        "the test needs holds of two frames or more, the still one longer"
+    );
     let column = |v: f32| {
         let mut m = box_mask(100, 150, 40, 220, 0.95);
         for y in 40..220 {
@@ -99,18 +106,32 @@ fn a_slow_change_inside_the_band_is_followed_after_the_hold() {
         }
         m
     };
-    let mut m = column(0.4);
-    let c = crop_of(&m);
-    t.steady_input(0.0, 1, &mut m, c);
-    for k in 1..=hold + 2 {
-        let mut m = column(0.6);
-        let (_, step) = t.steady_input(k as f64 / 30.0, 1, &mut m, c);
-        assert_eq!(step, Step::Continued);
-        let shown = m[100 * S + 150];
-        if k < hold {
-            assert_eq!(shown, 0.4, "frame {k}: held");
-        } else {
-            assert_eq!(shown, 0.6, "frame {k}: followed after {hold} frames");
+    for crop_moves in [false, true] {
+        let mut t = Temporal::new(settings);
+        let mut m = column(0.4);
+        let c = crop_of(&m);
+        // A crop moving by a tenth of its size a frame: the play never holds it.
+        let crop = |k: usize| Crop {
+            tx: c.tx + if crop_moves { 0.1 * k as f32 } else { 0.0 },
+            ..c
+        };
+        // Two frames on the old side: the crop given out twice (still, or moved).
+        for k in 0..2 {
+            let mut m = column(0.4);
+            t.steady_input(k as f64 / 30.0, 1, &mut m, crop(k));
+        }
+        let want = if crop_moves { hold } else { still_hold };
+        for k in 1..=still_hold + 2 {
+            m = column(0.6);
+            let (_, step) = t.steady_input((k + 1) as f64 / 30.0, 1, &mut m, crop(k + 1));
+            assert_eq!(step, Step::Continued);
+            let shown = m[100 * S + 150];
+            let what = format!("crop moving {crop_moves}, frame {k}");
+            if k < want {
+                assert_eq!(shown, 0.4, "{what}: held");
+            } else {
+                assert_eq!(shown, 0.6, "{what}: followed after {want} frames");
+            }
         }
     }
 }

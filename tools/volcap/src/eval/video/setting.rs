@@ -57,6 +57,11 @@ pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
                 filter_keys = true;
                 continue;
             }
+            "mask_still_hold_frames" => {
+                t.mask_still_hold_frames = whole(0.0..=255.0)?;
+                filter_keys = true;
+                continue;
+            }
             _ => {}
         }
         let slot = match k.trim() {
