@@ -116,6 +116,13 @@ impl GpuLocalizer {
         self.hold.held
     }
 
+    /// Stamps used so far set to `stamp` (at most the last, 65,535): the tests reach the
+    /// memory's clearing when the stamps run out without 65,534 frames.
+    #[doc(hidden)]
+    pub fn set_hold_stamp(&mut self, stamp: u32) {
+        self.hold.stamp = stamp.min(LAST_STAMP);
+    }
+
     /// Why the last frame was not held though a band and key were given (its grid's memory
     /// does not fit one storage binding here).
     pub fn hold_refused(&self) -> Option<&str> {
