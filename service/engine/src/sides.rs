@@ -60,6 +60,15 @@ pub const JUST_INSIDE: f32 = f32::from_bits(ISO.to_bits() + 1);
 /// occupancy: no longer noise).
 pub const MAX_BAND: f32 = 0.25;
 
+/// A band as the memory uses it: within [0, [`MAX_BAND`]], 0 (off) when not finite.
+pub fn usable_band(band: f32) -> f32 {
+    if band.is_finite() {
+        band.clamp(0.0, MAX_BAND)
+    } else {
+        0.0
+    }
+}
+
 /// An occupancy in [0, 1] as 1..=255 on its side of the level: `1 + round(254 v)`, 129 at
 /// least inside and 128 at most outside (128 is the level itself).
 #[inline]
@@ -84,11 +93,7 @@ impl HeldSides {
     /// `band` (0: off). The last frame's values are kept only when the band, key and grid are
     /// the same as then; otherwise (or with no key) the memory starts empty.
     pub fn begin(&mut self, band: f32, key: Option<u64>, len: usize) {
-        let band = if band.is_finite() {
-            band.clamp(0.0, MAX_BAND)
-        } else {
-            0.0
-        };
+        let band = usable_band(band);
         let same = key.is_some() && key == self.key && len == self.len && band == self.band;
         clear_written(&mut self.last, &mut self.last_written);
         if same {

@@ -21,7 +21,7 @@
 
 use super::GpuLocalizer;
 use crate::grid::GridSpec;
-use crate::sides::{MAX_BAND, dequantize};
+use crate::sides::{dequantize, usable_band};
 
 /// The last stamp before the memory is cleared (16 bits).
 const LAST_STAMP: u32 = 0xffff;
@@ -59,11 +59,7 @@ impl Hold {
     /// `len` points whose memory fits (`fits`) or not.
     fn begin(&mut self, len: usize, fits: impl FnOnce() -> Result<(), String>) {
         let (band, key) = std::mem::take(&mut self.pending);
-        let band = if band.is_finite() {
-            band.clamp(0.0, MAX_BAND)
-        } else {
-            0.0
-        };
+        let band = usable_band(band);
         self.refused = None;
         self.held = 0;
         let key = key.filter(|_| band > 0.0);
