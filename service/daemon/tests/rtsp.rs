@@ -584,8 +584,9 @@ fn push_survives_the_server_restarting_and_a_relay_fans_out_to_50_clients() {
 
     // 50 clients through the relay, and one stalled client on the daemon itself: the daemon
     // keeps publishing. The relay and its 50 players run on the same two cores, so the rate
-    // may dip by their CPU share (8.5 -> 7.4 fps seen once, 13 %); a client that held the
-    // pipeline would take it toward zero. The bound is 25 %; the figures are printed.
+    // may dip by their CPU share (8.5 -> 7.4 fps seen once, 13 %; 14.1 -> 10.4 once under a
+    // parallel build, 26 %, which failed a 25 % bound); a client that held the pipeline
+    // would take it toward zero over the 8 s. The bound is half; the figures are printed.
     let alone = fps_over(&addr, 8.0);
     let players: Vec<_> = (0..50).filter_map(|_| raw_player(&out, false)).collect();
     assert_eq!(players.len(), 50, "the relay did not take 50 players");
@@ -602,7 +603,7 @@ fn push_survives_the_server_restarting_and_a_relay_fans_out_to_50_clients() {
     let s = state(&addr);
     assert_eq!(s["rtsp"]["push"]["state"], "streaming", "{}", s["rtsp"]);
     assert!(
-        with >= 0.75 * alone,
+        with >= 0.5 * alone,
         "the daemon's rate fell from {alone:.1} to {with:.1} fps with 50 relay clients"
     );
     println!("fps alone {alone:.2}, with 50 relay clients and a stalled one {with:.2}");

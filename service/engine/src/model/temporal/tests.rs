@@ -137,6 +137,94 @@ fn a_slow_change_inside_the_band_is_followed_after_the_hold() {
 }
 
 #[test]
+fn a_slow_edge_inside_a_still_crop_trails_by_at_most_the_band() {
+    // What `mask_still_hold_frames` can hold back: a part drifting slowly while the crop
+    // stays put (here the crop is given, fixed), too slowly for a moving block (a quarter
+    // of a pixel or half a pixel a frame: 4 or 8 of a block's 256 pixels flip), its edge a soft ramp 12 pixels
+    // wide. A pixel the edge passes over is taken once the segmenter puts it beyond the
+    // band (0.8 growing, 0.2 shrinking), or after the hold: so the edge given out trails
+    // the segmenter's 0.5 contour by at most the ramp's distance from 0.5 to the band's
+    // edge (0.3 x 12 = 3.6 px, whatever the hold), and stands on it within the hold once
+    // the part stops. Growing and shrinking, both holds.
+    let settings = TemporalSettings::default();
+    let (hi, lo) = (settings.mask_high, settings.mask_low);
+    let w = 12.0f32;
+    let frames = 120usize;
+    // Person on the left of the edge at `e` (x in pixels); rows 40..220.
+    let mask = |e: f32| {
+        let mut m = vec![0.0f32; S * S];
+        for y in 40..220 {
+            for x in 60..S {
+                m[y * S + x] = (0.5 + (e - x as f32) / w).clamp(0.0, 1.0);
+            }
+        }
+        m
+    };
+    // The first column given out off the person on row 100, with the edge in sub-pixels.
+    let edge_out = |m: &[f32]| (60..S).find(|&x| m[100 * S + x] <= 0.5).unwrap_or(S) as f32;
+    let edge_raw = |e: f32| edge_out(&mask(e));
+    // (hold, growing, pixels a frame): the default hold where the edge outruns it (0.5 px
+    // a frame: 4.5 px in nine frames, the band's 3.6 sooner); holds of 30 frames, whose
+    // trail only the band bounds; the moving person's hold.
+    let cases = [
+        (settings.mask_still_hold_frames, true, 0.5f32),
+        (30, true, 0.25),
+        (30, false, 0.25),
+        (2, true, 0.25),
+    ];
+    for (still_hold, grow, speed) in cases {
+        let s = TemporalSettings {
+            mask_still_hold_frames: still_hold,
+            ..settings
+        };
+        let mut t = Temporal::new(s);
+        let e0 = if grow { 120.0 } else { 160.0 };
+        let crop = crop_of(&mask(e0));
+        let dir = if grow { 1.0 } else { -1.0 };
+        let bound = (hi - 0.5).max(0.5 - lo) * w + 1.0;
+        let mut worst = 0.0f32;
+        let mut e = e0;
+        for k in 0..frames + still_hold as usize + 2 {
+            if k > 0 && k <= frames {
+                e += dir * speed;
+            }
+            let mut m = mask(e);
+            let (_, step) = t.steady_input(k as f64 / 30.0, 1, &mut m, crop);
+            let want = if k == 0 {
+                Step::Reset(ResetCause::First)
+            } else {
+                Step::Continued
+            };
+            assert_eq!(step, want, "frame {k}");
+            let trail = dir * (edge_raw(e) - edge_out(&m));
+            let what = format!("hold {still_hold}, growing {grow}, frame {k}");
+            assert!(
+                trail >= 0.0,
+                "{what}: the edge given out ran ahead by {trail}"
+            );
+            assert!(
+                trail <= bound,
+                "{what}: trails by {trail} px (bound {bound})"
+            );
+            worst = worst.max(trail);
+            if k == frames + still_hold as usize + 1 {
+                assert_eq!(
+                    trail, 0.0,
+                    "{what}: not on the contour after the part stopped"
+                );
+            }
+        }
+        println!(
+            "hold {still_hold}, growing {grow}, {speed} px a frame: trails by up to {worst} px"
+        );
+        assert!(
+            worst >= 1.0,
+            "hold {still_hold}: the case holds nothing back"
+        );
+    }
+}
+
+#[test]
 fn another_person_or_a_gap_starts_again() {
     let mut t = Temporal::new(TemporalSettings::default());
     let mut a = box_mask(20, 60, 40, 220, 0.9);
