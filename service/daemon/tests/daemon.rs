@@ -48,7 +48,7 @@ fn the_main_job_shows_the_reconstruction() {
             .unwrap();
     let given = shipped["temporal"].as_table().unwrap();
     let settings = s["temporal"]["settings"].as_object().unwrap();
-    assert_eq!(settings.len(), 15, "{s}");
+    assert_eq!(settings.len(), 16, "{s}");
     // The surface's dead band counts what it held (the walk's crop moves: maybe nothing).
     let held = &s["temporal"]["held_sides"];
     let (frames, points) = (held["frames"].as_u64(), held["points"].as_u64());

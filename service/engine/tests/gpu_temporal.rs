@@ -68,6 +68,38 @@ fn max_diff(a: &[f32], b: &[f32]) -> f32 {
 #[test]
 fn the_maps_filter_on_the_adapter_gives_the_hosts_maps_frame_by_frame() {
     let Some(gpu) = gpu() else { return };
+    // The maps not following the mask's motion, and following it (`map_motion_weight`, at
+    // a weight under the default 1 so that those pixels still blend): the same maps on
+    // both sides, and the motion changes them where the box moves.
+    let plain = parity(
+        &gpu,
+        TemporalSettings {
+            map_motion_weight: 0.0,
+            ..TemporalSettings::default()
+        },
+    );
+    let following = parity(
+        &gpu,
+        TemporalSettings {
+            map_motion_weight: 0.7,
+            ..TemporalSettings::default()
+        },
+    );
+    let changed = plain
+        .iter()
+        .zip(&following)
+        .filter(|(a, b)| max_diff(a, b) > 1e-3)
+        .count();
+    assert!(changed >= 3, "the mask's motion changed {changed} frames");
+}
+
+/// The frames of the test above under `settings`, on the adapter and the host, compared
+/// frame by frame; the host's filtered maps of each frame that has them.
+fn parity(
+    gpu: &std::sync::Arc<volcap_engine::gpu::Gpu>,
+    settings: TemporalSettings,
+) -> Vec<Vec<f32>> {
+    let gpu = gpu.clone();
     let head = MapsHead {
         k: 15,
         size: 128,
@@ -91,8 +123,9 @@ fn the_maps_filter_on_the_adapter_gives_the_hosts_maps_frame_by_frame() {
         size: 128,
         interleaved: false,
     };
-    let mut host = Temporal::new(TemporalSettings::default());
-    let mut dev = Temporal::new(TemporalSettings::default());
+    let mut host = Temporal::new(settings);
+    let mut dev = Temporal::new(settings);
+    let mut out = Vec::new();
     // (time s, crop shift px, maps drifting, maps not finite, colour features)
     let mut frames: Vec<(f64, usize, bool, bool, Option<MapLayout>)> = Vec::new();
     let mut t = 0.0;
@@ -167,6 +200,7 @@ fn the_maps_filter_on_the_adapter_gives_the_hosts_maps_frame_by_frame() {
             (interleaved, host_maps.coefficients_mut()),
             col_host.as_mut().map(|(l, d)| (*l, d.as_mut_slice())),
         );
+        out.push(host_maps.coefficients().to_vec());
         let back = dev_maps.host().expect("maps read back");
         let d = max_diff(back.coefficients(), host_maps.coefficients());
         assert!(d <= 1e-5, "frame {f}: the adapter's maps differ by {d}");
@@ -194,6 +228,7 @@ fn the_maps_filter_on_the_adapter_gives_the_hosts_maps_frame_by_frame() {
         colour_blended >= 3,
         "colour blended on {colour_blended} frames"
     );
+    out
 }
 
 /// The maps' buffer on the adapter holds the network's output interleaved (the host's

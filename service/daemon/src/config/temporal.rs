@@ -24,6 +24,7 @@ pub struct TemporalConfig {
     pub map_min_cutoff_hz: Option<f32>,
     pub map_beta: Option<f32>,
     pub map_change_cutoff_hz: Option<f32>,
+    pub map_motion_weight: Option<f32>,
     pub same_person_iou: Option<f32>,
     pub max_gap_s: Option<f32>,
 }
@@ -49,6 +50,7 @@ impl Default for TemporalConfig {
             map_min_cutoff_hz: None,
             map_beta: None,
             map_change_cutoff_hz: None,
+            map_motion_weight: None,
             same_person_iou: None,
             max_gap_s: None,
         }
@@ -82,6 +84,7 @@ impl TemporalConfig {
             map_min_cutoff_hz: self.map_min_cutoff_hz.unwrap_or(d.map_min_cutoff_hz),
             map_beta: self.map_beta.unwrap_or(d.map_beta),
             map_change_cutoff_hz: self.map_change_cutoff_hz.unwrap_or(d.map_change_cutoff_hz),
+            map_motion_weight: self.map_motion_weight.unwrap_or(d.map_motion_weight),
             same_person_iou: self.same_person_iou.unwrap_or(d.same_person_iou),
             max_gap_s: self.max_gap_s.unwrap_or(d.max_gap_s),
         }
@@ -107,6 +110,7 @@ pub fn settings_json(s: &volcap_engine::model::temporal::TemporalSettings) -> se
         "map_min_cutoff_hz": f(s.map_min_cutoff_hz),
         "map_beta": f(s.map_beta),
         "map_change_cutoff_hz": f(s.map_change_cutoff_hz),
+        "map_motion_weight": f(s.map_motion_weight),
         "same_person_iou": f(s.same_person_iou),
         "max_gap_s": f(s.max_gap_s),
     })

@@ -278,6 +278,7 @@ fn temporal_section_defaults_bounds_and_off() {
         ("crop_hold = 0.2", "temporal.crop_hold"),
         ("mask_dead_band = 0.6", "temporal.mask_dead_band"),
         ("surface_dead_band = -0.1", "temporal.surface_dead_band"),
+        ("map_motion_weight = 1.5", "temporal.map_motion_weight"),
     ] {
         let e = Config::parse(&format!("{base}[temporal]\n{extra}\n"), Path::new("b.toml"))
             .unwrap_err();

@@ -259,6 +259,10 @@ pub struct TemporalStep {
     pub to: Crop,
 }
 
+/// Where the temporal filter's parameters hold the motion's pixels, one bit each (word 16:
+/// their least weight, 0 when none moved).
+const MOTION_BITS_AT: usize = 17;
+
 struct TemporalPipes {
     layout: wgpu::BindGroupLayout,
     rates: wgpu::ComputePipeline,
@@ -341,7 +345,11 @@ impl GpuTemporal {
             (3 * n + 1) * 4,
             U::STORAGE | U::COPY_SRC,
         );
-        let params = buf("temporal params", 16 * 4, U::STORAGE | U::COPY_DST);
+        let params = buf(
+            "temporal params",
+            (MOTION_BITS_AT + n.div_ceil(32)) * 4,
+            U::STORAGE | U::COPY_DST,
+        );
         let staging = buf(
             "temporal read-back",
             WEIGHTS_AT as usize + n * 4,
@@ -369,16 +377,18 @@ impl GpuTemporal {
     }
 
     /// Record the filter of `maps` (this frame's, in place): `step` continues from the last
-    /// frame's maps, `None` starts from this frame's (after a reset).
+    /// frame's maps, `None` starts from this frame's (after a reset); `motion`: the least
+    /// weight of the new maps and the pixels it holds at (`FrameFilter::motion`).
     fn record(
         &mut self,
         enc: &mut wgpu::CommandEncoder,
         maps: &wgpu::Buffer,
         step: Option<&TemporalStep>,
+        motion: Option<&(f32, Vec<bool>)>,
     ) -> u64 {
         let h = self.head;
         let (n, c) = (h.pixels() as u32, h.channels() as u32);
-        let mut p = [0u32; 16];
+        let mut p = vec![0u32; MOTION_BITS_AT];
         p[0] = n;
         p[1] = c;
         p[2] = h.size as u32;
@@ -401,6 +411,14 @@ impl GpuTemporal {
             ];
             for (o, v) in p[4..].iter_mut().zip(f) {
                 *o = v.to_bits();
+            }
+            if let Some((least, pixels)) = motion.filter(|m| m.1.len() == n as usize) {
+                p[16] = least.to_bits();
+                let mut bits = vec![0u32; pixels.len().div_ceil(32)];
+                for (q, _) in pixels.iter().enumerate().filter(|(_, m)| **m) {
+                    bits[q / 32] |= 1 << (q % 32);
+                }
+                p.extend(bits);
             }
         }
         self.gpu
@@ -457,6 +475,9 @@ pub struct FrameFilter<'a> {
     pub state: &'a mut GpuTemporal,
     /// `None`: the first frame after a reset.
     pub step: Option<TemporalStep>,
+    /// Where the mask moved: the least weight of the new maps there and, per map pixel,
+    /// whether it is there (`Temporal::motion_pixels`; `None`: nowhere).
+    pub motion: Option<(f32, Vec<bool>)>,
     /// Bring the per-pixel weights back (the colour features are blended on the host with
     /// them).
     pub weights: bool,
@@ -577,7 +598,9 @@ fn frame_from<'a>(
     let n = head.pixels();
     let mut want_weights = false;
     if let Some(f) = filter.as_mut() {
-        dispatches += f.state.record(&mut enc, &fb.maps, f.step.as_ref());
+        dispatches += f
+            .state
+            .record(&mut enc, &fb.maps, f.step.as_ref(), f.motion.as_ref());
         want_weights = f.weights && f.step.is_some();
     }
     let (staging, scratch) = match filter.as_ref() {

@@ -7,12 +7,14 @@
 //    `warp.rs` `Taps`), each value's rate low-passed, the pixel's summed |rate| and |value|;
 //  - `reduce`, one workgroup: the maps' mean magnitude, the rates' normalization;
 //  - `blend`, per pixel: its weight (the One Euro weight of its normalized speed, at least
-//    the crop filter's, 1 where the last map has no value), the blend in place, the result
+//    the crop filter's and, where the mask moved, the motion's; 1 where the last map has
+//    no value), the blend in place, the result
 //    the next frame's last maps, the weight kept for the host (the colour features);
 //  - `prime`, per value: the first frame after a reset: the maps as they are, rates 0.
 // A frame whose maps are flagged not finite (maps.wgsl) changes nothing here.
 // p: [n, c, size, moved, a, inv_dt, min_cutoff, beta, dt, floor,
-//     from tx, ty, s, to tx, ty, s]  (floats as bits)
+//     from tx, ty, s, to tx, ty, s, motion weight, motion bits [ceil(n / 32)]]  (floats as
+//     bits; the motion's weight 0 and no bits when the mask moved nowhere)
 // maps: [n * c] and the flag; scratch: speed [n], magnitude [n], weight [n], norm.
 @group(0) @binding(0) var<storage, read> p: array<u32>;
 @group(0) @binding(1) var<storage, read_write> maps: array<f32>;
@@ -148,6 +150,11 @@ fn blend(@builtin(workgroup_id) wg: vec3<u32>, @builtin(num_workgroups) nwg: vec
     let c = p[1];
     let t = pixel_tap(q);
     var w = max(one_euro_alpha(pf(6u) + pf(7u) * scratch[q] * scratch[3u * n], pf(8u)), pf(9u));
+    // Where the mask moved, at least the motion's weight (model/temporal.rs `motion_floor`).
+    let least = pf(16u);
+    if least > 0.0 && ((p[17u + q / 32u] >> (q % 32u)) & 1u) != 0u {
+        w = max(w, least);
+    }
     if !t.ok { w = 1.0; }
     scratch[2u * n + q] = w;
     for (var ch = 0u; ch < c; ch++) {

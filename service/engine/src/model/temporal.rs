@@ -202,6 +202,9 @@ pub struct Temporal {
     out: Vec<f32>,
     /// The segmenter's mask of the last frame, before steadying.
     raw: Vec<f32>,
+    /// This frame's moving blocks (`moving_blocks`) and the mask's side, for the maps
+    /// (`map_motion_weight`); empty after a reset (the maps start again there anyway).
+    motion: (Vec<bool>, usize),
     last_t: Option<f64>,
     /// Seconds since the previous frame (0 on a reset).
     dt: f32,
@@ -227,6 +230,7 @@ impl Temporal {
             against: Vec::new(),
             out: Vec::new(),
             raw: Vec::new(),
+            motion: (Vec::new(), 0),
             last_t: None,
             dt: 0.0,
             people: 0,
@@ -252,6 +256,7 @@ impl Temporal {
         self.against.clear();
         self.out.clear();
         self.raw.clear();
+        self.motion.0.clear();
         self.last_t = None;
         self.maps = None;
         #[cfg(feature = "wgpu")]
@@ -293,6 +298,7 @@ impl Temporal {
         };
         self.raw.clear();
         self.raw.extend_from_slice(mask);
+        self.motion.0.clear();
         if let Some(moving) = moving {
             self.continued += 1;
             let (lo, hi) = (self.settings.mask_low, self.settings.mask_high);
@@ -328,6 +334,7 @@ impl Temporal {
                     *m = *out;
                 }
             }
+            self.motion = (moving, size);
         }
         self.out.clear();
         self.out.extend_from_slice(mask);
@@ -431,7 +438,7 @@ impl Temporal {
                 }
                 let (old, valid) =
                     resampled(&last.shape_taps, moved, l, &last.shape.1, &mut last.spare);
-                let weights = self.blend_weights(old, valid, l, shape.1, &mut last.rate);
+                let weights = self.blend_weights(old, valid, l, shape.1, &mut last.rate, crop);
                 blend(old, valid, l, shape.1, &weights);
                 match (&mut last.color, color.as_mut()) {
                     (Some((llast, lc)), Some((lcol, d))) if *llast == *lcol => {
@@ -490,6 +497,7 @@ impl Temporal {
         l: MapLayout,
         new: &[f32],
         rate: &mut [f32],
+        crop: Crop,
     ) -> Vec<f32> {
         let (dt, s) = (self.dt, &self.settings);
         let n = l.size * l.size;
@@ -537,6 +545,7 @@ impl Temporal {
             .iter()
             .map(|sp| one_euro_alpha(s.map_min_cutoff_hz + s.map_beta * sp * norm, dt).max(floor))
             .collect();
+        self.motion_floor(l.size, crop, &mut w);
         if let Some(valid) = valid {
             for (w, ok) in w.iter_mut().zip(valid) {
                 if !*ok {
@@ -545,6 +554,53 @@ impl Temporal {
             }
         }
         w
+    }
+}
+
+impl Temporal {
+    /// Per pixel of a `size x size` map made through `crop`, whether it lies in or beside a
+    /// block where this frame's mask moved (`None` when nothing moved, the crop given out
+    /// stayed put, or the setting is off: a person still as a whole keeps the maps' filter
+    /// whole, as the mask keeps its longer hold, so that noise that now and then flips a
+    /// block's worth of outline pixels does not open it). The crop is a scale and a shift,
+    /// so a map column's block depends on its x alone and a row's on its y alone.
+    pub(super) fn motion_pixels(&self, size: usize, crop: Crop) -> Option<Vec<bool>> {
+        let (moving, side) = (&self.motion.0, self.motion.1);
+        if self.settings.map_motion_weight <= 0.0
+            || self.crop_still
+            || !moving.contains(&true)
+            || size < 2
+        {
+            return None;
+        }
+        let nb = side.div_ceil(MOTION_BLOCK);
+        let m = (size - 1) as f32;
+        // Map pixel -> crop NDC -> the mask's NDC -> its pixel (nearest) -> its block.
+        let block = |i: usize, t: f32| {
+            let ndc = crop.s * (-1.0 + 2.0 * i as f32 / m) + t;
+            let px = ((ndc + 1.0) * 0.5 * (side - 1) as f32).round();
+            (px >= 0.0 && px <= (side - 1) as f32).then_some(px as usize / MOTION_BLOCK)
+        };
+        let cols: Vec<Option<usize>> = (0..size).map(|x| block(x, crop.tx)).collect();
+        let rows: Vec<Option<usize>> = (0..size).map(|y| block(y, crop.ty)).collect();
+        let mut out = vec![false; size * size];
+        for (row, by) in out.chunks_exact_mut(size).zip(&rows) {
+            let Some(by) = by else { continue };
+            for (o, bx) in row.iter_mut().zip(&cols) {
+                *o = bx.is_some_and(|bx| moving[by * nb + bx]);
+            }
+        }
+        Some(out)
+    }
+
+    /// Raise the new maps' weight to `map_motion_weight` where the mask moved.
+    fn motion_floor(&self, size: usize, crop: Crop, w: &mut [f32]) {
+        if let Some(pixels) = self.motion_pixels(size, crop) {
+            let least = self.settings.map_motion_weight;
+            for (w, _) in w.iter_mut().zip(pixels).filter(|(_, m)| *m) {
+                *w = w.max(least);
+            }
+        }
     }
 }
 

@@ -91,7 +91,7 @@ pub struct TemporalArgs {
     /// `[temporal]`: crop_min_cutoff_hz, crop_beta, crop_hold, mask_low, mask_high,
     /// mask_motion, mask_hold_frames, mask_still_hold_frames, mask_dead_band,
     /// surface_dead_band, map_min_cutoff_hz, map_beta, map_change_cutoff_hz,
-    /// same_person_iou).
+    /// map_motion_weight, same_person_iou).
     #[arg(
         long = "setting",
         value_delimiter = ',',

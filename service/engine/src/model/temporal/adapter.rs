@@ -72,9 +72,17 @@ impl Temporal {
         if !color_ok {
             a.color = None;
         }
+        let motion = match step {
+            Some(_) => self
+                .motion_pixels(head.size, crop)
+                .map(|m| (s.map_motion_weight, m)),
+            None => None,
+        };
+        let a = self.adapter.as_mut().ok_or("no filter state")?;
         Ok(FrameFilter {
             state: &mut a.state,
             step,
+            motion,
             weights: color.is_some(),
         })
     }

@@ -260,6 +260,128 @@ fn another_person_or_a_gap_starts_again() {
 }
 
 #[test]
+fn maps_follow_the_mask_where_it_moves_and_nowhere_else() {
+    // A still body with a limb sweeping 4 px a frame beside it (its blocks move); its map
+    // pixels swing between two values frame by frame, a change whose rate averages out
+    // like tremor, so the rate's weight alone keeps the filter nearly shut there (a
+    // swinging lower leg averaged with where it was). With `map_motion_weight` 1 those
+    // pixels take this frame's maps; every other pixel is filtered exactly as without.
+    let l = MapLayout {
+        channels: 3,
+        size: 32,
+        interleaved: true,
+    };
+    let body = |k: usize| {
+        let mut m = box_mask(100, 150, 40, 220, 0.95);
+        for y in 150..220 {
+            for x in 150 + 4 * k..160 + 4 * k {
+                m[y * S + x] = 0.95;
+            }
+        }
+        m
+    };
+    let c = crop_of(&box_mask(60, 230, 40, 220, 0.95));
+    let base: Vec<f32> = (0..l.len()).map(|i| 0.5 + 0.1 * (i % 7) as f32).collect();
+    let follow = TemporalSettings {
+        map_motion_weight: 1.0,
+        ..TemporalSettings::default()
+    };
+    let off = TemporalSettings {
+        map_motion_weight: 0.0,
+        ..TemporalSettings::default()
+    };
+    let (mut plain, mut moving) = (Temporal::new(off), Temporal::new(follow));
+    // The crop given out moves a little each frame (the limb moves the box): a still crop
+    // keeps the maps' filter whole (below).
+    let crop_at = |k: usize| Crop {
+        tx: c.tx + 0.006 * k as f32,
+        ..c
+    };
+    let (mut followed, mut shut, mut frames_followed) = (0usize, 0usize, 0usize);
+    // Pixels the motion reached on some frame so far (their history differs after it).
+    let mut ever = vec![false; l.size * l.size];
+    for k in 0..12 {
+        let (mut m0, mut m1) = (body(k), body(k));
+        let t_s = k as f64 / 30.0;
+        let crop = plain.steady_input(t_s, 1, &mut m0, crop_at(k)).0.unwrap();
+        assert_eq!(
+            Some(crop),
+            moving.steady_input(t_s, 1, &mut m1, crop_at(k)).0
+        );
+        // Where this frame's mask moved, in map pixels (none on the first frame).
+        let here = moving.motion_pixels(l.size, crop);
+        assert!(plain.motion_pixels(l.size, crop).is_none(), "off at 0");
+        let here = here.unwrap_or_else(|| vec![false; l.size * l.size]);
+        for (e, h) in ever.iter_mut().zip(&here) {
+            *e |= *h;
+        }
+        // The crop moves across only, so a map row's last values come from the same row:
+        // rows the motion never reached have the same history either way.
+        let ever_row: Vec<bool> = ever.chunks(l.size).map(|r| r.contains(&true)).collect();
+        let n = here.iter().filter(|m| **m).count();
+        if moving.crop_still {
+            assert_eq!(n, 0, "frame {k}: the crop stayed put");
+        } else if k > 0 {
+            frames_followed += 1;
+            assert!(
+                n > 0 && n < l.size * l.size / 3,
+                "frame {k}: {n} pixels moved"
+            );
+            // The body's middle (the crop's centre column, above the limb) is still.
+            assert!(!here[4 * l.size + l.size / 2], "frame {k}");
+        }
+        let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+        let new: Vec<f32> = base
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                if here[i / 3] {
+                    v + (k % 2) as f32
+                } else {
+                    v + sign * 0.005
+                }
+            })
+            .collect();
+        let (mut a, mut b) = (new.clone(), new.clone());
+        plain.steady_maps(crop, (l, &mut a), None);
+        moving.steady_maps(crop, (l, &mut b), None);
+        for (i, ((a, b), n)) in a.iter().zip(&b).zip(&new).enumerate() {
+            if here[i / 3] && k > 1 {
+                assert_eq!(
+                    b, n,
+                    "frame {k}, value {i}: the moving part follows at once"
+                );
+                shut += ((a - n).abs() > 0.2) as usize;
+                followed += 1;
+            } else if !ever_row[i / 3 / l.size] {
+                assert_eq!(
+                    a, b,
+                    "frame {k}, value {i}: a still pixel filtered as without"
+                );
+            }
+        }
+    }
+    // The same limb under a crop that stays put: not followed.
+    let mut held = Temporal::new(follow);
+    for k in 0..4 {
+        let mut m = body(k);
+        let crop = held.steady_input(k as f64 / 30.0, 1, &mut m, c).0.unwrap();
+        assert!(
+            k < 2 || held.motion_pixels(l.size, crop).is_none(),
+            "frame {k}: a still crop's maps followed the mask"
+        );
+    }
+    let still = ever.chunks(l.size).filter(|r| !r.contains(&true)).count();
+    assert!(still > l.size / 3, "{still} map rows never moved");
+    assert!(frames_followed >= 6, "followed on {frames_followed} frames");
+    assert!(followed > 0);
+    assert!(
+        shut * 2 > followed,
+        "without the motion's weight {shut} of {followed} moving values were held back"
+    );
+}
+
+#[test]
 fn maps_average_tremor_and_follow_motion_within_a_frame() {
     let mut t = Temporal::new(TemporalSettings::default());
     let l = MapLayout {

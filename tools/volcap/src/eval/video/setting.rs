@@ -76,6 +76,7 @@ pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
             "map_min_cutoff_hz" => &mut t.map_min_cutoff_hz,
             "map_beta" => &mut t.map_beta,
             "map_change_cutoff_hz" => &mut t.map_change_cutoff_hz,
+            "map_motion_weight" => &mut t.map_motion_weight,
             "same_person_iou" => &mut t.same_person_iou,
             other => bail!("--setting {s}: unknown key '{other}'"),
         };
