@@ -412,6 +412,8 @@ impl GpuTemporal {
             for (o, v) in p[4..].iter_mut().zip(f) {
                 *o = v.to_bits();
             }
+            // The motion's bits (2 KB at 128 x 128) go up with the parameters, which, as
+            // every kernel's parameter block, the byte counters leave out.
             if let Some((least, pixels)) = motion.filter(|m| m.1.len() == n as usize) {
                 p[16] = least.to_bits();
                 let mut bits = vec![0u32; pixels.len().div_ceil(32)];
