@@ -12,7 +12,8 @@ pub use compute::{
 };
 pub use live::{Live, LiveError};
 pub use model::{
-    CLOSE_RANGE_FRAMES, ModelConfig, Precision, SEGMENT_FULL_EVERY, SEGMENT_PASSES, ThinParts,
+    CLOSE_RANGE_FRAMES, MAP_SMOOTH, ModelConfig, Precision, SEGMENT_FULL_EVERY, SEGMENT_PASSES,
+    ThinParts,
 };
 pub use rtsp::RtspConfig;
 pub use temporal::{TemporalConfig, settings_json as temporal_json};
@@ -498,6 +499,12 @@ impl Config {
             self.model.segment_full_every,
             &SEGMENT_FULL_EVERY,
             " (frames)",
+        )?;
+        in_range(
+            "model.map_smooth",
+            self.model.map_smooth,
+            &MAP_SMOOTH,
+            " (passes)",
         )?;
         let split = self.compute.segment_thread_up_to;
         if split != 0 && !GRID_RESOLUTIONS.contains(&split) {

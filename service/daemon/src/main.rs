@@ -126,13 +126,21 @@ fn main() -> ExitCode {
         match loaded {
             Ok(m) => {
                 let fill = cfg.model.thin_parts.moment_fill();
-                let (mut m, took) = m.with_moment_fill(fill);
+                let (m, took) = m.with_moment_fill(fill);
+                let (mut m, smoothed) = m.with_map_smooth(cfg.model.map_smooth);
                 if let Some(passes) = cfg.model.segment_passes {
                     m.segment_passes = passes;
                 }
                 if fill.is_some() && took == 0 {
                     tracing::warn!(
                         "model.thin_parts = \"moment-fill\": {} is not a Fourier model; read as predicted",
+                        cfg.model.name
+                    );
+                }
+                if cfg.model.map_smooth > 0 && smoothed == 0 {
+                    tracing::info!(
+                        "model.map_smooth = {}: {} has no maps to smooth",
+                        cfg.model.map_smooth,
                         cfg.model.name
                     );
                 }
@@ -204,6 +212,7 @@ fn main() -> ExitCode {
     let mut shared = pipeline::Shared::new(&cfg, source.clone(), tx);
     if let Some(m) = &models {
         shared.set_segment_passes(m.segment_passes);
+        shared.set_map_smooth(m.map_smooth());
     }
     if let Some((label, fallback)) = runtime {
         shared.set_runtime(label, fallback);

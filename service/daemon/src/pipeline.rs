@@ -277,6 +277,24 @@ impl Shared {
         }
     }
 
+    /// Model mode: the passes of smoothing the shape model's maps get (`[model] map_smooth`,
+    /// `None` for a model without maps); some join the field's label
+    /// (`reconstruction: NAME (PRECISION, maps smoothed twice)`).
+    pub fn set_map_smooth(&mut self, passes: Option<u8>) {
+        let words = match passes {
+            Some(1) => "once".to_string(),
+            Some(2) => "twice".to_string(),
+            Some(n) if n > 2 => format!("{n} times"),
+            _ => return,
+        };
+        if self.mode == "model"
+            && let Some(open) = self.field_label.rfind(')')
+        {
+            self.field_label
+                .insert_str(open, &format!(", maps smoothed {words}"));
+        }
+    }
+
     /// The segmentation's track's `full_every` while it tracks (model mode, two passes,
     /// `[model] segment_full_every` > 1), else none.
     pub fn segment_tracking(&self) -> Option<u32> {

@@ -9,7 +9,7 @@ use common::{check_config, request, root, serial, start, wait_for};
 
 /// `[model] segment_full_every = 4`: the segment stage segments the walking person's crop
 /// alone between whole frames, says so in `/state` and `/metrics`, and still counts one
-/// person and renders them.
+/// person and renders them; `map_smooth = 1` reaches the shape model (its field's label).
 #[test]
 fn the_segmentation_tracks_the_crop_between_whole_frames() {
     let _serial = serial();
@@ -19,7 +19,7 @@ fn the_segmentation_tracks_the_crop_between_whole_frames() {
     std::fs::write(
         dir.join("b.toml"),
         format!(
-            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\ndisplay_size = 0\n[model]\ndir = \"{}\"\nsegment_passes = 2\nsegment_full_every = 4\n",
+            "[camera]\nbackend = \"sim\"\nscene = \"{}\"\n[render]\nfield = \"model\"\nresolution = 65\ndisplay_size = 0\n[model]\ndir = \"{}\"\nsegment_passes = 2\nsegment_full_every = 4\nmap_smooth = 1\n",
             scene.display(),
             root().join("models").display()
         ),
@@ -38,7 +38,10 @@ fn the_segmentation_tracks_the_crop_between_whole_frames() {
     assert!(whole >= 1 && crop <= 3 * whole + 3, "{t}");
     assert_eq!(s["people"], 1, "{s}");
     assert!(
-        s["field"].as_str().unwrap().contains("segmented twice"),
+        s["field"]
+            .as_str()
+            .unwrap()
+            .contains("segmented twice, maps smoothed once"),
         "{s}"
     );
     let (st, _, metrics) = request(&d.addr, "GET", "/metrics", "");

@@ -106,6 +106,7 @@ fn parity(
         basis: Basis::Fourier,
         zeta_scale: 1.0,
         iso_level: 0.55,
+        smooth: 0,
     };
     let interleaved = MapLayout {
         channels: head.channels(),
@@ -243,6 +244,7 @@ fn maps_on_the_adapter_are_the_hosts_interleaved_maps() {
             basis: Basis::Cosine,
             zeta_scale: 0.8,
             iso_level: 0.45,
+            smooth: 0,
         };
         let maps = planar(head, 3, true);
         let before = gpu.counters();
@@ -274,5 +276,60 @@ fn maps_on_the_adapter_are_the_hosts_interleaved_maps() {
             Some(FrameError::NotFinite)
         );
         assert!(maps_frame(&gpu, &maps[1..], head, None).is_err());
+    }
+}
+
+/// The smoothing across pixels on the adapter (`gpu/maps/smooth_region.wgsl` and
+/// `smooth.wgsl`) is the host's `FourierMaps::smoothed`: the region, a thin strip left out,
+/// then one to three passes (odd counts end in the other buffer and are
+/// copied back), frame buffers reused from the pool between counts, the maps changed where
+/// the person is; a frame with a value that is not finite is still refused.
+#[test]
+fn the_maps_smoothed_on_the_adapter_are_the_hosts() {
+    let Some(gpu) = gpu() else { return };
+    for (k, size) in [(15, 128), (7, 33)] {
+        for smooth in [1u8, 2, 3, 1] {
+            let head = MapsHead {
+                k,
+                size,
+                basis: Basis::Fourier,
+                zeta_scale: 1.0,
+                iso_level: 0.5,
+                smooth,
+            };
+            let mut maps = planar(head, 2, false);
+            // A gap of 6 columns across the upper rows with a strip 2 pixels wide in it (c0
+            // negative beside it): the region leaves the strip out, which the adapter's
+            // erosion and dilation must agree on.
+            for (p, c0) in maps.iter_mut().enumerate().take(size * size / 2) {
+                let x = p % size;
+                if (4..10).contains(&x) && !(6..8).contains(&x) {
+                    *c0 = -0.5;
+                }
+            }
+            let (m, _) = maps_frame(&gpu, &maps, head, None).expect("a frame");
+            let plain = FourierMaps::from_planar(&maps, k, size, 1.0).expect("finite");
+            let want = plain.clone().smoothed(smooth);
+            let got = m.host().expect("read back");
+            let d = max_diff(got.coefficients(), want.coefficients());
+            assert!(d < 1e-5, "K {k}, {size} px, {smooth} passes: {d}");
+            let moved = max_diff(got.coefficients(), plain.coefficients());
+            assert!(
+                moved > 1e-3,
+                "K {k}, {size} px, {smooth} passes changed nothing"
+            );
+            let c = head.channels();
+            let strip = &plain.coefficients()[(2 * size + 6) * c..(2 * size + 8) * c];
+            assert_eq!(
+                &got.coefficients()[(2 * size + 6) * c..(2 * size + 8) * c],
+                strip
+            );
+            let mut bad = maps.clone();
+            bad[size * size / 2] = f32::NAN;
+            assert_eq!(
+                maps_frame(&gpu, &bad, head, None).err(),
+                Some(FrameError::NotFinite)
+            );
+        }
     }
 }

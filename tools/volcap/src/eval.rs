@@ -403,8 +403,19 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     } else {
         a.segment_passes.iter().map(|p| Some(*p)).collect()
     };
+    // None: the engine's default.
+    let smooths: Vec<Option<u8>> = if a.map_smooth.is_empty() {
+        vec![None]
+    } else {
+        let max = volcap_engine::model::fourier::MAX_SMOOTH_PASSES;
+        if let Some(p) = a.map_smooth.iter().find(|p| **p > max) {
+            bail!("--map-smooth {p}: passes are 0 to {max}");
+        }
+        a.map_smooth.iter().map(|p| Some(*p)).collect()
+    };
     let pb = ProgressBar::new(
         (cases.len()
+            * smooths.len()
             * specs.len()
             * levels.len()
             * fills.len()
@@ -423,11 +434,12 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let mut summary = Vec::new();
     for (backend, runtime) in &runtimes {
         let mut stages = crate::backend::Stages::new(runtime)?;
-        for ((((name, prec), level), fill), seg_passes) in specs
+        for (((((name, prec), level), fill), seg_passes), smooth) in specs
             .iter()
             .flat_map(|s| levels.iter().map(move |l| (s, *l)))
             .flat_map(|sl| fills.iter().map(move |f| (sl, *f)))
             .flat_map(|slf| passes.iter().map(move |p| (slf, *p)))
+            .flat_map(|slfp| smooths.iter().map(move |m| (slfp, *m)))
         {
             let truth_k = truth_order(name);
             // Ground-truth fields still segment (for the mask IoU column) with the default models.
@@ -437,6 +449,25 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 *prec,
                 runtime,
             )?;
+            // The maps' smoothing: Fourier models only (the ground-truth rows' series are the
+            // truth), once for the others.
+            let smooth = match smooth {
+                Some(p) if truth_k.is_none() => {
+                    let (m, took) = models.with_map_smooth(p);
+                    models = m;
+                    if took == 0 && Some(p) != smooths[0] {
+                        pb.inc(per_variant);
+                        continue;
+                    }
+                    (took > 0 && p != volcap_engine::model::fourier::DEFAULT_SMOOTH_PASSES)
+                        .then_some(p)
+                }
+                Some(p) if Some(p) != smooths[0] => {
+                    pb.inc(per_variant);
+                    continue;
+                }
+                _ => None,
+            };
             let own_passes = models.segment_passes;
             let seg_passes = seg_passes.unwrap_or(own_passes);
             models.segment_passes = seg_passes;
@@ -499,9 +530,10 @@ pub fn eval(a: &EvalArgs) -> anyhow::Result<()> {
                 _ => None,
             };
             let variant = format!(
-                "{name}-{}{}{}{}{}{}{}{}",
+                "{name}-{}{}{}{}{}{}{}{}{}",
                 prec.name(),
                 if a.gt_mask { "-gtmask" } else { "" },
+                smooth.map(|p| format!("-s{p}")).unwrap_or_default(),
                 if seg_passes != own_passes {
                     format!("-seg{seg_passes}")
                 } else {

@@ -34,7 +34,8 @@ enum Cmd {
     Bench(BenchCmd),
     /// The full pipeline (segmentation -> shape -> localization -> mesh) on held-out
     /// simulator subjects against ground truth: Chamfer, P2S, IoU, mask IoU, worst 10, time.
-    Eval(eval::EvalArgs),
+    /// (Boxed: its many knobs make it the largest.)
+    Eval(Box<eval::EvalArgs>),
     /// Reconstruct people from single images (PNG/JPEG): per image a mask, a mesh (.glb) and
     /// mesh-free renders at yaw 0/90/180/270.
     Reconstruct(reconstruct::ReconstructArgs),

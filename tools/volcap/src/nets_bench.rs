@@ -67,7 +67,7 @@ pub fn run(a: &NetsArgs) -> anyhow::Result<()> {
     let rgb = input(3 * s * s);
     let x = input(4 * s * s);
     // First, on a quiet process (after tract's runs its pool's threads share the cores).
-    let filter = temporal_cost(a.runs)?;
+    let filter = temporal_cost(a.runs)? + &smooth_cost(a.runs)?;
     let mut runtimes = Vec::new();
     for r in &a.runtimes {
         if let Some(kernels) = r.trim().strip_prefix("wgpu") {
@@ -327,6 +327,49 @@ fn temporal_cost(runs: usize) -> anyhow::Result<String> {
         }
         times.sort_by(f64::total_cmp);
         let _ = writeln!(out, "| {what} | {:.2} |", times[times.len() / 2]);
+    }
+    Ok(out)
+}
+
+/// The maps smoothed across pixels (`[model] map_smooth`) per frame on fourier-medium's maps
+/// (128^2 x 31 coefficients): a person over a third of the pixels (about the main job's walk
+/// in its crop), then every pixel a person's (the most a frame can cost).
+fn smooth_cost(runs: usize) -> anyhow::Result<String> {
+    use volcap_engine::model::fourier::FourierMaps;
+    let (k, n) = (15, 128);
+    let planar_of = |person: &dyn Fn(usize, usize) -> bool| {
+        let mut p = input((2 * k + 1) * n * n);
+        for y in 0..n {
+            for x in 0..n {
+                // c0, the ray's mean occupancy: 0.5 on the person, 0 beside it.
+                p[y * n + x] = if person(x, y) { 0.5 } else { 0.0 };
+            }
+        }
+        p
+    };
+    let mut out = String::from(
+        "\n| maps smoothed across pixels (`map_smooth`, 128^2 x 31), per frame | 1 pass ms | 2 passes ms |\n|---|---|---|\n",
+    );
+    let third = |x: usize, y: usize| (40..104).contains(&x) && (8..(8 + n * 2 / 3)).contains(&y);
+    for (what, planar) in [
+        ("person on a third of the pixels", planar_of(&third)),
+        ("every pixel a person's", planar_of(&|_, _| true)),
+    ] {
+        let maps = FourierMaps::from_planar(&planar, k, n, 1.0)
+            .ok_or_else(|| anyhow!("the bench's maps are not finite"))?;
+        let mut cells = Vec::new();
+        for passes in [1u8, 2] {
+            let mut times = Vec::new();
+            for _ in 0..runs.max(1) + 1 {
+                let m = maps.clone();
+                let start = Instant::now();
+                std::hint::black_box(m.smoothed(passes));
+                times.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+            times.sort_by(f64::total_cmp);
+            cells.push(format!("{:.2}", times[times.len() / 2]));
+        }
+        let _ = writeln!(out, "| {what} | {} |", cells.join(" | "));
     }
     Ok(out)
 }

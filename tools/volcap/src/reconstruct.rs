@@ -44,6 +44,11 @@ pub struct ReconstructArgs {
     /// segment_passes`); unset: as the model was trained (its file's `volcap.segment_passes`).
     #[arg(long, value_parser = segment_passes)]
     pub segment_passes: Option<u8>,
+    /// Passes of smoothing across a Fourier model's map pixels, 0 to 4 (`volcapd`'s `[model]
+    /// map_smooth`; 0: the maps as the network gives them).
+    #[arg(long, default_value_t = volcap_engine::model::fourier::DEFAULT_SMOOTH_PASSES,
+          value_parser = clap::value_parser!(u8).range(0..=volcap_engine::model::fourier::MAX_SMOOTH_PASSES as i64))]
+    pub map_smooth: u8,
     /// Folder of the ONNX models.
     #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
@@ -272,6 +277,7 @@ pub fn reconstruct(a: &ReconstructArgs) -> anyhow::Result<()> {
     if let Some(passes) = a.segment_passes {
         models.segment_passes = passes;
     }
+    let (models, _) = models.with_map_smooth(a.map_smooth);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let bar = if a.json {
         ProgressBar::hidden()

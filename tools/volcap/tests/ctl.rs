@@ -106,14 +106,14 @@ fn cli_reads_status_and_controls_the_daemon() {
         );
         std::thread::sleep(Duration::from_millis(200));
     };
-    // The main job's board: the reconstruction, named as one, with its segmentation passes
-    // and the runtime that runs its networks (`compute.runtime = "auto"`: ONNX Runtime where
+    // The main job's board: the reconstruction, named as one, with its segmentation passes,
+    // its maps' smoothing and the runtime that runs its networks (`compute.runtime = "auto"`: ONNX Runtime where
     // its library is installed).
     let model = status["Model"].as_str().unwrap_or_default();
     assert!(
-        model == "reconstruction: fourier-medium (f32, segmented twice, tract)"
+        model == "reconstruction: fourier-medium (f32, segmented twice, maps smoothed twice, tract)"
             || (model.starts_with(
-                "reconstruction: fourier-medium (f32, segmented twice, onnxruntime 1."
+                "reconstruction: fourier-medium (f32, segmented twice, maps smoothed twice, onnxruntime 1."
             ) && model.ends_with(')')),
         "{model}"
     );

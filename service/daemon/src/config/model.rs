@@ -60,6 +60,24 @@ pub struct ModelConfig {
     /// walking in is counted at the next whole frame.
     #[serde(default = "d_segment_full_every")]
     pub segment_full_every: u32,
+    /// Passes of smoothing across the map pixels of a Fourier model's frame (0 to 4; each a
+    /// 3x3 binomial mean among the pixels of the person's thick parts, hands and other parts
+    /// narrower than 7 map pixels left as they are: the network predicts each pixel's ray on
+    /// its own, and its row-to-row noise shows in a turned view as a serrated outline and
+    /// streaked sides; `volcap_engine::model::fourier::FourierMaps::smoothed`). Default 2
+    /// (docs/bench/map-smooth: Chamfer / P2S 1.521 / 1.009 -> 1.510 / 0.954 cm on the main
+    /// job's moving scenes, hands shown on held-out images 53.8 -> 52.6 %); 0 reads the maps
+    /// as the network gives them.
+    #[serde(default = "d_map_smooth")]
+    pub map_smooth: u8,
+}
+
+/// `model.map_smooth`: the engine's range.
+pub const MAP_SMOOTH: std::ops::RangeInclusive<u8> =
+    0..=volcap_engine::model::fourier::MAX_SMOOTH_PASSES;
+
+fn d_map_smooth() -> u8 {
+    volcap_engine::model::fourier::DEFAULT_SMOOTH_PASSES
 }
 
 /// `model.thin_parts`.
@@ -117,6 +135,7 @@ impl Default for ModelConfig {
             thin_parts: ThinParts::Series,
             segment_passes: None,
             segment_full_every: d_segment_full_every(),
+            map_smooth: d_map_smooth(),
         }
     }
 }

@@ -433,3 +433,34 @@ fn render_device_auto_is_own_on_a_gpu_and_shared_on_the_cpu() {
         assert_eq!(crate::config::RenderDevice::by_name(d.name()), Some(d));
     }
 }
+
+/// `model.map_smooth`: the engine's default passes, 0 to 4 read, anything else refused
+/// naming the key, the line and the range.
+#[test]
+fn map_smooth_is_read_and_a_wrong_count_named() {
+    let base = "[camera]\nbackend = \"sim\"\nscene = \"x.toml\"\n";
+    let c = Config::parse(base, Path::new("b.toml")).unwrap();
+    assert_eq!(
+        c.model.map_smooth,
+        volcap_engine::model::fourier::DEFAULT_SMOOTH_PASSES
+    );
+    for n in [0u8, 1, 4] {
+        let c = Config::parse(
+            &format!("{base}[model]\nmap_smooth = {n}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.model.map_smooth, n);
+    }
+    for bad in ["5", "-1", "1.5", "\"2\""] {
+        let e = Config::parse(
+            &format!("{base}[model]\nmap_smooth = {bad}\n"),
+            Path::new("b.toml"),
+        )
+        .unwrap_err();
+        assert!(
+            e.contains("b.toml") && e.contains("map_smooth") && e.contains("line 5"),
+            "{bad}: {e}"
+        );
+    }
+}

@@ -19,6 +19,8 @@ use crate::model::preprocess::Crop;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, OnceLock};
 
+mod smooth;
+
 const INTERLEAVE: &str = include_str!("maps.wgsl");
 const TEMPORAL: &str = include_str!("maps_temporal.wgsl");
 
@@ -44,6 +46,9 @@ pub struct MapsHead {
     pub zeta_scale: f32,
     /// The series level read as the surface (`FourierMaps::with_iso_level`).
     pub iso_level: f32,
+    /// Passes of the smoothing across pixels the frame's maps get after the interleave
+    /// (`maps/smooth.wgsl`, `FourierMaps::smoothed`), before the temporal filter.
+    pub smooth: u8,
 }
 
 impl MapsHead {
@@ -89,6 +94,9 @@ pub(crate) struct FrameBufs {
     params: wgpu::Buffer,
     /// The interleave's bind group and the network output it reads (remade when another).
     bind: Option<(wgpu::Buffer, wgpu::BindGroup)>,
+    /// The smoothing's other buffer and bind groups (maps into it, it into the maps), made
+    /// at the first frame that smooths.
+    smooth: Option<smooth::SmoothBufs>,
 }
 
 impl FrameBufs {
@@ -127,6 +135,7 @@ impl FrameBufs {
             timer: gpu.timer(),
             params,
             bind: None,
+            smooth: None,
         }
     }
 
@@ -591,9 +600,9 @@ fn frame_from<'a>(
         pass.set_bind_group(0, fb.bind(gpu, &interleave, src), &[]);
         pass.dispatch_workgroups(x, y, 1);
     }
+    let mut dispatches = 1 + smooth::record(gpu, &mut enc, fb, head)?;
     let fb = maps.bufs.as_ref().ok_or("no frame buffers")?;
     let timer = fb.timer.as_ref();
-    let mut dispatches = 1;
     // The filter's passes; the read-back (the flag, the timestamps where timed, 16 bytes for
     // these passes' span and 16 for the network's, the weights where asked) into the
     // filter's staging, which has room for the weights, or the frame's.

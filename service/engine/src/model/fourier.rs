@@ -33,9 +33,14 @@ use std::path::{Path, PathBuf};
 
 mod basis;
 mod seeds;
+mod smooth;
 pub use basis::{Basis, basis, cosine_basis, cosine_interval_coeffs, interval_coeffs};
 use basis::{LANES, lane_basis};
 pub use seeds::SEED_THIN;
+pub use smooth::{
+    DEFAULT_SMOOTH_PASSES, MAX_SMOOTH_PASSES, SMOOTH_INSIDE, SMOOTH_THIN, smooth_pass,
+    smooth_region,
+};
 
 /// A square dilation of radius `r` (Chebyshev) of an `n x n` row-major mask.
 fn dilate(m: &[bool], n: usize, r: usize) -> Vec<bool> {
@@ -438,6 +443,9 @@ pub struct FourierNet {
     /// `volcap.segment_passes`, written by the exporter for a `train --segment-passes 2` run;
     /// absent: 1): [`super::Models::segment_passes`] starts there.
     pub segment_passes: u8,
+    /// [`FourierMaps::smoothed`] passes on every frame's maps, before any reading below
+    /// ([`DEFAULT_SMOOTH_PASSES`] unless set: `Models::with_map_smooth`).
+    pub smooth_passes: u8,
     /// Experimental: [`FourierMaps::with_peak_relative_level`] `(frac, min_peak)` on every
     /// frame's maps (`volcap eval --peak-level`); off by default.
     pub peak_level: Option<(f32, f32)>,
@@ -568,6 +576,7 @@ impl FourierNet {
             iso_level,
             basis,
             segment_passes,
+            smooth_passes: DEFAULT_SMOOTH_PASSES,
             peak_level: None,
             peak_gate: None,
             moment_fill: None,
@@ -582,7 +591,10 @@ impl FourierNet {
         let planar = self.net.run(&[(&[1, 4, s, s], x)])?;
         FourierMaps::from_planar(&planar, self.k, self.size, self.zeta_scale)
             .map(|m| {
-                let m = m.with_iso_level(self.iso_level).with_basis(self.basis);
+                let m = m
+                    .with_iso_level(self.iso_level)
+                    .with_basis(self.basis)
+                    .smoothed(self.smooth_passes);
                 let m = match self.interior_level {
                     Some((level, r)) => {
                         let mask = mask_gate(&x[3 * s * s..], s, self.size, 0.5);

@@ -441,6 +441,13 @@ impl Models {
     /// many models took it. A model already shared (an `Arc` cloned elsewhere) is left as
     /// it is: call this right after loading.
     pub fn with_moment_fill(mut self, fill: Option<(f32, f32, usize)>) -> (Self, usize) {
+        let n = self.each_fourier(|f| f.moment_fill = fill);
+        (self, n)
+    }
+
+    /// Apply `set` to every Fourier shape model (the main one and the close-range one) not
+    /// yet shared; how many took it.
+    fn each_fourier(&mut self, mut set: impl FnMut(&mut FourierNet)) -> usize {
         let mut n = 0;
         let shapes =
             std::iter::once(&mut self.shape).chain(self.close_range.as_mut().map(|(_, s)| s));
@@ -448,11 +455,30 @@ impl Models {
             if let ShapeModel::Fourier(f) = shape
                 && let Some(f) = Arc::get_mut(f)
             {
-                f.moment_fill = fill;
+                set(f);
                 n += 1;
             }
         }
+        n
+    }
+
+    /// Read every Fourier shape model's maps (the main one and the close-range one) with
+    /// `passes` passes of [`fourier::FourierMaps::smoothed`] (0: as the network gives them;
+    /// at most [`fourier::MAX_SMOOTH_PASSES`], more are taken as that). Returns how many
+    /// models took it; a model already shared is left as it is (call this right after loading).
+    pub fn with_map_smooth(mut self, passes: u8) -> (Self, usize) {
+        let passes = passes.min(fourier::MAX_SMOOTH_PASSES);
+        let n = self.each_fourier(|f| f.smooth_passes = passes);
         (self, n)
+    }
+
+    /// The passes of smoothing the main shape model's maps get ([`Self::with_map_smooth`]);
+    /// `None` when it has no maps (the MLP family).
+    pub fn map_smooth(&self) -> Option<u8> {
+        match &self.shape {
+            ShapeModel::Fourier(f) => Some(f.smooth_passes),
+            _ => None,
+        }
     }
 
     /// Segment, crop and encode one RGB8 frame (its most prominent person); the field over

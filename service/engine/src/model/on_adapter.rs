@@ -26,6 +26,7 @@ impl FourierNet {
             basis: self.basis,
             zeta_scale: self.zeta_scale,
             iso_level: self.iso_level,
+            smooth: self.smooth_passes,
         })
     }
 }

@@ -135,6 +135,12 @@ pub struct EvalArgs {
     /// trained (its file's `volcap.segment_passes`), as `volcapd` runs it.
     #[arg(long, value_delimiter = ',')]
     pub segment_passes: Vec<u8>,
+    /// Fourier models: passes of smoothing across the maps' pixels, comma-separated, each 0
+    /// to 4 (`FourierMaps::smoothed`; the daemon's `[model] map_smooth`). Every Fourier model
+    /// gets a row per value, side by side, named `-sN` where it is not the engine's default
+    /// (`fourier::DEFAULT_SMOOTH_PASSES`). Unset: the default, as `volcapd` runs it.
+    #[arg(long, value_delimiter = ',')]
+    pub map_smooth: Vec<u8>,
     /// Localization's coarsest levels (`2^l + 1` points a side; the boards' `render.coarse_level`
     /// is 4), comma-separated (a row each, named `-cL` when more than one is given): unset,
     /// the engine's for the grid (3 at 257^3: 9^3 seeds).

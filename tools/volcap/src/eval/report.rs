@@ -181,6 +181,10 @@ fn knobs(a: &EvalArgs) -> String {
         let passes: Vec<String> = a.segment_passes.iter().map(|p| p.to_string()).collect();
         let _ = write!(k, " --segment-passes {}", passes.join(","));
     }
+    if !a.map_smooth.is_empty() {
+        let passes: Vec<String> = a.map_smooth.iter().map(|p| p.to_string()).collect();
+        let _ = write!(k, " --map-smooth {}", passes.join(","));
+    }
     if a.truth_surface == super::TruthSurface::Seen {
         k.push_str(" --truth-surface seen");
     }

@@ -27,7 +27,7 @@
 
 use super::framing::{OracleInCrop, ToCamera};
 use super::{FrameArg, frame_of, surface_distances};
-use anyhow::{Context, anyhow};
+use anyhow::{Context, anyhow, bail};
 use clap::Args;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -87,7 +87,8 @@ pub struct TemporalArgs {
     pub model: String,
     /// Filter settings (comma-separated): `off`, `default` (volcapd's defaults), or
     /// `KEY=VALUE+KEY=VALUE...` over the defaults (`off+segment_full_every=N` or
-    /// `default+segment_full_every=N`: the segmentation's track, `[model]`'s key; keys of
+    /// `default+segment_full_every=N`: the segmentation's track, and `map_smooth=N`: the
+    /// passes of smoothing across the maps' pixels, 0 none: `[model]`'s keys; keys of
     /// `[temporal]`: crop_min_cutoff_hz, crop_beta, crop_hold, mask_low, mask_high,
     /// mask_motion, mask_hold_frames, mask_still_hold_frames, mask_dead_band,
     /// surface_dead_band, map_min_cutoff_hz, map_beta, map_change_cutoff_hz,
@@ -327,8 +328,26 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
         Some((n, p)) => (n, Precision::parse(p).map_err(anyhow::Error::msg)?),
         None => (a.model.as_str(), Precision::F32),
     };
-    let models = Models::load(&a.models_dir, name, prec)?;
-    let depth = frame_of(FrameArg::Auto, &models, None);
+    // The networks once per smoothing the settings ask for (a model's passes are set at
+    // load).
+    let mut by_smooth: Vec<(u8, Models)> = Vec::new();
+    for st in &settings {
+        if by_smooth.iter().all(|(p, _)| *p != st.map_smooth) {
+            let (m, _) = Models::load(&a.models_dir, name, prec)?.with_map_smooth(st.map_smooth);
+            by_smooth.push((st.map_smooth, m));
+        }
+    }
+    let models_for = |passes: u8| {
+        by_smooth
+            .iter()
+            .find(|(p, _)| *p == passes)
+            .map(|(_, m)| m)
+            .ok_or_else(|| anyhow!("no networks loaded for map_smooth = {passes}"))
+    };
+    let depth = match settings.first() {
+        Some(st) => frame_of(FrameArg::Auto, models_for(st.map_smooth)?, None),
+        None => bail!("bench temporal: no --setting"),
+    };
     let pb = ProgressBar::new((a.scenes.len() * settings.len()) as u64 * a.frames);
     pb.set_style(
         ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} {msg}")
@@ -350,6 +369,7 @@ pub fn run(a: &TemporalArgs) -> anyhow::Result<()> {
         let mut unfiltered: Option<Vec<Option<Views>>> = None;
         for st in &settings {
             let (setting, ts) = (&st.label, &st.filter);
+            let models = models_for(st.map_smooth)?;
             pb.set_message(format!("{label}: {setting}"));
             let mut temporal = ts.map(Temporal::new);
             loc.forget_sides();

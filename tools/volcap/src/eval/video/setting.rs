@@ -4,22 +4,25 @@
 use anyhow::{anyhow, bail};
 use volcap_engine::model::temporal::TemporalSettings;
 
-/// A `--setting` value: its label, the filter (none: off) and the segmentation's track
-/// (`segment_full_every`, the daemon's `[model]` key: 1 segments every frame whole).
+/// A `--setting` value: its label, the filter (none: off), the segmentation's track
+/// (`segment_full_every`, the daemon's `[model]` key: 1 segments every frame whole) and the
+/// maps' smoothing (`map_smooth`, the daemon's `[model]` key: passes, 0 none).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Setting {
     pub label: String,
     pub filter: Option<TemporalSettings>,
     pub segment_full_every: u32,
+    pub map_smooth: u8,
 }
 
 /// Parse a `--setting`: `off`, `default`, or `+`-joined `KEY=VALUE`s over the defaults
-/// (`[temporal]`'s keys, and `segment_full_every`), optionally with `off` among them (no
-/// filter: then only `segment_full_every` may follow).
+/// (`[temporal]`'s keys, and `[model]`'s `segment_full_every` and `map_smooth`), optionally
+/// with `off` among them (no filter: then only `[model]`'s keys may follow).
 pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
     let s = s.trim();
     let mut t = TemporalSettings::default();
     let (mut off, mut filter_keys, mut full_every) = (false, false, 1u32);
+    let mut smooth = volcap_engine::model::fourier::DEFAULT_SMOOTH_PASSES;
     for kv in s.split('+') {
         let kv = kv.trim();
         match kv {
@@ -50,6 +53,11 @@ pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
         match k.trim() {
             "segment_full_every" => {
                 full_every = whole(1.0..=volcap_engine::model::SEGMENT_FULL_EVERY_MAX as f32)?;
+                continue;
+            }
+            "map_smooth" => {
+                let max = volcap_engine::model::fourier::MAX_SMOOTH_PASSES;
+                smooth = whole(0.0..=f32::from(max))? as u8;
                 continue;
             }
             "mask_hold_frames" => {
@@ -91,5 +99,6 @@ pub fn parse_setting(s: &str) -> anyhow::Result<Setting> {
         label: s.to_string(),
         filter: (!off).then_some(t),
         segment_full_every: full_every,
+        map_smooth: smooth,
     })
 }

@@ -1,0 +1,330 @@
+//! The maps smoothed across pixels ([`FourierMaps::smoothed`]): the shape network predicts
+//! every pixel's ray on its own, so neighbouring rows' depth profiles differ by noise that a
+//! turned view shows as a serrated outline and streaked sides (the rows' surfaces stepping
+//! back and forth). A pass replaces each person pixel's coefficients by the 3x3 binomial
+//! average (weights 1 2 1 / 2 4 2 / 1 2 1) of the person pixels around it; the series is
+//! linear in its coefficients, so this averages the neighbouring rays' occupancy profiles.
+//!
+//! A person pixel is one whose ray is more than [`SMOOTH_INSIDE`] inside on average (its
+//! `c0`, the series' mean over the depth range in both bases). Only the person's thick parts
+//! are smoothed: the person pixels an opening of radius [`SMOOTH_THIN`] keeps
+//! ([`smooth_region`]); pixels outside that region are left as they are and never enter a
+//! mean, so the outline does not erode into the background and the thin parts (hands,
+//! fingers) keep their own profiles. The GPU backend's `gpu/maps/smooth.wgsl` is the same
+//! rule.
+
+use super::FourierMaps;
+
+/// A pixel whose series' mean (`c0`) is above this is a person pixel for [`smooth_pass`].
+pub const SMOOTH_INSIDE: f32 = 0.02;
+
+/// Most passes a model may be read with (`[model] map_smooth`, `--map-smooth`).
+pub const MAX_SMOOTH_PASSES: u8 = 4;
+
+/// The passes every Fourier model is read with unless told otherwise: measured on the
+/// simulated scenes (`volcap bench temporal --setting default+map_smooth=N`, docs/bench/map-smooth).
+pub const DEFAULT_SMOOTH_PASSES: u8 = 2;
+
+/// Parts narrower than `2 * SMOOTH_THIN + 1` map pixels are not smoothed: a square opening
+/// of this radius of the person pixels leaves them out. Hands' rays lie barely over the
+/// surface level, and averaged with their neighbours they fell under it (held-out images,
+/// fourier-medium: hands shown 53.8 % unsmoothed, 46.1 % smoothed everywhere, 52.6 % with
+/// this; docs/bench/map-smooth). The seeds' thin parts' radius (`seeds::SEED_THIN`).
+pub const SMOOTH_THIN: usize = super::seeds::SEED_THIN;
+
+/// The pixels a pass smooths and averages over (`n x n` pixel-interleaved maps of `c`
+/// channels, `c0` first): person pixels (`c0` above [`SMOOTH_INSIDE`]) that a square opening
+/// of radius [`SMOOTH_THIN`] of the person pixels keeps (the map's own edge does not erode).
+/// Passes do not change it: a mean of person pixels' `c0` is above the threshold, and other
+/// pixels are copied.
+pub fn smooth_region(data: &[f32], c: usize, n: usize) -> Vec<bool> {
+    let inside: Vec<bool> = (0..n * n).map(|p| data[p * c] > SMOOTH_INSIDE).collect();
+    let opened = super::dilate(&super::erode(&inside, n, SMOOTH_THIN), n, SMOOTH_THIN);
+    inside.iter().zip(opened).map(|(i, o)| *i && o).collect()
+}
+
+/// One pass over pixel-interleaved maps `src` (`n x n` pixels, `c` channels each) into `dst`
+/// of the same length: each pixel of `region` ([`smooth_region`]) becomes the 3x3 binomial
+/// mean (1 2 1 / 2 4 2 / 1 2 1) of the pixels of `region` around it; the others are copied.
+pub fn smooth_pass(src: &[f32], dst: &mut [f32], c: usize, n: usize, region: &[bool]) {
+    debug_assert_eq!(src.len(), n * n * c);
+    debug_assert_eq!(dst.len(), src.len());
+    debug_assert_eq!(region.len(), n * n);
+    for y in 0..n {
+        for x in 0..n {
+            let p = y * n + x;
+            let out = &mut dst[p * c..(p + 1) * c];
+            if !region[p] {
+                out.copy_from_slice(&src[p * c..(p + 1) * c]);
+                continue;
+            }
+            // The weights first, then the mean as a sum of fractions: no partial sum is
+            // larger than the largest coefficient, whatever the values.
+            let joined = (y.saturating_sub(1)..=(y + 1).min(n - 1))
+                .flat_map(|yy| (x.saturating_sub(1)..=(x + 1).min(n - 1)).map(move |xx| (xx, yy)))
+                .filter(|(xx, yy)| region[yy * n + xx])
+                .map(|(xx, yy)| {
+                    let w = if xx == x { 2.0f32 } else { 1.0 } * if yy == y { 2.0 } else { 1.0 };
+                    (yy * n + xx, w)
+                });
+            let w: f32 = joined.clone().map(|(_, w)| w).sum();
+            // `w` >= 4: the pixel itself is in the region.
+            let inv = 1.0 / w;
+            out.fill(0.0);
+            for (q, wq) in joined {
+                let f = wq * inv;
+                for (o, v) in out.iter_mut().zip(&src[q * c..(q + 1) * c]) {
+                    *o += f * v;
+                }
+            }
+        }
+    }
+}
+
+impl FourierMaps {
+    /// The maps after `passes` passes of [`smooth_pass`] (0: as they are) over the region
+    /// worked out once from the maps as they come ([`smooth_region`]).
+    pub fn smoothed(mut self, passes: u8) -> Self {
+        if passes == 0 || self.size == 0 {
+            return self;
+        }
+        let c = 2 * self.k + 1;
+        let region = smooth_region(&self.data, c, self.size);
+        let mut other = vec![0.0f32; self.data.len()];
+        for _ in 0..passes {
+            smooth_pass(&self.data, &mut other, c, self.size, &region);
+            std::mem::swap(&mut self.data, &mut other);
+        }
+        self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Maps of `n x n` pixels with K = 1 whose pixel `(x, y)` has the coefficients `f(x, y)`.
+    fn maps(n: usize, f: impl Fn(usize, usize) -> [f32; 3]) -> FourierMaps {
+        let mut d = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                d.extend(f(x, y));
+            }
+        }
+        FourierMaps::from_interleaved(d, 1, n, 1.0).unwrap()
+    }
+
+    /// The region written from its definition: a person pixel that lies in some window of
+    /// radius [`SMOOTH_THIN`] (clipped to the map) whose pixels are all a person's.
+    fn reference_region(m: &FourierMaps) -> Vec<bool> {
+        let n = m.size() as i64;
+        let r = SMOOTH_THIN as i64;
+        let inside = |x: i64, y: i64| m.pixel(x as usize, y as usize)[0] > SMOOTH_INSIDE;
+        let window_full = |cx: i64, cy: i64| {
+            (cy - r..=cy + r)
+                .flat_map(|y| (cx - r..=cx + r).map(move |x| (x, y)))
+                .filter(|&(x, y)| x >= 0 && y >= 0 && x < n && y < n)
+                .all(|(x, y)| inside(x, y))
+        };
+        let mut out = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let in_full = (y - r..=y + r)
+                    .flat_map(|cy| (x - r..=x + r).map(move |cx| (cx, cy)))
+                    .filter(|&(cx, cy)| cx >= 0 && cy >= 0 && cx < n && cy < n)
+                    .any(|(cx, cy)| window_full(cx, cy));
+                out.push(inside(x, y) && in_full);
+            }
+        }
+        out
+    }
+
+    /// The pass in f64, written from the definition (a weighted mean over the 3x3
+    /// neighbours in the region).
+    fn reference(m: &FourierMaps, region: &[bool]) -> Vec<f64> {
+        let (n, c) = (m.size(), 2 * m.k() + 1);
+        let mut out = Vec::new();
+        for y in 0..n as i64 {
+            for x in 0..n as i64 {
+                let me = m.pixel(x as usize, y as usize);
+                if !region[y as usize * n + x as usize] {
+                    out.extend(me.iter().map(|v| *v as f64));
+                    continue;
+                }
+                let (mut acc, mut w) = (vec![0.0f64; c], 0.0f64);
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let (xx, yy) = (x + dx, y + dy);
+                        if xx < 0 || yy < 0 || xx >= n as i64 || yy >= n as i64 {
+                            continue;
+                        }
+                        if !region[yy as usize * n + xx as usize] {
+                            continue;
+                        }
+                        let q = m.pixel(xx as usize, yy as usize);
+                        let wq = ((2 - dx.abs()) * (2 - dy.abs())) as f64;
+                        w += wq;
+                        for (a, v) in acc.iter_mut().zip(q) {
+                            *a += wq * *v as f64;
+                        }
+                    }
+                }
+                out.extend(acc.iter().map(|a| a / w));
+            }
+        }
+        out
+    }
+
+    /// A 28 x 28 map: a 16 x 16 block of person pixels with varied coefficients (the torso)
+    /// with a hole at the threshold itself and one of a negative mean, a bar two pixels wide
+    /// off its side (an arm), a 5 x 5 square apart (a hand), the rest empty.
+    fn body() -> FourierMaps {
+        maps(28, |x, y| {
+            let v = (x * 7 + y * 3) as f32;
+            let varied = [0.2 + 0.01 * v, (v * 0.37).sin(), (v * 0.11).cos()];
+            if (x, y) == (15, 15) {
+                [SMOOTH_INSIDE, 9.0, 9.0]
+            } else if (x, y) == (14, 3) {
+                [-0.3, 1.0, 1.0]
+            } else if (2..18).contains(&x) && (2..18).contains(&y)
+                || (18..25).contains(&x) && (6..8).contains(&y)
+                || (21..26).contains(&x) && (20..25).contains(&y)
+            {
+                varied
+            } else {
+                [0.0, 0.5, -0.5]
+            }
+        })
+    }
+
+    #[test]
+    fn the_region_is_the_opened_person_and_a_pass_its_weighted_mean() {
+        let m = body();
+        let n = m.size();
+        let c = 2 * m.k() + 1;
+        let region = smooth_region(m.coefficients(), c, n);
+        assert_eq!(region, reference_region(&m));
+        // The block's pixels away from its holes are in it; the bar, the small square, the
+        // holes and the background are not.
+        assert!(region[4 * n + 4] && region[12 * n + 12]);
+        for (x, y) in [
+            (20, 6),
+            (20, 7),
+            (23, 22),
+            (15, 15),
+            (14, 3),
+            (0, 0),
+            (26, 1),
+        ] {
+            assert!(!region[y * n + x], "({x}, {y})");
+        }
+        let want = reference(&m, &region);
+        let got = m.clone().smoothed(1);
+        for (i, (g, w)) in got.coefficients().iter().zip(&want).enumerate() {
+            assert!((*g as f64 - w).abs() < 1e-5, "value {i}: {g} vs {w}");
+        }
+        // Pixels outside the region kept to the bit; one inside changed.
+        for p in (0..n * n).filter(|p| !region[*p]) {
+            assert_eq!(got.pixel(p % n, p / n), m.pixel(p % n, p / n), "pixel {p}");
+        }
+        assert_ne!(got.pixel(5, 5), m.pixel(5, 5));
+        // Passes keep the region; two passes are the pass twice; none leaves the maps alone.
+        assert_eq!(smooth_region(got.coefficients(), c, n), region);
+        let twice = m.clone().smoothed(1).smoothed(1);
+        assert_eq!(m.clone().smoothed(2).coefficients(), twice.coefficients());
+        assert_eq!(m.clone().smoothed(0).coefficients(), m.coefficients());
+    }
+
+    #[test]
+    fn thin_parts_keep_their_profiles_while_the_thick_one_is_smoothed() {
+        // The arm (2 px) and the hand (5 px) of `body` are narrower than an opening of
+        // radius SMOOTH_THIN keeps: their rays decode as the network gave them, after any
+        // number of passes, while the torso's noise is averaged.
+        let m = body();
+        let s = m.clone().smoothed(MAX_SMOOTH_PASSES);
+        for (x, y) in (18..25)
+            .flat_map(|x| (6..8).map(move |y| (x, y)))
+            .chain((21..26).flat_map(|x| (20..25).map(move |y| (x, y))))
+        {
+            assert_eq!(s.pixel(x, y), m.pixel(x, y), "({x}, {y})");
+        }
+        let changed = (4..14)
+            .flat_map(|x| (4..12).map(move |y| (x, y)))
+            .filter(|&(x, y)| s.pixel(x, y) != m.pixel(x, y))
+            .count();
+        assert!(changed > 60, "{changed} of 80 torso pixels changed");
+    }
+
+    #[test]
+    fn a_part_one_pixel_wide_keeps_its_profile_and_the_outline_stays() {
+        // A vertical strip one pixel wide (a finger) and a 3-wide bar, on empty maps: both
+        // narrower than the region's opening, so passes leave their coefficients and the
+        // rays they decode as they are, and the empty pixels stay empty.
+        let n = 9;
+        let m = maps(n, |x, _| match x {
+            2 => [0.3, 0.4, -0.2],
+            5..=7 => [0.5, 0.1, 0.3],
+            _ => [0.0, 0.0, 0.0],
+        });
+        let s = m.clone().smoothed(3);
+        for (a, b) in s.coefficients().iter().zip(m.coefficients()) {
+            assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+        }
+        let mut scratch = Vec::new();
+        let pts: Vec<glam::Vec3> = (0..n)
+            .flat_map(|x| (0..9).map(move |z| (x, z)))
+            .map(|(x, z)| {
+                let u = -1.0 + 2.0 * x as f32 / (n - 1) as f32;
+                glam::Vec3::new(u, 0.1, -0.8 + 0.2 * z as f32)
+            })
+            .collect();
+        let (mut a, mut b) = (vec![0.0; pts.len()], vec![0.0; pts.len()]);
+        m.occupancy(&pts, &mut a, &mut scratch);
+        s.occupancy(&pts, &mut b, &mut scratch);
+        assert!(a.iter().any(|v| *v > 0.5));
+        for (a, b) in a.iter().zip(&b) {
+            assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn row_to_row_noise_shrinks_and_a_constant_field_stays() {
+        // Rows alternating between two profiles (the serration a turned view shows): a pass
+        // takes the difference between neighbouring rows down by half or more; a uniform
+        // inside region is a fixed point.
+        let n = 12;
+        let m = maps(n, |_, y| {
+            if y % 2 == 0 {
+                [0.4, 0.2, 0.1]
+            } else {
+                [0.4, 0.0, 0.3]
+            }
+        });
+        let s = m.clone().smoothed(1);
+        let diff = |m: &FourierMaps, y: usize| {
+            let (a, b) = (m.pixel(5, y), m.pixel(5, y + 1));
+            a.iter()
+                .zip(b)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max)
+        };
+        for y in 1..n - 2 {
+            assert!(diff(&s, y) <= 0.5 * diff(&m, y) + 1e-6, "row {y}");
+        }
+        let flat = maps(n, |_, _| [0.35, -0.1, 0.25]);
+        let f = flat.clone().smoothed(2);
+        for (a, b) in f.coefficients().iter().zip(flat.coefficients()) {
+            assert!((a - b).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn extreme_coefficients_stay_finite() {
+        let m = maps(6, |x, y| {
+            let big = if (x + y) % 2 == 0 { 1e38 } else { -1e38 };
+            [1e38, big, -big]
+        });
+        let s = m.smoothed(MAX_SMOOTH_PASSES);
+        assert!(s.coefficients().iter().all(|v| v.is_finite()));
+    }
+}
