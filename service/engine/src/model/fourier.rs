@@ -37,10 +37,7 @@ mod smooth;
 pub use basis::{Basis, basis, cosine_basis, cosine_interval_coeffs, interval_coeffs};
 use basis::{LANES, lane_basis};
 pub use seeds::SEED_THIN;
-pub use smooth::{
-    DEFAULT_SMOOTH_PASSES, MAX_SMOOTH_PASSES, SMOOTH_INSIDE, SMOOTH_THIN, smooth_pass,
-    smooth_region,
-};
+pub use smooth::{DEFAULT_SMOOTH_PASSES, MAX_SMOOTH_PASSES, SMOOTH_INSIDE, SMOOTH_THIN};
 
 /// A square dilation of radius `r` (Chebyshev) of an `n x n` row-major mask.
 fn dilate(m: &[bool], n: usize, r: usize) -> Vec<bool> {

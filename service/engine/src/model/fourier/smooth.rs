@@ -1,17 +1,18 @@
 //! The maps smoothed across pixels ([`FourierMaps::smoothed`]): the shape network predicts
 //! every pixel's ray on its own, so neighbouring rows' depth profiles differ by noise that a
 //! turned view shows as a serrated outline and streaked sides (the rows' surfaces stepping
-//! back and forth). A pass replaces each person pixel's coefficients by the 3x3 binomial
-//! average (weights 1 2 1 / 2 4 2 / 1 2 1) of the person pixels around it; the series is
-//! linear in its coefficients, so this averages the neighbouring rays' occupancy profiles.
+//! back and forth). A pass replaces the coefficients of each pixel of the person's thick
+//! parts by the 3x3 binomial average (weights 1 2 1 / 2 4 2 / 1 2 1) of the thick parts'
+//! pixels around it; the series is linear in its coefficients, so this averages the
+//! neighbouring rays' occupancy profiles.
 //!
 //! A person pixel is one whose ray is more than [`SMOOTH_INSIDE`] inside on average (its
 //! `c0`, the series' mean over the depth range in both bases). Only the person's thick parts
 //! are smoothed: the person pixels an opening of radius [`SMOOTH_THIN`] keeps
 //! ([`smooth_region`]); pixels outside that region are left as they are and never enter a
 //! mean, so the outline does not erode into the background and the thin parts (hands,
-//! fingers) keep their own profiles. The GPU backend's `gpu/maps/smooth.wgsl` is the same
-//! rule.
+//! fingers) keep their own profiles. The GPU backend's `gpu/maps/smooth_region.wgsl` and
+//! `smooth.wgsl` are the same rule.
 
 use super::FourierMaps;
 
@@ -39,8 +40,8 @@ pub const SMOOTH_THIN: usize = super::seeds::SEED_THIN;
 /// pixels are copied.
 pub fn smooth_region(data: &[f32], c: usize, n: usize) -> Vec<bool> {
     let inside: Vec<bool> = (0..n * n).map(|p| data[p * c] > SMOOTH_INSIDE).collect();
-    let opened = super::dilate(&super::erode(&inside, n, SMOOTH_THIN), n, SMOOTH_THIN);
-    inside.iter().zip(opened).map(|(i, o)| *i && o).collect()
+    let thin = super::thin_gate(&inside, n, SMOOTH_THIN);
+    inside.iter().zip(thin).map(|(i, t)| *i && !t).collect()
 }
 
 /// One pass over pixel-interleaved maps `src` (`n x n` pixels, `c` channels each) into `dst`
