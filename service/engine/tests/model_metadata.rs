@@ -51,10 +51,13 @@ fn fourier_surface_level_metadata_is_checked_and_applied() {
         );
     }
     with_level("0.35", &dir);
-    let low = FourierNet::load(&dir, "fourier", Precision::F32).unwrap();
+    let mut low = FourierNet::load(&dir, "fourier", Precision::F32).unwrap();
     assert_eq!(low.iso_level, 0.35);
     let mut plain = FourierNet::load(&models_dir(), "fourier", Precision::F32).unwrap();
     plain.iso_level = 0.5;
+    // The network's own maps on both sides: the smoothing gives rays back by the level they
+    // are read at (`FourierMaps::smoothed`), which this test does not compare.
+    (plain.smooth_passes, low.smooth_passes) = (0, 0);
     let g = Golden::load("shape-fourier");
     let (x, _) = golden_input(&g);
     let (a, b) = (plain.maps(&x).unwrap(), low.maps(&x).unwrap());

@@ -331,32 +331,54 @@ fn temporal_cost(runs: usize) -> anyhow::Result<String> {
     Ok(out)
 }
 
-/// The maps smoothed across pixels (`[model] map_smooth`) per frame on fourier-medium's maps
-/// (128^2 x 31 coefficients): a person over a third of the pixels (about the main job's walk
-/// in its crop), then every pixel a person's (the most a frame can cost).
+/// The maps smoothed across pixels (`[model] map_smooth`) per frame on maps of
+/// fourier-medium's size (128^2 x 31 coefficients): a body's rays (each pixel's the series of
+/// one inside interval around [-0.3, 0.1] with its ends moved by up to 0.01 from pixel to
+/// pixel, the network's row-to-row noise, and a forearm's patch of rays that also pass a
+/// part in front, [-0.75, -0.65]) over a third of the pixels (about the main job's walk in its
+/// crop) and over every pixel, then every pixel a person's with coefficients drawn anyhow
+/// (rays of many inside runs, each smoothed ray decoded at many depths: the most a frame
+/// can cost).
 fn smooth_cost(runs: usize) -> anyhow::Result<String> {
-    use volcap_engine::model::fourier::FourierMaps;
+    use volcap_engine::model::fourier::{FourierMaps, interval_coeffs};
     let (k, n) = (15, 128);
-    let planar_of = |person: &dyn Fn(usize, usize) -> bool| {
-        let mut p = input((2 * k + 1) * n * n);
+    let c = 2 * k + 1;
+    let body_of = |person: &dyn Fn(usize, usize) -> bool| {
+        let mut p = vec![0.0f32; c * n * n];
         for y in 0..n {
             for x in 0..n {
-                // c0, the ray's mean occupancy: 0.5 on the person, 0 beside it.
-                p[y * n + x] = if person(x, y) { 0.5 } else { 0.0 };
+                if !person(x, y) {
+                    continue;
+                }
+                let e = |i: usize| ((i * 37 % 101) as f64 / 101.0 - 0.5) * 0.02;
+                let mut ivs = vec![[-0.3 + e(y * n + x), 0.1 + e(y * n + x + 7)]];
+                if (60..70).contains(&x) && (40..60).contains(&y) {
+                    ivs.push([-0.75, -0.65]);
+                }
+                for (ch, v) in interval_coeffs(&ivs, k).iter().enumerate() {
+                    p[ch * n * n + y * n + x] = *v as f32;
+                }
             }
         }
         p
     };
+    let mut anyhow_maps = input(c * n * n);
+    anyhow_maps[..n * n].fill(0.5);
     let mut out = String::from(
         "\n| maps smoothed across pixels (`map_smooth`, 128^2 x 31), per frame | 1 pass ms | 2 passes ms |\n|---|---|---|\n",
     );
     let third = |x: usize, y: usize| (40..104).contains(&x) && (8..(8 + n * 2 / 3)).contains(&y);
     for (what, planar) in [
-        ("person on a third of the pixels", planar_of(&third)),
-        ("every pixel a person's", planar_of(&|_, _| true)),
+        ("a body's rays on a third of the pixels", body_of(&third)),
+        ("a body's rays on every pixel", body_of(&|_, _| true)),
+        (
+            "every pixel a person's, coefficients drawn anyhow",
+            anyhow_maps,
+        ),
     ] {
         let maps = FourierMaps::from_planar(&planar, k, n, 1.0)
-            .ok_or_else(|| anyhow!("the bench's maps are not finite"))?;
+            .ok_or_else(|| anyhow!("the bench's maps are not finite"))?
+            .with_iso_level(0.55);
         let mut cells = Vec::new();
         for passes in [1u8, 2] {
             let mut times = Vec::new();

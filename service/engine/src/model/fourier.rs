@@ -218,15 +218,9 @@ impl FourierMaps {
         self
     }
 
-    /// The basis at the 129 depths the peak tests sample (`zeta = -1 + 2 i / 128`: the
-    /// series is band-limited to K cycles), flat: depth `i`'s is the `i`-th chunk of `2K + 1`.
+    /// The basis at the 129 depths the peak tests sample ([`sample_basis`]).
     fn sample_basis(&self) -> Vec<f32> {
-        let c = 2 * self.k + 1;
-        let mut zs = vec![0.0f32; 129 * c];
-        for (i, v) in zs.chunks_exact_mut(c).enumerate() {
-            self.basis.values(-1.0 + 2.0 * i as f32 / 128.0, self.k, v);
-        }
-        zs
+        sample_basis(self.basis, self.k)
     }
 
     /// Each pixel's series at its highest over the ray (at [`Self::sample_basis`]'s depths).
@@ -625,6 +619,19 @@ impl FourierNet {
                 msg: "non-finite Fourier coefficients".into(),
             })
     }
+}
+
+/// `basis` of order `k` at the 129 depths the peak tests and the smoothing's kept runs
+/// sample (`zeta = -1 + 2 i / 128`: the series is band-limited to K cycles), flat: depth
+/// `i`'s is the `i`-th chunk of `2K + 1` (the GPU backend's `gpu/maps/smooth_keep.wgsl`
+/// reads this table).
+pub fn sample_basis(basis: Basis, k: usize) -> Vec<f32> {
+    let c = 2 * k + 1;
+    let mut zs = vec![0.0f32; 129 * c];
+    for (i, v) in zs.chunks_exact_mut(c).enumerate() {
+        basis.values(-1.0 + 2.0 * i as f32 / 128.0, k, v);
+    }
+    zs
 }
 
 /// `int_{-1}^{1} z sin(m pi z) dz = 2 (-1)^(m+1) / (m pi)` for m = 1..=K: a Fourier ray's

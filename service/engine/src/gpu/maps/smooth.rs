@@ -1,30 +1,38 @@
-//! The maps' smoothing across pixels on the adapter (`smooth_region.wgsl` and `smooth.wgsl`,
-//! the rule of `model/fourier/smooth.rs`): after the interleave, the region to smooth (two
-//! dispatches: erode, then dilate) and `MapsHead::smooth` passes ping-pong between the
-//! frame's maps and a buffer of the same size kept with them, in the network's own
-//! submission, before the temporal filter.
+//! The maps' smoothing across pixels on the adapter (`smooth_region.wgsl`, `smooth.wgsl` and
+//! `smooth_keep.wgsl`, the rule of `model/fourier/smooth.rs`): after the interleave, the
+//! maps copied aside, the region to smooth (two dispatches: erode, then dilate),
+//! `MapsHead::smooth` passes ping-pong between the frame's maps and a buffer of the same size
+//! kept with them, then the pixels that lost one of their own inside runs take their own
+//! coefficients back (one dispatch), in the network's own submission, before the temporal
+//! filter.
 
 use super::super::kit::entry;
 use super::super::{Gpu, groups};
 use super::{FrameBufs, MapsHead};
+use crate::model::fourier::{Basis, sample_basis};
 
 const SMOOTH: &str = include_str!("smooth.wgsl");
 const REGION: &str = include_str!("smooth_region.wgsl");
+const KEEP: &str = include_str!("smooth_keep.wgsl");
 
-/// The smoothing's other buffer, its region's flags (eroded, then the region) and bind
-/// groups (the region's two steps; the maps into the other buffer, it into the maps).
+/// The smoothing's other buffer, the maps as they came (`own`), its region's flags (eroded,
+/// then the region) and bind groups (the region's two steps; the maps into the other
+/// buffer, it into the maps; the kept runs, for the basis and level in `made_for`).
 pub(super) struct SmoothBufs {
     tmp: wgpu::Buffer,
+    own: wgpu::Buffer,
     region: [wgpu::BindGroup; 2],
     binds: [wgpu::BindGroup; 2],
+    keep: wgpu::BindGroup,
+    made_for: (Basis, u32),
 }
 
 impl SmoothBufs {
     fn new(
         gpu: &Gpu,
         fb: &FrameBufs,
-        region: &wgpu::ComputePipeline,
-        smooth: &wgpu::ComputePipeline,
+        head: MapsHead,
+        [region, smooth, keep]: [&wgpu::ComputePipeline; 3],
     ) -> Self {
         use wgpu::BufferUsages as U;
         let d = &gpu.device;
@@ -32,6 +40,12 @@ impl SmoothBufs {
             label: Some("smoothed maps"),
             size: (fb.cap.max(1) * 4) as u64,
             usage: U::STORAGE | U::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let own = d.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("maps before smoothing"),
+            size: (fb.cap.max(1) * 4) as u64,
+            usage: U::STORAGE | U::COPY_DST,
             mapped_at_creation: false,
         });
         // The buffers hold square maps of `channels` values a pixel (`MapsHead::len`).
@@ -83,7 +97,44 @@ impl SmoothBufs {
             })
         };
         let binds = [pass(&fb.maps, &tmp), pass(&tmp, &fb.maps)];
-        SmoothBufs { tmp, region, binds }
+        let init = |label: &str, contents: &[u8]| {
+            wgpu::util::DeviceExt::create_buffer_init(
+                d,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage: U::STORAGE,
+                },
+            )
+        };
+        let made_for = (head.basis, head.iso_level.to_bits());
+        let keep_params = init(
+            "smooth keep params",
+            bytemuck::cast_slice(&[fb.channels as u32, size as u32, made_for.1]),
+        );
+        let table = init(
+            "smooth keep depths",
+            bytemuck::cast_slice(&sample_basis(head.basis, head.k)),
+        );
+        let keep = d.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &keep.get_bind_group_layout(0),
+            entries: &[
+                entry(0, &keep_params),
+                entry(1, &own),
+                entry(2, &fb.maps),
+                entry(3, &flags),
+                entry(4, &table),
+            ],
+        });
+        SmoothBufs {
+            tmp,
+            own,
+            region,
+            binds,
+            keep,
+            made_for,
+        }
     }
 }
 
@@ -100,11 +151,14 @@ pub(super) fn record(
     }
     let region = gpu.pipeline("maps smooth region", REGION)?;
     let pipeline = gpu.pipeline("maps smooth", SMOOTH)?;
-    if fb.smooth.is_none() {
-        fb.smooth = Some(SmoothBufs::new(gpu, fb, &region, &pipeline));
+    let keep = gpu.pipeline("maps smooth keep", KEEP)?;
+    let made_for = (head.basis, head.iso_level.to_bits());
+    if fb.smooth.as_ref().is_none_or(|sb| sb.made_for != made_for) {
+        fb.smooth = Some(SmoothBufs::new(gpu, fb, head, [&region, &pipeline, &keep]));
     }
     let sb = fb.smooth.as_ref().ok_or("no smoothing buffers")?;
     let len = head.len();
+    enc.copy_buffer_to_buffer(&fb.maps, 0, &sb.own, 0, (len * 4) as u64);
     {
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
         pass.set_pipeline(&region);
@@ -124,5 +178,12 @@ pub(super) fn record(
     if head.smooth % 2 == 1 {
         enc.copy_buffer_to_buffer(&sb.tmp, 0, &fb.maps, 0, (len * 4) as u64);
     }
-    Ok(2 + u64::from(head.smooth))
+    {
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+        pass.set_pipeline(&keep);
+        pass.set_bind_group(0, &sb.keep, &[]);
+        let (x, y) = groups(head.pixels() as u32);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+    Ok(3 + u64::from(head.smooth))
 }
