@@ -11,8 +11,10 @@
 //! are smoothed: the person pixels an opening of radius [`SMOOTH_THIN`] keeps
 //! ([`smooth_region`]); pixels outside that region are left as they are and never enter a
 //! mean, so the outline does not erode into the background and the thin parts (hands,
-//! fingers) keep their own profiles. The GPU backend's `gpu/maps/smooth_region.wgsl` and
-//! `smooth.wgsl` are the same rule.
+//! fingers) keep their own profiles. After the passes, a pixel whose smoothed ray would lose
+//! one of its own inside runs takes its own coefficients back ([`keep_runs`]: a part in front
+//! of the body, an arm pointing at the camera). The GPU backend's
+//! `gpu/maps/smooth_region.wgsl`, `smooth.wgsl` and `smooth_keep.wgsl` are the same rule.
 
 use super::FourierMaps;
 
@@ -84,7 +86,8 @@ pub fn smooth_pass(src: &[f32], dst: &mut [f32], c: usize, n: usize, region: &[b
 
 impl FourierMaps {
     /// The maps after `passes` passes of [`smooth_pass`] (0: as they are) over the region
-    /// worked out once from the maps as they come ([`smooth_region`]).
+    /// worked out once from the maps as they come ([`smooth_region`]), the pixels that lost
+    /// one of their own inside runs given their own back ([`keep_runs`]).
     pub fn smoothed(mut self, passes: u8) -> Self {
         if passes == 0 || self.size == 0 {
             return self;
@@ -109,10 +112,10 @@ impl FourierMaps {
 /// coefficients back. Averaging shortens a ray towards its neighbours'; where a part lies
 /// in front of another (a hand or a forearm before the body) or ends along the ray (an arm
 /// pointing at the camera), the part's rays lie barely over the level and averaged with
-/// the body's around them the part is gone, not smoothed (held-out images, fourier-medium:
-/// hands shown 50.4 % unsmoothed, 46.5 % smoothed without this, 48.9 % with it;
-/// docs/bench/map-smooth/keep-runs). The GPU backend's `gpu/maps/smooth_keep.wgsl` is the
-/// same rule.
+/// the body's around them the part is gone, not smoothed (the 126 held-out images,
+/// fourier-medium at 2 passes: hands shown 50.7 % unsmoothed, 46.6 % smoothed without this,
+/// 48.5 % with it; docs/bench/map-smooth/keep-runs). The GPU backend's
+/// `gpu/maps/smooth_keep.wgsl` is the same rule.
 pub(super) fn keep_runs(
     own: &[f32],
     smoothed: &mut [f32],
