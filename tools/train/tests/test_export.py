@@ -334,3 +334,42 @@ def test_calibration_counts_parse_in_order_and_name_the_bad_value():
     for bad, says in [("0", "at least 1"), ("256,-3", "-3 images"), ("2x6", "'2x6'"), ("192,192", "named twice")]:
         with pytest.raises(argparse.ArgumentTypeError, match=says):
             calib_counts(bad)
+
+
+def test_the_sides_count_the_cells_a_series_moves_across_the_level():
+    """export.sides_of: a ray inside on [-0.3, 0.1] against the same ray grown to 0.2 (K = 15,
+    read at the engine's 129 depths, 1/64 apart): the grown one holds about 0.5 / 0.4 of the
+    cells inside, and the cells changing side are the ones it gained; a map against itself
+    changes none."""
+    from volcap_train import fourier as FO
+    from volcap_train.export import sides_of
+
+    k = 15
+    ray = lambda hi: FO.interval_coeffs(torch.tensor(-0.3, dtype=torch.float64), torch.tensor(hi, dtype=torch.float64), k)
+    a, b = ray(0.1)[:, None, None], ray(0.2)[:, None, None]
+    na, nb, nc = sides_of(a, b, k, 0.55)
+    assert 22 <= na <= 26 and 29 <= nb <= 33, (na, nb)
+    assert 1.15 < nb / na < 1.35
+    assert nb - na <= nc <= nb - na + 2, (na, nb, nc)
+    assert sides_of(a, a, k, 0.55) == (na, na, 0)
+
+
+def test_int8_sides_read_a_file_against_its_f32_over_whole_volumes(tmp_path):
+    """export.int8_sides: a file against itself moves no cell and keeps the volume; its int8
+    file moves some and keeps about the volume; a level no cell reaches is an error naming
+    the f32 file."""
+    from volcap_train import fourier as FO
+    from volcap_train.export import int8_sides, quantize
+
+    x = fresh_fourier_onnx(tmp_path / "f.onnx")
+    feeds = [{"image": torch.rand(1, 4, 256, 256).numpy()} for _ in range(3)] + [{"image": x.numpy()}]
+    quantize(tmp_path / "f.onnx", tmp_path / "q.onnx", feeds)
+    coeff = torch.from_numpy(run(tmp_path / "f.onnx", {"image": x.numpy()})[0])
+    k = (coeff.shape[0] - 1) // 2
+    zs = FO.basis(torch.linspace(-1.0, 1.0, 129), k)
+    level = (zs @ coeff.reshape(coeff.shape[0], -1)).median().item()
+    assert int8_sides(tmp_path / "f.onnx", tmp_path / "f.onnx", feeds, k, level) == (0.0, 1.0)
+    changed, volume = int8_sides(tmp_path / "f.onnx", tmp_path / "q.onnx", feeds, k, level)
+    assert 0.0 < changed < 0.5 and 0.7 < volume < 1.3, (changed, volume)
+    with pytest.raises(ValueError, match="f.onnx: no cell inside"):
+        int8_sides(tmp_path / "f.onnx", tmp_path / "q.onnx", feeds, k, 1e9)

@@ -442,6 +442,39 @@ def int8_drift(f32: Path, int8: Path, x: torch.Tensor, pts: torch.Tensor, k: int
     return (occ(int8) - occ(f32)).abs().mean().item()
 
 
+# Training images whose whole volumes compare a kept int8 file with its f32 (int8_sides).
+SIDES_IMAGES = 96
+
+
+def sides_of(a: torch.Tensor, b: torch.Tensor, k: int, level: float) -> tuple[int, int, int]:
+    """Coefficient maps a (f32's) and b [2K+1, H, W] read at the 129 depths the engine samples
+    (zeta = -1 + 2 i / 128): a's inside cells (series > `level`), b's, and the cells on
+    different sides of the level."""
+    zs = FO.basis(torch.linspace(-1.0, 1.0, 129, dtype=a.dtype), k)  # [129, 2K+1]
+    ia = (zs @ a.reshape(a.shape[0], -1)[: FO.channels(k)]) > level
+    ib = (zs @ b.reshape(b.shape[0], -1)[: FO.channels(k)]) > level
+    return int(ia.sum()), int(ib.sum()), int((ia != ib).sum())
+
+
+def int8_sides(f32: Path, int8: Path, feeds: list[dict], k: int, level: float) -> tuple[float, float]:
+    """An int8 file against its f32 over whole volumes (every map pixel's series at the
+    engine's 129 depths, `feeds` the encoder's inputs): the cells on the other side of the
+    surface level as a share of f32's inside cells, and the inside volume as a share of f32's.
+    The golden query's mean |drift| (int8_drift) did not order one network's int8 files by
+    their accuracy; these did (docs/eval/hands.md section 59)."""
+    import onnxruntime as ort
+
+    sa, sb = (ort.InferenceSession(str(p), providers=["CPUExecutionProvider"]) for p in (f32, int8))
+    inside_a = inside_b = changed = 0
+    for f in feeds:
+        a, b = (torch.from_numpy(s.run(None, f)[0][0]) for s in (sa, sb))
+        na, nb, nc = sides_of(a, b, k, level)
+        inside_a, inside_b, changed = inside_a + na, inside_b + nb, changed + nc
+    if inside_a == 0:
+        raise ValueError(f"{f32}: no cell inside the surface level {level} on {len(feeds)} images")
+    return changed / inside_a, inside_b / inside_a
+
+
 # The Fourier nets' first two convolutions (the input's, at 128 px, and the first of the
 # 64-px block), left in float32 by the KEEP_F32 candidates: with them in int8, run (51) of
 # fourier-medium read the golden query 0.44 off f32 from 96, 192 or 256 calibration images
@@ -551,6 +584,9 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
     calib = f"{scheme} (the golden query's occupancy {drift:.3f} off f32 on average; the others: {others})"
     if drift < INT8_MAX_DRIFT:
         files.append(int8_path.name)
+        sides = fourier_calib(data, k, seg, upper_every, images=SIDES_IMAGES, passes=passes)
+        changed, volume = int8_sides(path, int8_path, sides, k, iso)
+        calib += f"; against f32 over the whole volumes of {len(sides)} training images at the level {iso:.2f}: {100 * changed:.1f} % of its inside cells change side, the inside volume {volume:.3f} of its"
     else:
         # An int8 file that reads the occupancy this far from its f32 is not shipped (and the
         # tests would refuse it): `NAME@int8` is then refused at load, naming the file.
