@@ -460,8 +460,8 @@ def int8_sides(f32: Path, int8: Path, feeds: list[dict], k: int, level: float) -
     """An int8 file against its f32 over whole volumes (every map pixel's series at the
     engine's 129 depths, `feeds` the encoder's inputs): the cells on the other side of the
     surface level as a share of f32's inside cells, and the inside volume as a share of f32's.
-    The golden query's mean |drift| (int8_drift) did not order one network's int8 files by
-    their accuracy; these did (docs/eval/hands.md section 59)."""
+    The golden query's mean |drift| (int8_drift) did not order run (102)'s four int8 files
+    as the 126 judging images did; these did (docs/eval/hands.md section 59)."""
     import onnxruntime as ort
 
     sa, sb = (ort.InferenceSession(str(p), providers=["CPUExecutionProvider"]) for p in (f32, int8))
@@ -586,7 +586,7 @@ def export_fourier(run: Path, name: str, variant: str, budget: dict, out: Path, 
         files.append(int8_path.name)
         sides = fourier_calib(data, k, seg, upper_every, images=SIDES_IMAGES, passes=passes)
         changed, volume = int8_sides(path, int8_path, sides, k, iso)
-        calib += f"; against f32 over the whole volumes of {len(sides)} training images at the level {iso:.2f}: {100 * changed:.1f} % of its inside cells change side, the inside volume {volume:.3f} of its"
+        calib += f"; against f32 over the whole volumes of {len(sides)} training images at the level {iso:.2f}: {100 * changed:.1f} % of its inside cells change side, the inside volume {volume:.3f} of f32's"
     else:
         # An int8 file that reads the occupancy this far from its f32 is not shipped (and the
         # tests would refuse it): `NAME@int8` is then refused at load, naming the file.
