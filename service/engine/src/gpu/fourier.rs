@@ -7,6 +7,7 @@
 //! come from the adapter's pool ([`Gpu::field_pool`]) and go back to it when the frame's
 //! field is dropped: a frame writes into them instead of creating them.
 
+use super::kit::entry;
 use super::{Gpu, groups};
 use crate::model::fourier::{Basis, FourierMaps};
 use glam::Vec3;
@@ -62,12 +63,6 @@ impl FieldBuffers {
         let occ = buf("occupancy", cap * 4, U::STORAGE | U::COPY_SRC);
         let staging = buf("occupancy read-back", cap * 4, U::MAP_READ | U::COPY_DST);
         let params = buf("fourier params", 24, U::STORAGE | U::COPY_DST);
-        fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry {
-                binding,
-                resource: b.as_entire_binding(),
-            }
-        }
         let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
             layout: &pipeline.get_bind_group_layout(0),
