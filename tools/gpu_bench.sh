@@ -73,6 +73,12 @@ case "$mode" in
       export VK_DRIVER_FILES="$nvidia_icd"
     fi
     export WGPU_BACKEND="${WGPU_BACKEND:-vulkan}"
+    # Mesa's Vulkan drivers print "XDG_RUNTIME_DIR is invalid" on every instance without one
+    # (their window-system probe; no window is opened): give them an empty one.
+    if [ -z "${XDG_RUNTIME_DIR:-}" ] || [ ! -d "$XDG_RUNTIME_DIR" ]; then
+      XDG_RUNTIME_DIR="$(mktemp -d)"
+      export XDG_RUNTIME_DIR
+    fi
     bin=/tmp/volcap-gpubench
     if [ -f .gpubench/volcap.xz ]; then
       xz -dc .gpubench/volcap.xz > "$bin" && chmod +x "$bin"
