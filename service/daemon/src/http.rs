@@ -411,12 +411,20 @@ async fn set_view(
     if let Some(r) = token_refusal(&app, &headers, peer_ip(&peer)) {
         return r;
     }
-    let Ok(Query(q)) = q else {
-        return (
-            StatusCode::BAD_REQUEST,
-            "need ?yaw=DEG&pitch=DEG[&distance=M][&resolution=N][&background=r,g,b,a] (numbers)\n",
-        )
-            .into_response();
+    let q = match q {
+        Ok(Query(q)) => q,
+        // The rejection names the parameter and what was wrong with it ("yaw: invalid float
+        // literal", "missing field `pitch`").
+        Err(e) => {
+            return (
+                StatusCode::BAD_REQUEST,
+                format!(
+                    "{}: need ?yaw=DEG&pitch=DEG[&distance=M][&resolution=N][&background=r,g,b,a] (numbers)\n",
+                    e.body_text()
+                ),
+            )
+                .into_response();
+        }
     };
     let background = match q.background.as_deref().map(parse_background) {
         None => None,

@@ -247,16 +247,26 @@ fn token_enables_view_controls_and_client_limit_holds() {
         .0,
         401
     );
-    assert_eq!(
-        request(
+    // A bad or missing parameter is named in the refusal.
+    for (query, names) in [
+        ("/view?yaw=abc&pitch=10", "yaw"),
+        ("/view?yaw=10&pitch=1e999", "pitch"),
+        ("/view?yaw=10", "pitch"),
+        ("/view?yaw=10&pitch=0&resolution=-3", "resolution"),
+    ] {
+        let (code, _, body) = request(
             &d.addr,
             "POST",
-            "/view?yaw=abc&pitch=10",
-            "Authorization: Bearer s3cret-token\r\n"
-        )
-        .0,
-        400
-    );
+            query,
+            "Authorization: Bearer s3cret-token\r\n",
+        );
+        let body = String::from_utf8_lossy(&body);
+        assert_eq!(code, 400, "{query}: {body}");
+        assert!(
+            body.contains(names),
+            "{query}: the refusal does not name {names}: {body}"
+        );
+    }
     assert_eq!(
         request(
             &d.addr,
