@@ -17,6 +17,18 @@ fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
+/// A module's files: `src/NAME.rs` where it exists and everything under `src/NAME/`.
+fn module_files(src: &Path, name: &str) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = Some(src.join(format!("{name}.rs")))
+        .filter(|f| f.exists())
+        .into_iter()
+        .collect();
+    if src.join(name).is_dir() {
+        sources(&src.join(name), &mut files);
+    }
+    files
+}
+
 #[test]
 fn module_arrows_run_one_way() {
     let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
@@ -38,12 +50,7 @@ fn module_arrows_run_one_way() {
     ];
     let mut checked = 0;
     for (module, above) in rules {
-        let mut files = vec![src.join(format!("{module}.rs"))];
-        let dir = src.join(module);
-        if dir.is_dir() {
-            sources(&dir, &mut files);
-        }
-        for f in files.iter().filter(|f| f.exists()) {
+        for f in &module_files(&src, module) {
             let text = std::fs::read_to_string(f).unwrap();
             // A doc link may name any module; grouped imports (`crate::{a, b::C}`) count.
             let code = code_of(&text);
@@ -75,24 +82,23 @@ fn engine_and_simulator_modules_keep_their_rules() {
         .parent()
         .expect("service/daemon has a parent")
         .to_path_buf();
-    // (file or folder under src, the module paths it must not name; `*`: any but `allowed`)
+    // (module: its file and folder under src; the module paths it must not name; `*`: any but `allowed`)
     type Rule<'a> = (&'a str, &'a [&'a str], &'a [&'a str]);
     let engine: &[Rule] = &[
-        ("grid.rs", &["*"], &[]),
-        ("softz.rs", &["*"], &[]),
-        ("sides.rs", &["*"], &["grid"]),
+        ("grid", &["*"], &[]),
+        ("softz", &["*"], &[]),
+        ("sides", &["*"], &["grid"]),
         (
-            "field.rs",
+            "field",
             &["localize", "render", "mesh", "metrics", "pieces"],
             &[],
         ),
         ("analytic", &["localize", "render", "mesh", "metrics"], &[]),
         ("localize", &["render", "mesh", "metrics", "pieces"], &[]),
-        ("render.rs", &["mesh", "metrics"], &[]),
         ("render", &["mesh", "metrics"], &[]),
-        ("mesh.rs", &["render", "localize"], &[]),
-        ("pieces.rs", &["render", "field", "localize", "model"], &[]),
-        ("metrics.rs", &["localize", "render"], &[]),
+        ("mesh", &["render", "localize"], &[]),
+        ("pieces", &["render", "field", "localize", "model"], &[]),
+        ("metrics", &["localize", "render"], &[]),
         (
             "gpu",
             &["model::runtime", "model::net", "model::threads"],
@@ -100,11 +106,11 @@ fn engine_and_simulator_modules_keep_their_rules() {
         ),
     ];
     let sim: &[Rule] = &[
-        ("scene.rs", &["raster", "sim"], &[]),
-        ("effects.rs", &["raster", "sim"], &[]),
+        ("scene", &["raster", "sim"], &[]),
+        ("effects", &["raster", "sim"], &[]),
         // The oracle shares the texture type with the rasterizer, nothing that draws.
         (
-            "oracle.rs",
+            "oracle",
             &[
                 "raster::Rasterizer",
                 "raster::Framebuffer",
@@ -118,15 +124,13 @@ fn engine_and_simulator_modules_keep_their_rules() {
     for (krate, rules) in [("engine", engine), ("sim", sim)] {
         let src = service.join(krate).join("src");
         for (at, forbidden, allowed) in rules {
-            let mut files = Vec::new();
-            if src.join(at).is_dir() {
-                sources(&src.join(at), &mut files);
-            } else {
-                files.push(src.join(at));
-            }
+            let files = module_files(&src, at);
+            assert!(
+                !files.is_empty(),
+                "{krate}/src/{at}: no files (did the module move?)"
+            );
             for f in &files {
-                let text = std::fs::read_to_string(f)
-                    .unwrap_or_else(|e| panic!("{}: {e} (did the module move?)", f.display()));
+                let text = std::fs::read_to_string(f).unwrap();
                 let top = f.parent() == Some(src.as_path());
                 for path in named_paths(&code_of(&text), top) {
                     let head = path.split("::").next().unwrap_or("");
@@ -193,7 +197,7 @@ fn engine_and_simulator_modules_keep_their_rules() {
 /// The code of a Rust file without comments and without `#[cfg(test)]` items.
 fn code_of(text: &str) -> String {
     let mut out = String::new();
-    let mut lines = text.lines().peekable();
+    let mut lines = text.lines();
     while let Some(line) = lines.next() {
         let t = line.trim();
         if t == "#[cfg(test)]" {
