@@ -9,9 +9,12 @@
 #           then fourier-small-k31; 73.3 before 2026-11-29's slimming), and
 #           tools/train/tests/test_tree_size.py keeps it under 48)
 #           and downloads the Vulkan loader into .gl/ (both git-ignored)
-#   there:  device run, carry [".gpubench", ".gl"], command: tools/gpu_bench.sh run
+#   there:  device run, carry [".gpubench", ".gl"], command:
+#           PACK_TO=$OUT OUT=/tmp/gb tools/gpu_bench.sh run --short
 #           (--quick: a tiny version, as CI-free checking here on lavapipe does; --short: the
-#           whole matrix with shorter windows and the machine's cores only)
+#           matrix with 4 s windows, the machine's cores only and no rows that another step
+#           of the same run measures, some 8 minutes on an H200; PACK_TO: the results packed
+#           into one file, since a call brings back at most 8)
 #
 # `run` unpacks the loader, names the adapter, and writes into $OUT (default /tmp/gpubench):
 # pipeline.md/.png (the daemon's pipeline in-process, CPU and GPU backends side by side, 257^3
@@ -55,7 +58,7 @@ case "$mode" in
       (cd .gl && apt-get $o download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
     fi
     du -sh .gpubench .gl
-    echo "now: device run with carry [\".gpubench\", \".gl\"] and command: tools/gpu_bench.sh run"
+    echo "now: device run with carry [\".gpubench\", \".gl\"] and command: PACK_TO=\$OUT OUT=/tmp/gb tools/gpu_bench.sh run --short"
     ;;
   run)
     quick=0
@@ -89,22 +92,46 @@ case "$mode" in
     if [ "$quick" = 1 ]; then
       # (Windows long enough for lavapipe, whose frames take seconds, to publish some.)
       res=65 models=fourier-small secs=12 warm=8 runs=1 threads=1 loc_backends=cpu,wgpu qres=33
+      round_waits=per-round,per-frame k31_backends=cpu,wgpu
     elif [ "$quick" = 2 ]; then
       # The whole matrix in about half the time (a lent machine's 15 minutes are shared with
       # training): shorter windows, the machine's cores only.
-      res=257,513 models=fourier-small,fourier-medium secs=5 warm=2 runs=3
+      res=257,513 models=fourier-small,fourier-medium secs=4 warm=2 runs=3
       threads="$(nproc)" loc_backends=wgpu qres=257
+      # (Rows measured elsewhere in the same run left out: the per-round and CPU rows are the
+      # main matrix's; the track at 257^3 alone.)
+      round_waits=per-frame k31_backends=wgpu track_res=257
     else
       res=257,513 models=fourier-small,fourier-medium secs=10 warm=5 runs=5
       threads="1,$(nproc)" loc_backends=cpu,wgpu qres=257
+      round_waits=per-round,per-frame k31_backends=cpu,wgpu
     fi
+    # A lent machine brings back at most 8 files, two folders down, and only what lies under
+    # $OUT when the call ends (at its limit too): with PACK_TO set, the results are packed into
+    # PACK_TO/gpubench.tgz every 20 s and at the end (written aside, then renamed: a call
+    # stopped at its limit brings back the last whole pack).
+    if [ -n "${PACK_TO:-}" ]; then
+      pack() { tar czf "$PACK_TO/.gpubench.tgz.part" -C "$(dirname "$out")" "$(basename "$out")" \
+        && mv -f "$PACK_TO/.gpubench.tgz.part" "$PACK_TO/gpubench.tgz"; }
+      (while sleep 20; do pack 2>/dev/null || true; done) &
+      packer=$!
+      trap 'kill "$packer" 2>/dev/null || true; pack || true' EXIT
+    fi
+    step() { echo "== $(date -u +%T) $*"; }
     # Most telling first: a call that runs past its limit still brings back what the
-    # finished steps wrote under $OUT (the networks' kernels, then the split that the
-    # goals need, then the main matrix those rows are measured against, then the rest).
-    echo "== networks (and where each spends its time: tract's nodes, the adapter's steps)"
+    # finished steps wrote (the networks' kernels, then the main matrix the other rows are
+    # measured against, then the levers on it).
+    step "networks (and where each spends its time: tract's nodes, the adapter's steps)"
     "$bin" bench nets --model fourier-small-seg2,fourier-medium --runtime tract,wgpu,wgpu-rows,wgpu-conv4 \
       --runs "$((runs * 4))" --profile --top 12 --out "$out"
-    echo "== the segmentation on a thread of its own, and the render and segment stages on 1 or 2 workers"
+    step "pipeline ($res; $models; threads $threads; the camera's view and a turned one)"
+    # A turned view (yaw 30) runs the colour networks on the surface points (the colour MLP
+    # through its row buckets); the camera's own view takes the input pixel's colour.
+    # Its GPU rows at yaw 0 (the default split, one worker each, the render stage on a
+    # device of its own, `auto`) are the baseline of the levers' rows below, in the same run.
+    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
+      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
+    step "the segmentation on a thread of its own, and the render and segment stages on 1 or 2 workers"
     # The third H200 run (devices/pipeline.md there, fourier-small at 257^3, the render stage
     # on its own device, 78.6 fps = 12.7 ms a frame) had two threads at about 10 ms a frame:
     # the field thread segmented too (segment 4.6 + field 5.3 ms: compute.segment_thread_up_to
@@ -115,62 +142,65 @@ case "$mode" in
     # frame N + 1 localized while N waits; frames published in capture order).
     # fourier-medium segments twice (10 ms a frame there): a second segment worker
     # (compute.segment_workers) segments frame N + 1 while N waits on its read-backs.
-    # (The main matrix's camera-view GPU rows, the next step, are the default split, 129,
-    # with one worker each: the baseline of these rows, in the same run.)
-    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
-      --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
-      --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
-    echo "== pipeline ($res; $models; threads $threads; the camera's view and a turned one)"
-    # A turned view (yaw 30) runs the colour networks on the surface points (the colour MLP
-    # through its row buckets); the camera's own view takes the input pixel's colour.
-    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model "$models" --res "$res" \
-      --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --yaw 0,30 --out "$out"
-    echo "== the GPU backend's pipeline: the levels' conflict rounds read per round or predicted"
-    # compute.round_waits: per-round (a read-back per round and level, some ten a frame) or
-    # per-frame (each level's rounds predicted from the last frame, one read-back for the
-    # levels; a frame the prediction fell short of runs again, its share in the note). The
-    # render stage on its own device (auto): its waits are what is left of its 10.1 ms
-    # against 1.6 ms of adapter work (third H200 run). Batches of rounds (--rounds-per-wait
-    # 1,8) were measured three times and stay at one.
-    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
-      --seconds "$secs" --warmup "$warm" --fps 1000 --round-waits per-round,per-frame --out "$out/rounds"
-    echo "== the segmentation's track: the whole frame every 8th frame, the person's crop alone between"
+    if [ "$quick" = 2 ]; then
+      # (--short: the second segment worker only where the segmentation runs twice.)
+      "$bin" bench pipeline --backend wgpu --model fourier-medium --res "$res" --threads "$threads" \
+        --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
+        --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
+      "$bin" bench pipeline --backend wgpu --model fourier-small --res "$res" --threads "$threads" \
+        --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
+        --render-workers 1,2 --out "$out/workers-small"
+    else
+      "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
+        --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
+        --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
+    fi
+    step "the segmentation's track: the whole frame every 8th frame, the person's crop alone between"
     # model.segment_full_every: one segmentation a frame instead of two (fourier-medium segments
     # twice: 10 ms a frame of the segment stage on the H200, 1.2 ms each run on the adapter);
     # its accuracy is docs/bench/segment-track/temporal.md (CPU, the same networks).
-    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
+    "$bin" bench pipeline --backend wgpu --model "$models" --res "${track_res:-$res}" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
       --segment-passes 2 --segment-full-every 1,8 --out "$out/track"
-    echo "== two stages on one device or two (item 4: does a wait queue behind a network?)"
-    # The localization timed alone, beside the shape network on its device, and on a second
-    # device of the same adapter (a few seconds a row).
-    "$bin" bench queues --res "$qres" --seconds "$secs" --out "$out"
-    # The same question in the pipeline: the render stage on the networks' device or on a
-    # second one (compute.render_device; `auto`, the default, is the second on a GPU), the
-    # maps crossing the host for the second; every model and resolution of the matrix (the
-    # third H200 run measured fourier-small at 257^3 only: 49.8 -> 78.6 fps).
+    step "the GPU backend's pipeline: the levels' conflict rounds read per round or predicted"
+    # compute.round_waits: per-round (a read-back per round and level, some ten a frame) or
+    # per-frame (each level's rounds predicted from the last frame, one read-back for the
+    # levels; a frame the prediction fell short of runs again, its share in the note).
+    # (--short: per-frame alone; the main matrix's GPU rows at yaw 0 are per-round, the default.)
     "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
-      --seconds "$secs" --warmup "$warm" --fps 1000 --render-device shared,own --out "$out/devices"
-    echo "== the series' K: 15 harmonics (fourier-small-seg2, the default) against 31 (fourier-small-k31, the issue's 'K = 31')"
+      --seconds "$secs" --warmup "$warm" --fps 1000 --round-waits "$round_waits" --out "$out/rounds"
+    step "the series' K: 15 harmonics (fourier-small-seg2, the default) against 31 (fourier-small-k31, the issue's 'K = 31')"
     # The same encoder but for its last convolution (63 maps instead of 31): the maps' traffic,
     # the temporal filter and every field evaluation twice the terms.
-    "$bin" bench pipeline --backend cpu,wgpu --runtime tract --model fourier-small-seg2,fourier-small-k31 --res "$res" \
+    "$bin" bench pipeline --backend "$k31_backends" --runtime tract --model fourier-small-seg2,fourier-small-k31 --res "$res" \
       --threads "$threads" --seconds "$secs" --warmup "$warm" --fps 1000 --out "$out/k31"
-    echo "== the GPU backend's pipeline from other coarse levels (issue 33 item 4: 'coarse levels')"
+    step "the GPU backend's pipeline from other coarse levels (issue 33 item 4: 'coarse levels')"
     # The default starts the levels at 9^3 (3); 5^3 (2) has fewer points a level and more
     # levels (more waits), 17^3 (4) more points and fewer levels.
     "$bin" bench pipeline --backend wgpu --model fourier-small --res "${res%%,*}" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --coarse-level 2,3,4 --out "$out/coarse"
-    echo "== the surface's dead band on the adapter ([temporal] surface_dead_band 0 against 0.06)"
+    step "the surface's dead band on the adapter ([temporal] surface_dead_band 0 against 0.06)"
     # A word a grid point read and written by every evaluation (gpu/localize/hold.rs): what
     # holding a still person's grid costs the render stage there (the sim's walk holds
     # stretches of frames; 0 is the renderer of the runs before 2026-12-03).
     "$bin" bench pipeline --backend wgpu --model fourier-medium --res "$res" --threads "$threads" \
       --seconds "$secs" --warmup "$warm" --fps 1000 --surface-dead-band 0,0.06 --out "$out/held"
-    echo "== localization on the model's field"
+    step "two stages on one device or two: the render stage on the networks' device or its own"
+    # compute.render_device (`auto`, the default, is a second device on a GPU), the maps
+    # crossing the host for the second; every model and resolution of the matrix (the third
+    # H200 run measured fourier-small at 257^3 only: 49.8 -> 78.6 fps).
+    "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
+      --seconds "$secs" --warmup "$warm" --fps 1000 --render-device shared,own --out "$out/devices"
+    step "localization on the model's field"
     # The adapter's rows twice: a read-back per conflict round, and the rounds predicted.
     "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \
       --methods hierarchical,hierarchical-tight --runs "$runs" --round-waits per-round,per-frame --out "$out"
+    if [ "$quick" != 2 ]; then
+      step "two stages on one device or two, the localization alone (bench queues)"
+      # The localization timed alone, beside the shape network on its device, and on a
+      # second device of the same adapter (the third H200 run has it: not in --short).
+      "$bin" bench queues --res "$qres" --seconds "$secs" --out "$out"
+    fi
     mv "$out/accuracy-vs-time.md" "$out/localize.md"
     mv "$out/accuracy-vs-time.png" "$out/localize.png"
     ls -la "$out"
