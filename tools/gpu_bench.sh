@@ -195,12 +195,11 @@ case "$mode" in
     # The adapter's rows twice: a read-back per conflict round, and the rounds predicted.
     "$bin" bench localize --model fourier-small --backend "$loc_backends" --res "$res" \
       --methods hierarchical,hierarchical-tight --runs "$runs" --round-waits per-round,per-frame --out "$out"
-    if [ "$quick" != 2 ]; then
-      step "two stages on one device or two, the localization alone (bench queues)"
-      # The localization timed alone, beside the shape network on its device, and on a
-      # second device of the same adapter (the third H200 run has it: not in --short).
-      "$bin" bench queues --res "$qres" --seconds "$secs" --out "$out"
-    fi
+    step "two stages on one device or two, the localization alone (bench queues)"
+    # The localization timed alone, beside the shape network on its device, and on a second
+    # device of the same adapter: how long a render device's work waits while another
+    # device's runs (pipeline-gpu.md item 11; a few seconds a row).
+    "$bin" bench queues --res "$qres" --seconds "$secs" --out "$out"
     mv "$out/accuracy-vs-time.md" "$out/localize.md"
     mv "$out/accuracy-vs-time.png" "$out/localize.png"
     ls -la "$out"
