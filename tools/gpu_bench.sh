@@ -13,7 +13,7 @@
 #           PACK_TO=$OUT OUT=/tmp/gb tools/gpu_bench.sh run --short
 #           (--quick: a tiny version, as CI-free checking here on lavapipe does; --short: the
 #           matrix with 4 s windows, the machine's cores only and no rows that another step
-#           of the same run measures, some 8 minutes on an H200; PACK_TO: the results packed
+#           of the same run measures, some 7 minutes on an H200; PACK_TO: the results packed
 #           into one file, since a call brings back at most 8)
 #
 # `run` unpacks the loader, names the adapter, and writes into $OUT (default /tmp/gpubench):
