@@ -5,7 +5,7 @@
 #   here:   tools/gpu_bench.sh prepare
 #           builds the release `volcap` with the GPU backend, packs it stripped into .gpubench/
 #           (xz, ~12 MiB: the working tree that travels is limited to 64 MiB with what a call
-#           carries; the tracked tree is 47.2 MiB (2026-12-03; 2026-12-01: the golden vectors gzipped, 47.3 -> 42.4,
+#           carries; the tracked tree is 47.9 MiB (2026-12-04; 2026-12-01: the golden vectors gzipped, 47.3 -> 42.4,
 #           then fourier-small-k31; 73.3 before 2026-11-29's slimming), and
 #           tools/train/tests/test_tree_size.py keeps it under 48)
 #           and downloads the Vulkan loader into .gl/ (both git-ignored)
