@@ -92,19 +92,20 @@ case "$mode" in
     if [ "$quick" = 1 ]; then
       # (Windows long enough for lavapipe, whose frames take seconds, to publish some.)
       res=65 models=fourier-small secs=12 warm=8 runs=1 threads=1 loc_backends=cpu,wgpu qres=33
-      round_waits=per-round,per-frame k31_backends=cpu,wgpu
+      round_waits=per-round,per-frame k31_backends=cpu,wgpu workers_rows="$models=1,2=workers"
     elif [ "$quick" = 2 ]; then
-      # The whole matrix in about half the time (a lent machine's 15 minutes are shared with
-      # training): shorter windows, the machine's cores only.
+      # The matrix in about a third of the time (a lent machine's 15 minutes, its start
+      # included): shorter windows, the machine's cores only, no row twice.
       res=257,513 models=fourier-small,fourier-medium secs=4 warm=2 runs=3
       threads="$(nproc)" loc_backends=wgpu qres=257
       # (Rows measured elsewhere in the same run left out: the per-round and CPU rows are the
       # main matrix's; the track at 257^3 alone.)
       round_waits=per-frame k31_backends=wgpu track_res=257
+      workers_rows="fourier-medium=1,2=workers fourier-small=1=workers-small"
     else
       res=257,513 models=fourier-small,fourier-medium secs=10 warm=5 runs=5
       threads="1,$(nproc)" loc_backends=cpu,wgpu qres=257
-      round_waits=per-round,per-frame k31_backends=cpu,wgpu
+      round_waits=per-round,per-frame k31_backends=cpu,wgpu workers_rows="$models=1,2=workers"
     fi
     # A lent machine brings back at most 8 files, two folders down, and only what lies under
     # $OUT when the call ends (at its limit too): with PACK_TO set, the results are packed into
@@ -142,19 +143,14 @@ case "$mode" in
     # frame N + 1 localized while N waits; frames published in capture order).
     # fourier-medium segments twice (10 ms a frame there): a second segment worker
     # (compute.segment_workers) segments frame N + 1 while N waits on its read-backs.
-    if [ "$quick" = 2 ]; then
-      # (--short: the second segment worker only where the segmentation runs twice.)
-      "$bin" bench pipeline --backend wgpu --model fourier-medium --res "$res" --threads "$threads" \
+    # MODELS=SEGMENT_WORKERS=FOLDER per invocation (--short: the second segment worker only
+    # where the segmentation runs twice).
+    for w in $workers_rows; do
+      IFS== read -r w_models w_segment w_dir <<<"$w"
+      "$bin" bench pipeline --backend wgpu --model "$w_models" --res "$res" --threads "$threads" \
         --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
-        --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
-      "$bin" bench pipeline --backend wgpu --model fourier-small --res "$res" --threads "$threads" \
-        --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
-        --render-workers 1,2 --out "$out/workers-small"
-    else
-      "$bin" bench pipeline --backend wgpu --model "$models" --res "$res" --threads "$threads" \
-        --seconds "$secs" --warmup "$warm" --fps 1000 --segment-thread-up-to 513 \
-        --render-workers 1,2 --segment-workers 1,2 --out "$out/workers"
-    fi
+        --render-workers 1,2 --segment-workers "$w_segment" --out "$out/$w_dir"
+    done
     step "the segmentation's track: the whole frame every 8th frame, the person's crop alone between"
     # model.segment_full_every: one segmentation a frame instead of two (fourier-medium segments
     # twice: 10 ms a frame of the segment stage on the H200, 1.2 ms each run on the adapter);
